@@ -1,0 +1,1 @@
+"""Diagram builders: one function per diagram."""

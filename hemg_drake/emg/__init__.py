@@ -1,0 +1,1 @@
+"""sEMG chain: sources, RMS envelope (eqs. 1-2), calibration, gain law (eq. 22)."""

@@ -1,0 +1,1 @@
+"""Robot models: the Baxter right arm as a MultibodyPlant."""

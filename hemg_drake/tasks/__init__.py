@@ -1,0 +1,1 @@
+"""The paper's two tasks (cotter pin, drawing): scenes, plans and metrics."""

@@ -1,0 +1,1 @@
+"""Teleoperation: haptic master (eq. 19), simulated operator, workspace map, force feedback."""

@@ -1,0 +1,1 @@
+"""Visualisation: Meshcat recordings to HTML replays, and the paper's figures."""

@@ -1,0 +1,30 @@
+import numpy as np
+import pytest
+
+from hemg_drake.fileio import atomic_open, save_npz_atomic, write_text_atomic
+
+
+def test_atomic_write_replaces_whole_file(tmp_path):
+    path = tmp_path / "out.txt"
+    write_text_atomic(path, "old")
+    write_text_atomic(path, "new")
+    assert path.read_text() == "new"
+    assert [p.name for p in tmp_path.iterdir()] == ["out.txt"]
+
+
+def test_crash_midway_leaves_old_file_and_no_temporary(tmp_path):
+    path = tmp_path / "out.txt"
+    write_text_atomic(path, "old")
+    with pytest.raises(RuntimeError):
+        with atomic_open(path) as f:
+            f.write("half")
+            raise RuntimeError("crash")
+    assert path.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["out.txt"]
+
+
+def test_npz_round_trip(tmp_path):
+    path = tmp_path / "a.npz"
+    save_npz_atomic(path, x=np.arange(3.0))
+    with np.load(path) as data:
+        np.testing.assert_array_equal(data["x"], np.arange(3.0))
