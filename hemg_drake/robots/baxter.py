@@ -1,0 +1,142 @@
+"""The Baxter right arm (7 DOF) in a ``MultibodyPlant``: loading, frames, limits.
+
+The model is ``models/baxter_right_arm.urdf``, written from the shared facts (joint origins,
+axes, limits, inertials of Rethink's ``baxter_description``). It is found from this package's
+location, never from the current directory, and parsed with the package map entry
+``package://hemg_drake_models/``.
+"""
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.tree import Frame, ModelInstanceIndex
+
+# models/ sits beside the package in the repository (installed editable).
+MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
+PACKAGE_NAME = "hemg_drake_models"
+BAXTER_URDF = MODELS_DIR / "baxter_right_arm.urdf"
+
+# Order of the arm's positions, velocities and actuators everywhere in the project.
+JOINT_NAMES = ("right_s0", "right_s1", "right_e0", "right_e1", "right_w0", "right_w1", "right_w2")
+# Elbow bent, forearm tilted down, hand in front of the robot: close to the Baxter SDK's
+# "neutral" pose, far from every joint limit, gravity loading shoulder, elbow and wrist.
+HOME_POSITIONS = np.array([0.0, -0.55, 0.0, 0.75, 0.0, 1.26, 0.0])
+
+
+@dataclass(frozen=True)
+class BaxterArm:
+    """Handles to the arm inside a plant, returned by :func:`add_baxter_arm`.
+
+    Arrays have shape (7,) in the order of ``joint_names`` (right_s0 ... right_w2); SI units.
+
+    Attributes
+    ----------
+    model_instance : ModelInstanceIndex
+    joint_names : tuple of str, the seven revolute joints.
+    mount_frame : Frame, ``right_arm_mount`` (the arm's base; the facts' FK reference).
+    hand_frame : Frame, ``right_hand`` (flange; z points out of the hand).
+    tool_frame : Frame, ``right_tool``: 0.1 m along the hand's z, the CLIK end-effector point.
+    position_lower, position_upper : array, shape (7,), rad.
+    velocity_limit : array, shape (7,), rad/s (symmetric).
+    effort_limit : array, shape (7,), N·m (symmetric; s1 = 100 N·m, see the URDF).
+    home_positions : array, shape (7,), rad, a nominal configuration.
+    """
+
+    model_instance: ModelInstanceIndex
+    joint_names: tuple
+    mount_frame: Frame
+    hand_frame: Frame
+    tool_frame: Frame
+    position_lower: np.ndarray
+    position_upper: np.ndarray
+    velocity_limit: np.ndarray
+    effort_limit: np.ndarray
+    home_positions: np.ndarray
+
+
+def make_parser(plant):
+    """A ``Parser`` for ``plant`` that resolves ``package://hemg_drake_models/`` to models/."""
+    parser = Parser(plant)
+    parser.package_map().Add(PACKAGE_NAME, str(MODELS_DIR))
+    return parser
+
+
+def add_baxter_arm(plant, scene_graph=None, *, weld_base=True, model_path=None):
+    """Add the Baxter right arm on its torso and pedestal to ``plant``.
+
+    Self-collisions of the robot are filtered in the model, so only contacts between the arm
+    and a scene count. Call before ``plant.Finalize()``.
+
+    Parameters
+    ----------
+    plant : MultibodyPlant, not finalized.
+    scene_graph : SceneGraph, optional. Registers ``plant`` as its geometry source if that has
+        not been done yet (``AddMultibodyPlantSceneGraph`` already does it).
+    weld_base : bool
+        Weld the ``base`` frame to the world at the identity (the test vectors assume it).
+    model_path : path-like, optional
+        Another URDF/SDFormat file with the same frame and joint names; default ``BAXTER_URDF``.
+
+    Returns
+    -------
+    BaxterArm
+
+    Raises
+    ------
+    FileNotFoundError
+        The model file does not exist.
+    ValueError
+        The model file cannot be parsed or lacks the arm's joints, frames or actuators.
+    """
+    path = Path(model_path) if model_path is not None else BAXTER_URDF
+    if not path.is_file():
+        raise FileNotFoundError(f"robot model file not found: {path}")
+    if scene_graph is not None and not plant.geometry_source_is_registered():
+        plant.RegisterAsSourceForSceneGraph(scene_graph)
+    try:
+        (model,) = make_parser(plant).AddModels(str(path))
+    except (RuntimeError, ValueError) as error:
+        # Drake's message can span many lines; its first one names the problem.
+        reason = (str(error).strip().splitlines() or [type(error).__name__])[0]
+        raise ValueError(f"malformed robot model {path}: {reason}") from None
+
+    def frame(name):
+        if not plant.HasFrameNamed(name, model):
+            raise ValueError(f"robot model {path} has no frame named {name!r}")
+        return plant.GetFrameByName(name, model)
+
+    if weld_base:
+        plant.WeldFrames(plant.world_frame(), frame("base"))
+    for name in JOINT_NAMES:
+        if not plant.HasJointNamed(name, model):
+            raise ValueError(f"robot model {path} has no joint named {name!r}")
+    joints = [plant.GetJointByName(name, model) for name in JOINT_NAMES]
+    efforts = _effort_limits(plant, model, joints, path)
+    return BaxterArm(
+        model_instance=model,
+        joint_names=JOINT_NAMES,
+        mount_frame=frame("right_arm_mount"),
+        hand_frame=frame("right_hand"),
+        tool_frame=frame("right_tool"),
+        position_lower=np.array([j.position_lower_limits()[0] for j in joints]),
+        position_upper=np.array([j.position_upper_limits()[0] for j in joints]),
+        velocity_limit=np.array([j.velocity_upper_limits()[0] for j in joints]),
+        effort_limit=efforts,
+        home_positions=HOME_POSITIONS.copy(),
+    )
+
+
+def _effort_limits(plant, model, joints, path):
+    """Effort limits in joint order; the actuation port must follow the same order."""
+    # GetJointActuatorIndices(model) is empty before Finalize(); filter all actuators instead.
+    actuators = [plant.get_joint_actuator(i) for i in plant.GetJointActuatorIndices()]
+    actuators = [a for a in actuators if a.model_instance() == model]
+    actuated = [a.joint().name() for a in actuators]
+    if actuated != [j.name() for j in joints]:
+        raise ValueError(
+            f"robot model {path}: actuators must drive {list(JOINT_NAMES)} in that order "
+            f"(found {actuated}); declare one transmission per joint"
+        )
+    return np.array([a.effort_limit() for a in actuators])
