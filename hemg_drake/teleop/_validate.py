@@ -1,0 +1,22 @@
+"""Argument checks shared by the teleoperation systems: clear ValueErrors at the door."""
+
+import numpy as np
+
+
+def as_vector(name, value, size):
+    """Return ``value`` as a finite float array of shape (size,), or raise ValueError."""
+    array = np.asarray(value, dtype=float)
+    if array.shape != (size,):
+        raise ValueError(f"{name} must have shape ({size},), got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} must be finite, got {array.tolist()}")
+    return array
+
+
+def as_scalar(name, value, *, minimum=0.0, strict=True):
+    """Return ``value`` as a finite float > ``minimum`` (>= if not ``strict``)."""
+    number = float(value)
+    if not np.isfinite(number) or number < minimum or (strict and number == minimum):
+        bound = ">" if strict else ">="
+        raise ValueError(f"{name} must be finite and {bound} {minimum}, got {value}")
+    return number

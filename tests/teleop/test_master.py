@@ -1,0 +1,127 @@
+"""HapticMaster: exact mass-damper steps, motor saturation, soft walls, friction, errors."""
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
+
+from hemg_drake.teleop.master import HapticMaster, MasterDynamics
+
+PERIOD = 1e-3
+
+
+def run_master(hand_force, motor_force=(0.0, 0.0, 0.0), duration=0.1, **parameters):
+    """Simulate a HapticMaster under constant forces; return sample times and p_MS, v_MS."""
+    builder = DiagramBuilder()
+    master = builder.AddSystem(HapticMaster(**parameters))
+    hand = builder.AddSystem(ConstantVectorSource(np.asarray(hand_force, float)))
+    motor = builder.AddSystem(ConstantVectorSource(np.asarray(motor_force, float)))
+    builder.Connect(hand.get_output_port(), master.GetInputPort("hand_force"))
+    builder.Connect(motor.get_output_port(), master.GetInputPort("motor_force"))
+    p_log = LogVectorOutput(master.GetOutputPort("p_MS"), builder, publish_period=PERIOD)
+    v_log = LogVectorOutput(master.GetOutputPort("v_MS"), builder, publish_period=PERIOD)
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    simulator.AdvanceTo(duration)
+    context = simulator.get_context()
+    p = p_log.FindLog(context)
+    return p.sample_times(), p.data().T, v_log.FindLog(context).data().T
+
+
+def test_step_force_matches_analytic_mass_damper():
+    mass, damping = 0.045, 2.0
+    force = np.array([0.1, -0.05, 0.08])
+    times, p, v = run_master(force, mass=mass, damping=damping, duration=0.1)
+    tau = mass / damping
+    decay = np.exp(-times / tau)[:, None]
+    p_expected = force / damping * (times[:, None] - tau * (1.0 - decay))
+    v_expected = force / damping * (1.0 - decay)
+    assert np.max(np.abs(p_expected)) > 2e-3  # the tip really moved
+    np.testing.assert_allclose(p, p_expected, rtol=1e-9, atol=1e-14)
+    np.testing.assert_allclose(v, v_expected, rtol=1e-9, atol=1e-14)
+
+
+def test_system_matches_numpy_twin_with_friction():
+    parameters = dict(friction=0.06, damping=0.3)
+    hand_force = np.array([0.2, 0.03, -0.1])
+    times, p, v = run_master(hand_force, duration=0.05, **parameters)
+    dynamics = MasterDynamics(**parameters)
+    p_twin, v_twin = np.zeros(3), np.zeros(3)
+    for k in range(1, len(times)):
+        p_twin, v_twin = dynamics.step(p_twin, v_twin, hand_force, np.zeros(3))
+        np.testing.assert_allclose(p[k], p_twin, atol=1e-15)
+        np.testing.assert_allclose(v[k], v_twin, atol=1e-15)
+
+
+def test_friction_holds_a_small_push_and_yields_to_a_larger_one():
+    _, p_small, _ = run_master([0.05, 0.0, 0.0], friction=0.06, duration=0.2)
+    assert np.all(p_small == 0.0)
+    _, p_large, _ = run_master([0.1, 0.0, 0.0], friction=0.06, damping=0.0, duration=0.1)
+    # Sliding: the net force 0.1 - 0.06 N accelerates 45 g uniformly.
+    expected = 0.5 * (0.1 - 0.06) / 0.045 * 0.1**2
+    assert p_large[-1, 0] == pytest.approx(expected, rel=0.02)
+
+
+def test_motor_force_saturates_in_norm_keeping_direction():
+    command = np.array([30.0, 0.0, -40.0])  # 50 N, beyond the 7.9 N peak
+    saturated = command * 7.9 / 50.0
+    _, p_motor, _ = run_master([0.0, 0.0, 0.0], command, duration=0.01)
+    _, p_hand, _ = run_master(saturated, duration=0.01)
+    np.testing.assert_allclose(p_motor, p_hand, rtol=1e-12, atol=1e-15)
+    _, p_over, _ = run_master(command, duration=0.01)
+    assert np.linalg.norm(p_over[-1]) > 5 * np.linalg.norm(p_motor[-1])
+    # A command within the limit passes unchanged.
+    small = np.array([0.5, -0.2, 0.1])
+    _, p_small_motor, _ = run_master([0, 0, 0], small, duration=0.01)
+    _, p_small_hand, _ = run_master(small, duration=0.01)
+    np.testing.assert_allclose(p_small_motor, p_small_hand, rtol=1e-12)
+
+
+@pytest.mark.parametrize("axis, sign", [(0, 1.0), (1, -1.0), (2, 1.0)])
+def test_soft_walls_hold_a_large_push(axis, sign):
+    force = np.zeros(3)
+    force[axis] = sign * 10.0
+    wall = 0.5 * np.array([0.16, 0.12, 0.12])[axis]
+    p_touching = np.zeros(3)
+    p_touching[axis] = sign * wall
+    _, p, _ = run_master(force, duration=0.5, p_MS_initial=p_touching)
+    depth = sign * p[:, axis] - wall
+    assert depth[-1] > 0.0  # the push does reach the wall
+    assert np.max(depth) < 3e-3  # and the wall holds it within a few mm
+    assert depth[-1] == pytest.approx(10.0 / 5000.0, rel=0.01)  # static spring deflection
+
+
+def test_zero_force_from_rest_stays_at_rest():
+    p0 = np.array([0.01, -0.02, 0.03])
+    _, p, v = run_master([0.0, 0.0, 0.0], duration=0.2, p_MS_initial=p0)
+    assert np.all(p == p0)
+    assert np.all(v == 0.0)
+
+
+def test_state_port_is_position_then_velocity():
+    master = HapticMaster(p_MS_initial=[0.01, 0.02, 0.03])
+    context = master.CreateDefaultContext()
+    state = master.GetOutputPort("state").Eval(context)
+    np.testing.assert_array_equal(state, [0.01, 0.02, 0.03, 0, 0, 0])
+
+
+@pytest.mark.parametrize(
+    "parameters, message",
+    [
+        (dict(mass=0.0), "mass"),
+        (dict(damping=-1.0), "damping"),
+        (dict(workspace_size=[0.1, 0.1]), "workspace_size"),
+        (dict(workspace_size=[0.1, 0.0, 0.1]), "workspace_size"),
+        (dict(period=float("nan")), "period"),
+        (dict(p_MS_initial=[0, 0, np.inf]), "p_MS_initial"),
+    ],
+)
+def test_bad_parameters_are_named(parameters, message):
+    with pytest.raises(ValueError, match=message):
+        HapticMaster(**parameters)
+
+
+def test_nan_input_is_rejected():
+    with pytest.raises(ValueError, match="hand_force"):
+        run_master([np.nan, 0.0, 0.0], duration=0.01)
