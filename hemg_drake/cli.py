@@ -15,6 +15,24 @@ def _demo(args):
     print(f"wrote {replay}")
 
 
+def _emg_figure(args):
+    import numpy as np
+
+    from hemg_drake.emg.sources import MYO_RATE, load_emg_recording, synthesize_emg
+    from hemg_drake.viz.figures import plot_emg_envelopes, save_figure
+
+    if args.input:
+        samples = load_emg_recording(args.input)
+    else:
+        # Two contractions rising from rest and relaxing, 2.5 s each, then rest.
+        time = np.arange(int(args.duration * MYO_RATE)) / MYO_RATE
+        activation = 0.05 + 0.9 * np.clip(np.sin(np.pi * time / 2.5), 0.0, None) ** 2
+        samples = synthesize_emg(activation, args.seed)
+    figure = plot_emg_envelopes(samples, args.windows, per_channel=args.per_channel)
+    save_figure(figure, args.output)
+    print(f"wrote {args.output}")
+
+
 def build_parser():
     parser = argparse.ArgumentParser(prog="hemg-drake", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True)
@@ -22,6 +40,21 @@ def build_parser():
     demo = commands.add_parser("demo", help="run the main job (make demo)")
     demo.add_argument("--out", default="runs/demo", help="output folder")
     demo.set_defaults(func=_demo)
+
+    emg = commands.add_parser(
+        "emg-figure", help="Fig. 6: summed sEMG and its moving-RMS envelopes"
+    )
+    emg.add_argument(
+        "input", nargs="?", help="recording (CSV: 8 integer columns; or NPZ); synthetic if omitted"
+    )
+    emg.add_argument("--windows", type=int, nargs="+", default=[10, 20, 30], help="L_win values")
+    emg.add_argument("--per-channel", action="store_true", help="per-channel RMS summed")
+    emg.add_argument("--seed", type=int, default=0, help="seed of the synthetic recording")
+    emg.add_argument(
+        "--duration", type=float, default=10.0, help="synthetic recording length (s)"
+    )
+    emg.add_argument("-o", "--output", default="fig6.png", help="image file (.png, .svg, .pdf)")
+    emg.set_defaults(func=_emg_figure)
 
     return parser
 

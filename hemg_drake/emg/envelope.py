@@ -1,0 +1,167 @@
+"""Moving-RMS envelope of the sEMG (eqs. 1-2): an offline function and its system.
+
+Both forms treat the samples before the start as zeros and always divide by the
+window length, so the first ``window - 1`` envelope values ramp up from the
+first sample rather than being undefined.
+"""
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from pydrake.systems.framework import LeafSystem
+
+from hemg_drake.emg.sources import MYO_CHANNELS, MYO_PERIOD
+
+
+def _check_window(window):
+    if isinstance(window, bool) or int(window) != window or window < 1:
+        raise ValueError(f"window must be a positive integer, got {window!r}")
+    return int(window)
+
+
+def _squares(samples, per_channel):
+    """Squares of the signal eq. 2 averages: of the channel sum (eq. 1) or per channel."""
+    if per_channel:
+        return np.square(samples)
+    return np.square(samples.sum(axis=1, keepdims=True))
+
+
+def _combine(mean_squares):
+    """RMS per column, summed over columns (one column unless per channel)."""
+    return np.sqrt(mean_squares).sum(axis=-1)
+
+
+def moving_rms(samples, window=20, *, per_channel=False):
+    """Moving-window RMS envelope of multichannel sEMG (eqs. 1-2).
+
+    By default, the paper's form: u_k = sum_i samples[k, i] (eq. 1), then
+    rms_k = sqrt((1 / L) sum_{j=k-L+1..k} u_j^2) (eq. 2). With
+    ``per_channel=True``, the RMS of each channel over the window, summed over
+    channels (signed channel sums partly cancel; per-channel RMS does not).
+
+    Samples before the first are taken as zeros, and the sum is always divided
+    by ``window``, so ``rms[:window - 1]`` ramps up from the first sample.
+
+    Parameters
+    ----------
+    samples : array-like, shape (n_samples, n_channels)
+        Raw sEMG, oldest first (MYO: 8 channels, integers in -128..127).
+    window : int
+        L_win, the number of samples in the window (paper: 10, 20, 30; 20 chosen).
+    per_channel : bool
+        Per-channel RMS summed over channels instead of the RMS of the sum.
+
+    Returns
+    -------
+    rms : ndarray, shape (n_samples,)
+        The envelope, in the units of ``samples``.
+    """
+    window = _check_window(window)
+    samples = np.asarray(samples, dtype=float)
+    if samples.ndim != 2 or samples.shape[0] == 0:
+        raise ValueError(
+            f"samples must have shape (n_samples, n_channels) with n_samples > 0, "
+            f"got {samples.shape}"
+        )
+    if not np.all(np.isfinite(samples)):
+        raise ValueError("samples contain NaN or infinite values")
+    squares = _squares(samples, per_channel)
+    padded = np.concatenate([np.zeros((window - 1, squares.shape[1])), squares])
+    # Each window summed on its own: exact for integer samples, no cumulative drift.
+    sums = sliding_window_view(padded, window, axis=0).sum(axis=-1)
+    return _combine(sums / window)
+
+
+class RmsEnvelope(LeafSystem):
+    """Moving-window RMS of 8-channel sEMG, in O(1) per sample (eqs. 1-2).
+
+    .. pydrake_system::
+
+        name: RmsEnvelope
+        input_ports:
+        - emg
+        output_ports:
+        - envelope
+
+    ``emg`` is the raw sEMG (8 channels, MYO units), ``envelope`` the RMS in the
+    same units: of the channel sum by default (eq. 1 then eq. 2), or the
+    per-channel RMS summed over channels with ``per_channel=True``.
+
+    Timing: a periodic discrete update every ``period`` (200 Hz, offset 0, as
+    the sources) stores the input's square in a ring buffer of the last
+    ``window`` squares with a running sum. The output is direct feedthrough:
+    the stored window minus its oldest square plus the current input's square.
+    In a diagram with a source updating at the same instants, the update at
+    t_k stores sample k-1 (Drake updates read pre-update values) and the output
+    then combines it with sample k, so there is no lag: the output is, sample
+    for sample, ``moving_rms`` of the source's samples (zeros before the start,
+    divided by L_win throughout; exact for integer samples).
+
+    Modelling choice: the running sum is recomputed from the buffer each time
+    the ring wraps, so rounding (non-integer input) cannot drift, and a NaN
+    sample makes the envelope NaN for at most 2 L_win samples (``VariableGain``
+    maps a NaN envelope to K_min).
+
+    Parameters
+    ----------
+    window : int
+        L_win, samples per window (default 20, the paper's choice).
+    per_channel : bool
+        Per-channel RMS summed over channels instead of the RMS of the sum.
+    period : float
+        Sample period in s (MYO: 1/200).
+    """
+
+    def __init__(self, *, window=20, per_channel=False, period=MYO_PERIOD):
+        LeafSystem.__init__(self)
+        self._window = _check_window(window)
+        self._per_channel = bool(per_channel)
+        self._columns = MYO_CHANNELS if per_channel else 1
+        if not period > 0:
+            raise ValueError(f"period must be positive, got {period!r}")
+        self._emg_input = self.DeclareVectorInputPort("emg", MYO_CHANNELS)
+        # Layout: ring of squares (window x columns, row-major), running sum
+        # (columns), index of the oldest row.
+        self._ring_state = self.DeclareDiscreteState(
+            (self._window + 1) * self._columns + 1
+        )
+        self.DeclarePeriodicDiscreteUpdateEvent(
+            period_sec=period, offset_sec=0.0, update=self._update_ring
+        )
+        self._envelope_output = self.DeclareVectorOutputPort(
+            "envelope", 1, self._calc_envelope
+        )
+
+    def get_emg_input_port(self):
+        return self._emg_input
+
+    def get_envelope_output_port(self):
+        return self._envelope_output
+
+    def _unpack(self, state):
+        n = self._window * self._columns
+        ring = state[:n].reshape(self._window, self._columns)
+        total = state[n : n + self._columns]
+        return ring, total, int(state[-1])
+
+    def _input_squares(self, context):
+        emg = self._emg_input.Eval(context).reshape(1, MYO_CHANNELS)
+        return _squares(emg, self._per_channel)[0]
+
+    def _update_ring(self, context, discrete_state):
+        state = context.get_discrete_state(self._ring_state).CopyToVector()
+        ring, total, oldest = self._unpack(state)
+        square = self._input_squares(context)
+        total += square - ring[oldest]
+        ring[oldest] = square
+        oldest = (oldest + 1) % self._window
+        if oldest == 0:
+            total[:] = ring.sum(axis=0)
+        state[-1] = oldest
+        discrete_state.set_value(self._ring_state, state)
+
+    def _calc_envelope(self, context, output):
+        state = context.get_discrete_state(self._ring_state).get_value()
+        ring, total, oldest = self._unpack(state)
+        window_sum = total - ring[oldest] + self._input_squares(context)
+        # Rounding of non-integer input must not push a zero sum below zero.
+        output.SetAtIndex(0, _combine(np.maximum(window_sum, 0.0) / self._window))

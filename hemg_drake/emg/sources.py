@@ -1,0 +1,400 @@
+"""Sources of 8-channel raw sEMG at 200 Hz, MYO-like: synthetic, file replay, live.
+
+Every source outputs the MYO's raw samples: 8 channels, integers in the signed
+8-bit range -128..127 (carried as float64 in Drake vector ports), one sample per
+1/200 s (facts: ``shared/facts/touch_x.md``, MYO section). Sample k is output
+from the discrete update at t = k / 200 s until the next one, and the output is
+zero before the first; as with any Drake discrete update, a logger publishing
+at exactly t = k / 200 still sees sample k - 1.
+"""
+
+from pathlib import Path
+
+import numpy as np
+from pydrake.systems.framework import LeafSystem
+
+MYO_CHANNELS = 8
+MYO_RATE = 200.0
+MYO_PERIOD = 1.0 / MYO_RATE
+INT8_MIN, INT8_MAX = -128, 127
+
+# Electrodes around the forearm see the contracting muscle unequally: the pods
+# over the muscle belly (first and last here) most, those across the arm least.
+DEFAULT_CHANNEL_GAINS = (40.0, 34.0, 26.0, 20.0, 20.0, 26.0, 34.0, 40.0)
+# Standard deviation at rest (electrode and amplifier noise), in MYO units.
+DEFAULT_REST_STD = 2.0
+NPZ_KEY = "emg"
+
+
+def _check_seed(seed):
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    return int(seed)
+
+
+def _check_period(period):
+    if not (np.isfinite(period) and period > 0):
+        raise ValueError(f"period must be a positive number of seconds, got {period!r}")
+    return float(period)
+
+
+class _NoiseModel:
+    """The synthetic source's law, shared by the system and its numpy twin."""
+
+    def __init__(self, seed, channel_gains, rest_std, exponent):
+        self.seed = _check_seed(seed)
+        self.gains = np.asarray(channel_gains, dtype=float)
+        if self.gains.shape != (MYO_CHANNELS,) or not np.all(
+            np.isfinite(self.gains) & (self.gains >= 0)
+        ):
+            raise ValueError(
+                f"channel_gains must be {MYO_CHANNELS} finite non-negative numbers, "
+                f"got {channel_gains!r}"
+            )
+        if not (np.isfinite(rest_std) and rest_std >= 0):
+            raise ValueError(f"rest_std must be finite and >= 0, got {rest_std!r}")
+        if not (np.isfinite(exponent) and exponent > 0):
+            raise ValueError(f"exponent must be finite and > 0, got {exponent!r}")
+        self.rest_std = float(rest_std)
+        self.exponent = float(exponent)
+
+    def sample(self, activation, k):
+        """Sample number ``k`` for a muscle activation in [0, 1]: shape (8,), integers."""
+        std = self.rest_std + self.gains * activation**self.exponent
+        # One generator per (seed, sample index): sample k is a pure function of
+        # both, so the system and the twin agree exactly whatever the step sizes.
+        noise = np.random.default_rng((self.seed, k)).standard_normal(MYO_CHANNELS)
+        return np.clip(np.round(std * noise), INT8_MIN, INT8_MAX)
+
+
+def synthesize_emg(
+    activation,
+    seed,
+    *,
+    channel_gains=DEFAULT_CHANNEL_GAINS,
+    rest_std=DEFAULT_REST_STD,
+    exponent=1.0,
+):
+    """Synthetic MYO-like raw sEMG for a sequence of muscle activations.
+
+    The numpy twin of ``SyntheticEmgSource``: the same arguments give exactly
+    the same samples as the system (see its docstring for the model).
+
+    Parameters
+    ----------
+    activation : array-like, shape (n_samples,)
+        Muscle activation per 200 Hz sample; clipped to [0, 1]. NaN is rejected.
+    seed : int
+        Non-negative seed; the same seed gives the same samples.
+    channel_gains : array-like, shape (8,)
+        Noise standard deviation added per channel at full activation (MYO units).
+    rest_std : float
+        Noise standard deviation at rest, on every channel (MYO units).
+    exponent : float
+        p in std = rest_std + gain * activation^p.
+
+    Returns
+    -------
+    emg : ndarray of int64, shape (n_samples, 8)
+        Integers in -128..127.
+    """
+    activation = np.asarray(activation, dtype=float)
+    if activation.ndim != 1:
+        raise ValueError(f"activation must have shape (n_samples,), got {activation.shape}")
+    if np.any(np.isnan(activation)):
+        raise ValueError("activation contains NaN")
+    model = _NoiseModel(seed, channel_gains, rest_std, exponent)
+    clipped = np.clip(activation, 0.0, 1.0)
+    emg = np.zeros((len(activation), MYO_CHANNELS), dtype=np.int64)
+    for k, a in enumerate(clipped):
+        emg[k] = model.sample(a, k)
+    return emg
+
+
+class SyntheticEmgSource(LeafSystem):
+    """Synthetic MYO-like raw sEMG whose amplitude grows with muscle activation.
+
+    .. pydrake_system::
+
+        name: SyntheticEmgSource
+        input_ports:
+        - activation
+        output_ports:
+        - emg
+
+    ``activation`` (1, unitless) is the muscle activation; it is clipped to
+    [0, 1], and a NaN reads as 0 (rest). ``emg`` (8, MYO units) holds integers
+    in -128..127.
+
+    Model (Sec. II-B; a stand-in for the MYO, not a physiological model): each
+    channel i is zero-mean Gaussian noise with standard deviation
+    std_i = rest_std + channel_gains[i] * activation^exponent, rounded to an
+    integer and clipped to int8. With the default exponent 1 the RMS envelope
+    of the channel sum grows linearly with activation (up to clipping, which is
+    rare below 3 std = 127), so after an ``EmgCalibration`` from rest
+    (activation 0) and MVC (activation 1) recordings, the normalised envelope
+    is close to the activation itself: roughly monotone and near identity.
+
+    Timing: a periodic discrete update at 200 Hz (offset 0) reads the input and
+    draws sample k at t = k / 200; the output holds it until the next update.
+    Sample k's noise comes from ``np.random.default_rng((seed, k))``, so the
+    same seed gives the same samples, and ``synthesize_emg`` with the input
+    sampled at the same instants gives exactly the same samples.
+
+    Parameters
+    ----------
+    seed : int
+        Non-negative seed.
+    channel_gains, rest_std, exponent
+        See ``synthesize_emg``.
+    period : float
+        Sample period in s (MYO: 1/200).
+    """
+
+    def __init__(
+        self,
+        *,
+        seed,
+        channel_gains=DEFAULT_CHANNEL_GAINS,
+        rest_std=DEFAULT_REST_STD,
+        exponent=1.0,
+        period=MYO_PERIOD,
+    ):
+        LeafSystem.__init__(self)
+        self._model = _NoiseModel(seed, channel_gains, rest_std, exponent)
+        self._activation_input = self.DeclareVectorInputPort("activation", 1)
+        self._emg_state = self.DeclareDiscreteState(MYO_CHANNELS)
+        self._count_state = self.DeclareDiscreteState(1)
+        self.DeclarePeriodicDiscreteUpdateEvent(
+            period_sec=_check_period(period), offset_sec=0.0, update=self._update_sample
+        )
+        self._emg_output = self.DeclareStateOutputPort("emg", self._emg_state)
+
+    def get_activation_input_port(self):
+        return self._activation_input
+
+    def get_emg_output_port(self):
+        return self._emg_output
+
+    def _update_sample(self, context, discrete_state):
+        activation = self._activation_input.Eval(context)[0]
+        activation = 0.0 if np.isnan(activation) else np.clip(activation, 0.0, 1.0)
+        k = int(context.get_discrete_state(self._count_state).GetAtIndex(0))
+        discrete_state.set_value(self._emg_state, self._model.sample(activation, k))
+        discrete_state.set_value(self._count_state, [k + 1])
+
+
+def _int8_problem(value):
+    if not INT8_MIN <= value <= INT8_MAX:
+        return f"value {value} is outside the int8 range {INT8_MIN}..{INT8_MAX}"
+    return None
+
+
+def _load_csv(path):
+    rows = []
+    with open(path, encoding="utf-8") as f:
+        for line_number, line in enumerate(f, start=1):
+            if not line.strip():
+                continue
+            fields = line.split(",")
+            where = f"{path}: line {line_number}"
+            if len(fields) != MYO_CHANNELS:
+                raise ValueError(
+                    f"{where}: expected {MYO_CHANNELS} comma-separated columns, "
+                    f"found {len(fields)}"
+                )
+            row = []
+            for column, field in enumerate(fields, start=1):
+                try:
+                    value = int(field.strip())
+                except ValueError:
+                    raise ValueError(
+                        f"{where}: column {column}: {field.strip()!r} is not an integer"
+                    ) from None
+                problem = _int8_problem(value)
+                if problem:
+                    raise ValueError(f"{where}: column {column}: {problem}")
+                row.append(value)
+            rows.append(row)
+    return np.array(rows, dtype=np.int64).reshape(-1, MYO_CHANNELS)
+
+
+def _load_npz(path):
+    try:
+        archive = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as error:
+        raise ValueError(f"{path}: not a readable NPZ file ({error})") from None
+    with archive:
+        if NPZ_KEY not in archive.files:
+            raise ValueError(
+                f"{path}: no array named {NPZ_KEY!r} (found {sorted(archive.files)})"
+            )
+        emg = archive[NPZ_KEY]
+    if emg.ndim != 2 or emg.shape[1] != MYO_CHANNELS:
+        raise ValueError(
+            f"{path}: array {NPZ_KEY!r} must have shape (n_samples, {MYO_CHANNELS}), "
+            f"got {emg.shape}"
+        )
+    if not np.issubdtype(emg.dtype, np.number) or np.issubdtype(emg.dtype, np.complexfloating):
+        raise ValueError(f"{path}: array {NPZ_KEY!r} has non-numeric dtype {emg.dtype}")
+    checks = (
+        (np.isnan(emg), "NaN"),
+        (~np.isfinite(emg), "an infinite value"),
+        (np.round(emg) != emg, "a non-integer value"),
+        ((emg < INT8_MIN) | (emg > INT8_MAX), f"a value outside {INT8_MIN}..{INT8_MAX}"),
+    )
+    for bad, what in checks:
+        if np.any(bad):
+            row, column = np.argwhere(bad)[0]
+            raise ValueError(
+                f"{path}: row {row + 1}, column {column + 1}: {what} ({emg[row, column]})"
+            )
+    return emg.astype(np.int64)
+
+
+def load_emg_recording(path):
+    """Read a raw sEMG recording: CSV (8 integer columns, no header) or NPZ.
+
+    CSV: one 200 Hz sample per line, 8 comma-separated integers in -128..127,
+    no header (the layout of public MYO data sets); blank lines are skipped.
+    NPZ (``.npz`` suffix): an array named ``"emg"`` of shape (n_samples, 8)
+    holding integer values in -128..127 (any numeric dtype).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    emg : ndarray of int64, shape (n_samples, 8)
+
+    Raises
+    ------
+    FileNotFoundError
+        The file does not exist.
+    ValueError
+        The file is malformed; the message names the file, the line (CSV) or
+        row (NPZ) and the problem.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"EMG recording not found: {path}")
+    emg = _load_npz(path) if path.suffix.lower() == ".npz" else _load_csv(path)
+    if len(emg) == 0:
+        raise ValueError(f"{path}: the recording holds no samples")
+    return emg
+
+
+class FileEmgSource(LeafSystem):
+    """Replays a raw sEMG recording at 200 Hz.
+
+    .. pydrake_system::
+
+        name: FileEmgSource
+        output_ports:
+        - emg
+
+    ``emg`` (8, MYO units): row k of the recording (``load_emg_recording``) from
+    t = k * period until the next update; the file is read and checked when the
+    system is built, so a malformed file fails there, never mid-simulation.
+
+    Timing: periodic discrete update every ``period`` (offset 0). After the
+    last row, ``at_end="hold"`` keeps outputting it; ``at_end="loop"`` starts
+    again from the first row.
+
+    Parameters
+    ----------
+    filename : str or Path
+        CSV or NPZ recording (see ``load_emg_recording``).
+    at_end : {"hold", "loop"}
+    period : float
+        Sample period in s (MYO: 1/200).
+    """
+
+    def __init__(self, *, filename, at_end="hold", period=MYO_PERIOD):
+        LeafSystem.__init__(self)
+        if at_end not in ("hold", "loop"):
+            raise ValueError(f"at_end must be 'hold' or 'loop', got {at_end!r}")
+        self._recording = load_emg_recording(filename).astype(float)
+        self._loop = at_end == "loop"
+        self._emg_state = self.DeclareDiscreteState(MYO_CHANNELS)
+        self._count_state = self.DeclareDiscreteState(1)
+        self.DeclarePeriodicDiscreteUpdateEvent(
+            period_sec=_check_period(period), offset_sec=0.0, update=self._update_sample
+        )
+        self._emg_output = self.DeclareStateOutputPort("emg", self._emg_state)
+
+    def get_emg_output_port(self):
+        return self._emg_output
+
+    @property
+    def recording(self):
+        """The replayed samples, shape (n_samples, 8) (read only)."""
+        view = self._recording.view()
+        view.flags.writeable = False
+        return view
+
+    def _update_sample(self, context, discrete_state):
+        k = int(context.get_discrete_state(self._count_state).GetAtIndex(0))
+        n = len(self._recording)
+        row = k % n if self._loop else min(k, n - 1)
+        discrete_state.set_value(self._emg_state, self._recording[row])
+        discrete_state.set_value(self._count_state, [k + 1])
+
+
+class LiveEmgSource(LeafSystem):
+    """Outputs the newest raw sEMG sample of a live armband, polled at 200 Hz.
+
+    .. pydrake_system::
+
+        name: LiveEmgSource
+        output_ports:
+        - emg
+
+    ``emg`` (8, MYO units). The device is any object with a ``read_emg()``
+    method returning the newest sample (8 integers) or ``None`` when nothing
+    new arrived; ``open_myo_device()`` gives one for a real MYO (optional extra
+    ``hemg-drake[myo]``), tests pass a fake. With ``None`` the output holds.
+
+    Timing: periodic discrete update every ``period`` (offset 0). Run the
+    simulator at real-time rate (``Simulator.set_target_realtime_rate(1)``) so
+    the polls follow the device's clock.
+
+    Parameters
+    ----------
+    device : object with ``read_emg()``
+    period : float
+        Poll period in s (MYO: 1/200).
+    """
+
+    def __init__(self, *, device, period=MYO_PERIOD):
+        LeafSystem.__init__(self)
+        if not callable(getattr(device, "read_emg", None)):
+            raise ValueError("device must have a read_emg() method")
+        self._device = device
+        self._emg_state = self.DeclareDiscreteState(MYO_CHANNELS)
+        self.DeclarePeriodicDiscreteUpdateEvent(
+            period_sec=_check_period(period), offset_sec=0.0, update=self._update_sample
+        )
+        self._emg_output = self.DeclareStateOutputPort("emg", self._emg_state)
+
+    def get_emg_output_port(self):
+        return self._emg_output
+
+    def _update_sample(self, context, discrete_state):
+        sample = self._device.read_emg()
+        if sample is None:
+            return
+        sample = np.asarray(sample, dtype=float)
+        if sample.shape != (MYO_CHANNELS,) or not np.all(np.isfinite(sample)):
+            raise ValueError(
+                f"device.read_emg() must return {MYO_CHANNELS} finite values, got {sample!r}"
+            )
+        discrete_state.set_value(self._emg_state, np.clip(sample, INT8_MIN, INT8_MAX))
+
+
+def open_myo_device(**kwargs):
+    """Connect to a MYO armband through ``pyomyo`` (see ``hemg_drake.emg._myo``)."""
+    from hemg_drake.emg._myo import open_myo_device as _open
+
+    return _open(**kwargs)
