@@ -1,0 +1,132 @@
+"""Time recursions of the explicit-duration HSMM in log space, compiled by numba.
+
+The recursions over time cannot be vectorised (step t needs step t - 1), and a
+numpy expression per time step costs more in call overhead than the work
+itself, so these loops are JIT-compiled (``cache=True``: compiled once per
+machine). Indices: t time, i and j states, d duration in steps (1 ..
+n_durations, stored at column d - 1).
+"""
+
+import numba
+import numpy as np
+
+_NEG_INF = -np.inf
+
+
+@numba.njit(cache=True)
+def _logsumexp(values, n):
+    """log(sum(exp(values[:n]))), -inf if every value is -inf."""
+    top = _NEG_INF
+    for k in range(n):
+        if values[k] > top:
+            top = values[k]
+    if top == _NEG_INF:
+        return _NEG_INF
+    total = 0.0
+    for k in range(n):
+        total += np.exp(values[k] - top)
+    return top + np.log(total)
+
+
+@numba.njit(cache=True)
+def forward(log_emission, log_startprob, log_transmat, log_duration):
+    """Segment forward variables (eq. 11) of one sequence.
+
+    Parameters
+    ----------
+    log_emission : array, shape (T, N)
+        log N(xi_t | mu_i, Sigma_i) (all zeros for "no observation").
+    log_startprob : array, shape (N,)
+    log_transmat : array, shape (N, N)
+        log a_ji at [j, i].
+    log_duration : array, shape (N, n_durations)
+        log p_i(d) at [i, d - 1].
+
+    Returns
+    -------
+    log_alpha : array, shape (T, N)
+        log p(xi_0..t, a segment of state i ends at t).
+    log_alpha_in : array, shape (T, N)
+        log p(xi_0..t-1, a segment of state i starts at t).
+    """
+    n_steps, n_states = log_emission.shape
+    n_durations = log_duration.shape[1]
+    log_alpha = np.empty((n_steps, n_states))
+    log_alpha_in = np.empty((n_steps, n_states))
+    terms = np.empty(max(n_durations, n_states))
+    for t in range(n_steps):
+        for i in range(n_states):
+            if t == 0:
+                log_alpha_in[t, i] = log_startprob[i]
+            else:
+                for j in range(n_states):
+                    terms[j] = log_alpha[t - 1, j] + log_transmat[j, i]
+                log_alpha_in[t, i] = _logsumexp(terms, n_states)
+        for i in range(n_states):
+            n_terms = min(n_durations, t + 1)
+            segment = 0.0  # log-likelihood of xi_{t-d+1..t} under state i
+            for d in range(1, n_terms + 1):
+                segment += log_emission[t - d + 1, i]
+                terms[d - 1] = (
+                    log_alpha_in[t - d + 1, i] + log_duration[i, d - 1] + segment
+                )
+            log_alpha[t, i] = _logsumexp(terms, n_terms)
+    return log_alpha, log_alpha_in
+
+
+@numba.njit(cache=True)
+def backward(log_emission, log_transmat, log_duration, log_alpha_in, log_likelihood):
+    """Backward variables and the expected duration counts of one sequence.
+
+    Parameters
+    ----------
+    log_emission, log_transmat, log_duration : arrays
+        As for :func:`forward`.
+    log_alpha_in : array, shape (T, N)
+        From :func:`forward`.
+    log_likelihood : float
+        log p(xi_0..T-1), a segment ending at T - 1.
+
+    Returns
+    -------
+    log_beta : array, shape (T, N)
+        log p(xi_t+1..T-1 | a segment of state i ends at t).
+    log_beta_in : array, shape (T, N)
+        log p(xi_t..T-1 | a segment of state i starts at t).
+    duration_counts : array, shape (N, n_durations)
+        Posterior expected number of segments of state i lasting d steps.
+    """
+    n_steps, n_states = log_emission.shape
+    n_durations = log_duration.shape[1]
+    log_beta = np.empty((n_steps, n_states))
+    log_beta_in = np.empty((n_steps, n_states))
+    duration_counts = np.zeros((n_states, n_durations))
+    terms = np.empty(max(n_durations, n_states))
+    for s in range(n_steps - 1, -1, -1):
+        for i in range(n_states):
+            if s == n_steps - 1:
+                log_beta[s, i] = 0.0
+            else:
+                for j in range(n_states):
+                    terms[j] = log_transmat[i, j] + log_beta_in[s + 1, j]
+                log_beta[s, i] = _logsumexp(terms, n_states)
+        for i in range(n_states):
+            n_terms = min(n_durations, n_steps - s)
+            segment = 0.0  # log-likelihood of xi_{s..s+d-1} under state i
+            top = _NEG_INF
+            for d in range(1, n_terms + 1):
+                segment += log_emission[s + d - 1, i]
+                terms[d - 1] = log_duration[i, d - 1] + segment + log_beta[s + d - 1, i]
+                if terms[d - 1] > top:
+                    top = terms[d - 1]
+            if top == _NEG_INF:
+                log_beta_in[s, i] = _NEG_INF
+                continue
+            total = 0.0
+            scale = np.exp(top + log_alpha_in[s, i] - log_likelihood)
+            for d in range(n_terms):
+                weight = np.exp(terms[d] - top)
+                total += weight
+                duration_counts[i, d] += weight * scale
+            log_beta_in[s, i] = top + np.log(total)
+    return log_beta, log_beta_in, duration_counts

@@ -1,0 +1,174 @@
+"""Gaussian mixture regression: condition a mixture on a subset of dimensions (eqs. 14-17)."""
+
+import numpy as np
+
+
+def gaussian_log_pdf(x, means, covariances):
+    """log N(x | mu_i, Sigma_i) for every sample and component.
+
+    Parameters
+    ----------
+    x : array, shape (T, D)
+    means : array, shape (N, D)
+    covariances : array, shape (N, D, D), symmetric positive definite.
+
+    Returns
+    -------
+    array, shape (T, N)
+    """
+    return _log_pdf_whitened(x, means, *_whitening(covariances))
+
+
+def _whitening(covariances):
+    """L^-1 of each Cholesky factor, shape (N, D, D), and log det Sigma_i, shape (N,)."""
+    cholesky = np.linalg.cholesky(covariances)
+    eye = np.broadcast_to(np.eye(covariances.shape[-1]), covariances.shape)
+    log_det = 2.0 * np.log(np.diagonal(cholesky, axis1=1, axis2=2)).sum(axis=1)
+    return np.linalg.solve(cholesky, eye), log_det
+
+
+def _log_pdf_whitened(x, means, inverse_cholesky, log_det):
+    diff = x[:, None, :] - means[None]  # (T, N, D)
+    white = np.einsum("nij,tnj->tni", inverse_cholesky, diff)
+    mahalanobis = np.einsum("tni,tni->tn", white, white)
+    return -0.5 * (mahalanobis + log_det + means.shape[1] * np.log(2.0 * np.pi))
+
+
+def softmax(log_weights):
+    """exp(log_weights) normalised over the last axis, without overflow."""
+    shifted = np.exp(log_weights - log_weights.max(axis=-1, keepdims=True))
+    return shifted / shifted.sum(axis=-1, keepdims=True)
+
+
+class Gmr:
+    """p(xi^O | xi^I) of a Gaussian mixture, for one query or a batch.
+
+    The index split is given once; the regression matrices
+    S_i^OI (S_i^II)^-1 and conditional covariances are precomputed.
+
+    Parameters
+    ----------
+    priors : array, shape (N,)
+        Mixture weights pi_i (>= 0, summing to 1).
+    means : array, shape (N, D)
+    covariances : array, shape (N, D, D)
+    input_dims : sequence of int
+        Indices of xi^I, the dimensions conditioned on.
+    output_dims : sequence of int, optional
+        Indices of xi^O; default all the others, in order.
+
+    Attributes
+    ----------
+    gains_ : array, shape (N, O, I)
+        S_i^OI (S_i^II)^-1 (eq. 16).
+    conditional_covariances_ : array, shape (N, O, O)
+        S_i^OO - S_i^OI (S_i^II)^-1 S_i^IO (eq. 17).
+    """
+
+    def __init__(self, *, priors, means, covariances, input_dims, output_dims=None):
+        means = np.asarray(means, dtype=float)
+        covariances = np.asarray(covariances, dtype=float)
+        priors = np.asarray(priors, dtype=float)
+        n_states, n_dims = means.shape if means.ndim == 2 else (0, 0)
+        if means.ndim != 2 or n_states < 1:
+            raise ValueError(f"means must have shape (N, D), got {means.shape}")
+        if covariances.shape != (n_states, n_dims, n_dims):
+            raise ValueError(
+                f"covariances must have shape {(n_states, n_dims, n_dims)}, "
+                f"got {covariances.shape}"
+            )
+        if priors.shape != (n_states,) or np.any(priors < 0):
+            raise ValueError(f"priors must be {n_states} non-negative weights")
+        input_dims = np.asarray(input_dims, dtype=int).ravel()
+        if output_dims is None:
+            output_dims = np.setdiff1d(np.arange(n_dims), input_dims)
+        output_dims = np.asarray(output_dims, dtype=int).ravel()
+        both = np.concatenate([input_dims, output_dims])
+        if input_dims.size == 0 or np.any((both < 0) | (both >= n_dims)):
+            raise ValueError(
+                f"input_dims and output_dims must be indices in [0, {n_dims}), "
+                f"input_dims non-empty; got {input_dims.tolist()}, {output_dims.tolist()}"
+            )
+        if np.unique(both).size != both.size:
+            raise ValueError("input_dims and output_dims must not overlap")
+        for name, value in (("means", means), ("covariances", covariances), ("priors", priors)):
+            if not np.all(np.isfinite(value)):
+                raise ValueError(f"{name} contain NaN or inf")
+
+        self.input_dims = input_dims
+        self.output_dims = output_dims
+        self.priors = priors
+        self.input_means_ = means[:, input_dims]
+        self.output_means_ = means[:, output_dims]
+        self.input_covariances_ = covariances[np.ix_(range(n_states), input_dims, input_dims)]
+        cross = covariances[np.ix_(range(n_states), output_dims, input_dims)]
+        output_cov = covariances[np.ix_(range(n_states), output_dims, output_dims)]
+        # gains = S^OI (S^II)^-1, via a solve with the symmetric S^II.
+        self.gains_ = np.swapaxes(
+            np.linalg.solve(self.input_covariances_, np.swapaxes(cross, 1, 2)), 1, 2
+        )
+        self.conditional_covariances_ = output_cov - self.gains_ @ np.swapaxes(cross, 1, 2)
+        with np.errstate(divide="ignore"):
+            self._log_priors = np.log(priors)
+        self._input_whitening = _whitening(self.input_covariances_)
+
+    def _as_queries(self, x):
+        x = np.asarray(x, dtype=float)
+        n_in = self.input_dims.size
+        if x.shape[-1:] != (n_in,) or x.ndim > 2:
+            raise ValueError(f"query must have shape ({n_in},) or (T, {n_in}), got {x.shape}")
+        if not np.all(np.isfinite(x)):
+            raise ValueError("query contains NaN or inf")
+        return np.atleast_2d(x), x.ndim == 1
+
+    def log_input_likelihood(self, x):
+        """log N(x | mu_i^I, S_i^II) per component; shape (T, N) (or (N,) for one query)."""
+        queries, single = self._as_queries(x)
+        log_pdf = self._log_input_likelihood(queries)
+        return log_pdf[0] if single else log_pdf
+
+    def _log_input_likelihood(self, queries):
+        return _log_pdf_whitened(queries, self.input_means_, *self._input_whitening)
+
+    def responsibilities(self, x):
+        """h_i proportional to pi_i N(x | mu_i^I, S_i^II) (eq. 14); shape (T, N) or (N,)."""
+        return softmax(self._log_priors + self.log_input_likelihood(x))
+
+    def component_means(self, x):
+        """mu_i^O + S_i^OI (S_i^II)^-1 (x - mu_i^I) (eq. 16); shape (T, N, O) or (N, O)."""
+        queries, single = self._as_queries(x)
+        means = self._component_means(queries)
+        return means[0] if single else means
+
+    def _component_means(self, queries):
+        diff = queries[:, None, :] - self.input_means_[None]  # (T, N, I)
+        return self.output_means_[None] + np.einsum("noi,tni->tno", self.gains_, diff)
+
+    def predict(self, x, weights=None):
+        """Conditional mean and covariance of xi^O given xi^I = x (eqs. 15-17).
+
+        Parameters
+        ----------
+        x : array, shape (I,) or (T, I)
+        weights : array, shape (N,) or (T, N), optional
+            State weights h; default the mixture posterior of eq. 14.
+
+        Returns
+        -------
+        mean : array, shape (O,) or (T, O)
+        covariance : array, shape (O, O) or (T, O, O)
+            Covariance of the mixture of conditionals (law of total covariance).
+        """
+        queries, single = self._as_queries(x)
+        if weights is None:
+            weights = self.responsibilities(queries)
+        weights = np.broadcast_to(np.asarray(weights, dtype=float), (len(queries), len(self.priors)))
+        means = self._component_means(queries)  # (T, N, O)
+        mean = np.einsum("tn,tno->to", weights, means)
+        spread = means - mean[:, None, :]
+        covariance = np.einsum("tn,nop->top", weights, self.conditional_covariances_) + np.einsum(
+            "tn,tno,tnp->top", weights, spread, spread
+        )
+        if single:
+            return mean[0], covariance[0]
+        return mean, covariance

@@ -1,0 +1,579 @@
+"""Hidden semi-Markov model with explicit Gaussian durations, trained by EM (eqs. 4-11)."""
+
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+from scipy.cluster.vq import kmeans2
+
+from hemg_drake.fileio import save_npz_atomic
+from hemg_drake.learning import _kernels
+from hemg_drake.learning.gmr import gaussian_log_pdf
+from hemg_drake.learning.reproduce import ResidualForward
+
+FORMAT_VERSION = 1
+_FITTED = (
+    "startprob_", "transmat_", "means_", "covariances_",
+    "duration_means_", "duration_stds_", "occupancy_",
+)  # fmt: skip
+
+
+def _log(x):
+    with np.errstate(divide="ignore"):
+        return np.log(x)
+
+
+def check_demos(demos, n_dims=None):
+    """Validate demonstrations; return them as a list of float arrays (T_c, D).
+
+    Raises ``ValueError`` naming the demonstration at fault for a wrong shape,
+    NaN/inf, a dimension other than ``n_dims`` or the others' dimension.
+    """
+    if isinstance(demos, np.ndarray) and demos.ndim == 2:
+        demos = [demos]
+    demos = [np.asarray(demo, dtype=float) for demo in demos]
+    if not demos:
+        raise ValueError("demos is empty: give at least one array of shape (T, D)")
+    for c, demo in enumerate(demos):
+        if demo.ndim != 2 or demo.shape[0] < 1 or demo.shape[1] < 1:
+            raise ValueError(f"demo {c} must have shape (T, D), got {demo.shape}")
+        if not np.all(np.isfinite(demo)):
+            raise ValueError(f"demo {c} contains NaN or inf")
+        expected = demos[0].shape[1] if n_dims is None else n_dims
+        if demo.shape[1] != expected:
+            where = "the model's" if n_dims is not None else "demo 0's"
+            raise ValueError(
+                f"demo {c} has D = {demo.shape[1]} dimensions, {where} is D = {expected}"
+            )
+    return demos
+
+
+class HSMM:
+    """Explicit-duration hidden semi-Markov model with full-covariance Gaussian states.
+
+    lambda = {pi, A, {mu_i, Sigma_i}, {mu_i^D, sigma_i^D}} (eq. 4): no
+    self-transitions (the diagonal of A is zero), Gaussian durations in steps
+    up to ``max_duration``. EM (eqs. 5-6) runs forward-backward in log space,
+    O(T N d_max) per demonstration, so sequences of any length are safe.
+
+    Modelling choices: the duration density is the Gaussian evaluated at
+    d = 1 .. d_max, not renormalised over that range, so that the M-step
+    (weighted moments) is exact and the log-likelihood never decreases; the
+    duration standard deviation is floored at ``min_duration_std`` steps and
+    covariance eigenvalues (in data-standardised units) at ``reg_covar``, both
+    exact constrained M-steps. A sequence must end with a complete segment.
+
+    Parameters
+    ----------
+    n_states : int
+        N >= 1.
+    max_duration : int, optional
+        d_max in steps; default 3 x the mean demonstration length / N, capped
+        at the longest demonstration.
+    reg_covar : float
+        Floor on covariance eigenvalues, relative to each dimension's variance
+        over all the data (so the floor does not depend on units).
+    min_duration_std : float
+        Floor on sigma_i^D, in steps.
+    n_iter : int
+        Maximum number of EM iterations.
+    tol : float
+        Stop when the log-likelihood gains less than ``tol * |log-likelihood|``.
+    init : {"kmeans", "time"}
+        "kmeans": seeded k-means++ on all samples (best of ``n_init`` runs),
+        durations and transitions from its runs; "time": each demonstration
+        cut into N equal segments, a left-to-right model (zeros in A stay
+        zero under EM).
+    n_init : int
+        k-means restarts.
+    n_position : int, optional
+        Layout of xi = [x (P), xdot (P), k (rest)]; default P = D // 2, so
+        D = 7 gives [x(3), xdot(3), k(1)], D = 6 no stiffness, D = 4 planar.
+    seed : int
+        Seed of every random draw.
+
+    Attributes
+    ----------
+    startprob_ : array, shape (N,)
+    transmat_ : array, shape (N, N)
+        a_ij at [i, j]; zero diagonal; rows of states never left may be zero.
+    means_ : array, shape (N, D)
+    covariances_ : array, shape (N, D, D)
+    duration_means_, duration_stds_ : arrays, shape (N,)
+        In steps.
+    occupancy_ : array, shape (N,)
+        Fraction of training samples in each state (the prior of eq. 14).
+    max_duration_ : int
+    log_likelihood_history_ : list of float
+        Total log-likelihood of all demonstrations before each M-step.
+    n_iter_ : int
+    converged_ : bool
+    """
+
+    def __init__(
+        self,
+        n_states,
+        *,
+        max_duration=None,
+        reg_covar=1e-4,
+        min_duration_std=1.0,
+        n_iter=100,
+        tol=1e-5,
+        init="kmeans",
+        n_init=5,
+        n_position=None,
+        seed=0,
+    ):
+        self.n_states = n_states
+        self.max_duration = max_duration
+        self.reg_covar = reg_covar
+        self.min_duration_std = min_duration_std
+        self.n_iter = n_iter
+        self.tol = tol
+        self.init = init
+        self.n_init = n_init
+        self.n_position = n_position
+        self.seed = seed
+        self._check_parameters()
+
+    def _check_parameters(self):
+        def integer(value):
+            return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+        if not integer(self.n_states) or self.n_states < 1:
+            raise ValueError(f"n_states must be an integer >= 1, got {self.n_states!r}")
+        if self.max_duration is not None and (
+            not integer(self.max_duration) or self.max_duration < 1
+        ):
+            raise ValueError(f"max_duration must be an integer >= 1, got {self.max_duration!r}")
+        if not self.reg_covar > 0:
+            raise ValueError(f"reg_covar must be > 0, got {self.reg_covar!r}")
+        if not self.min_duration_std > 0:
+            raise ValueError(f"min_duration_std must be > 0, got {self.min_duration_std!r}")
+        if not integer(self.n_iter) or self.n_iter < 1:
+            raise ValueError(f"n_iter must be an integer >= 1, got {self.n_iter!r}")
+        if not self.tol >= 0:
+            raise ValueError(f"tol must be >= 0, got {self.tol!r}")
+        if self.init not in ("kmeans", "time"):
+            raise ValueError(f"init must be 'kmeans' or 'time', got {self.init!r}")
+        if not integer(self.n_init) or self.n_init < 1:
+            raise ValueError(f"n_init must be an integer >= 1, got {self.n_init!r}")
+        if self.n_position is not None and (not integer(self.n_position) or self.n_position < 1):
+            raise ValueError(f"n_position must be an integer >= 1, got {self.n_position!r}")
+
+    # ------------------------------------------------------------------ layout
+    @property
+    def n_dims_(self):
+        self._check_fitted()
+        return self.means_.shape[1]
+
+    @property
+    def position_dims_(self):
+        """Indices of x, the input of GMR."""
+        return np.arange(self._n_position())
+
+    @property
+    def velocity_dims_(self):
+        """Indices of xdot, integrated by eq. 18."""
+        p = self._n_position()
+        return np.arange(p, 2 * p)
+
+    @property
+    def stiffness_dims_(self):
+        """Indices of k (possibly empty)."""
+        return np.arange(2 * self._n_position(), self.n_dims_)
+
+    def _n_position(self):
+        n_dims = self.n_dims_
+        p = n_dims // 2 if self.n_position is None else self.n_position
+        if 2 * p > n_dims:
+            raise ValueError(
+                f"n_position = {p} needs D >= {2 * p} (x and xdot), the model has D = {n_dims}"
+            )
+        return p
+
+    # -------------------------------------------------------------------- fit
+    def fit(self, demos):
+        """Estimate the model from demonstrations by EM.
+
+        Parameters
+        ----------
+        demos : list of arrays, shape (T_c, D)
+            C demonstrations of possibly different lengths T_c >= n_states.
+
+        Returns
+        -------
+        self
+        """
+        self._check_parameters()
+        demos = check_demos(demos)
+        for c, demo in enumerate(demos):
+            if len(demo) < self.n_states:
+                raise ValueError(
+                    f"demo {c} has {len(demo)} steps, fewer than n_states = {self.n_states}"
+                )
+        samples = np.concatenate(demos)
+        scale = samples.std(axis=0)
+        scale[scale == 0] = 1.0
+        lengths = [len(demo) for demo in demos]
+        if self.max_duration is None:
+            estimate = int(np.ceil(3.0 * np.mean(lengths) / self.n_states))
+            self.max_duration_ = max(1, min(estimate, max(lengths)))
+        else:
+            self.max_duration_ = int(self.max_duration)
+
+        self._initialise(demos, samples, scale)
+        self.log_likelihood_history_ = []
+        self.converged_ = False
+        for self.n_iter_ in range(1, self.n_iter + 1):
+            stats = self._expectation(demos)
+            if not np.isfinite(stats["log_likelihood"]):
+                raise ValueError(
+                    "the demos cannot be segmented into at most "
+                    f"max_duration = {self.max_duration_} steps per state visit; "
+                    "raise max_duration or n_states"
+                )
+            history = self.log_likelihood_history_
+            history.append(stats["log_likelihood"])
+            self._maximisation(stats, scale)
+            if len(history) > 1 and history[-1] - history[-2] < self.tol * abs(history[-1]):
+                self.converged_ = True
+                break
+        return self
+
+    def _initialise(self, demos, samples, scale):
+        n = self.n_states
+        if self.init == "time":
+            labels = [np.minimum(np.arange(len(d)) * n // len(d), n - 1) for d in demos]
+        else:
+            labels = self._kmeans_labels(demos, samples / scale)
+        flat = np.concatenate(labels)
+        global_cov = np.cov(samples, rowvar=False, bias=True).reshape(samples.shape[1], -1)
+        self.means_ = np.empty((n, samples.shape[1]))
+        self.covariances_ = np.empty((n, samples.shape[1], samples.shape[1]))
+        durations = [[] for _ in range(n)]
+        transitions = np.zeros((n, n))
+        starts = np.zeros(n)
+        self.duration_means_ = np.empty(n)
+        self.duration_stds_ = np.empty(n)
+        for label in labels:
+            change = np.flatnonzero(np.diff(label)) + 1
+            bounds = np.concatenate([[0], change, [len(label)]])
+            for begin, end in zip(bounds[:-1], bounds[1:]):
+                durations[label[begin]].append(end - begin)
+            np.add.at(transitions, (label[change - 1], label[change]), 1.0)
+            starts[label[0]] += 1.0
+        for i in range(n):
+            members = samples[flat == i]
+            if len(members) > 1:
+                self.means_[i] = members.mean(axis=0)
+                self.covariances_[i] = np.cov(members, rowvar=False, bias=True)
+            else:  # an empty cluster: a random sample, the data's spread
+                self.means_[i] = samples[np.random.default_rng(self.seed + i).integers(len(samples))]
+                self.covariances_[i] = global_cov
+            d = np.array(durations[i] or [np.mean([len(x) for x in demos]) / n], dtype=float)
+            self.duration_means_[i] = d.mean()
+            self.duration_stds_[i] = max(d.std(), self.min_duration_std)
+        self.covariances_ = self._floor_covariances(self.covariances_, scale)
+        if self.init == "kmeans":
+            # k-means runs flicker; a small pseudo-count keeps every order reachable for EM.
+            transitions += 0.1 / max(n - 1, 1)
+            starts += 0.1
+        np.fill_diagonal(transitions, 0.0)
+        self.transmat_ = self._normalise_rows(transitions, np.zeros((n, n)))
+        self.startprob_ = starts / starts.sum()
+        self.occupancy_ = np.bincount(flat, minlength=n) / len(flat)
+
+    def _kmeans_labels(self, demos, standardised):
+        rng = np.random.default_rng(self.seed)
+        best, best_inertia = None, np.inf
+        for _ in range(self.n_init):
+            centroids, label = kmeans2(
+                standardised, self.n_states, iter=30, minit="++", missing="warn", seed=rng
+            )
+            inertia = np.sum((standardised - centroids[label]) ** 2)
+            if inertia < best_inertia:
+                best, best_inertia = label, inertia
+        return np.split(best, np.cumsum([len(d) for d in demos])[:-1])
+
+    @staticmethod
+    def _normalise_rows(counts, previous):
+        """Rows of counts normalised; a row with no counts keeps its previous value."""
+        totals = counts.sum(axis=1, keepdims=True)
+        return np.where(totals > 0, counts / np.where(totals > 0, totals, 1.0), previous)
+
+    def _floor_covariances(self, covariances, scale):
+        # Eigenvalue floor in standardised units: the exact maximiser of the
+        # Gaussian likelihood under Sigma >= reg_covar (per-dimension variance).
+        standardised = covariances / np.outer(scale, scale)
+        values, vectors = np.linalg.eigh(standardised)
+        values = np.maximum(values, self.reg_covar)
+        floored = (vectors * values[:, None, :]) @ np.swapaxes(vectors, 1, 2)
+        floored = 0.5 * (floored + np.swapaxes(floored, 1, 2))
+        return floored * np.outer(scale, scale)
+
+    def _log_durations(self):
+        d = np.arange(1, self.max_duration_ + 1)
+        z = (d[None, :] - self.duration_means_[:, None]) / self.duration_stds_[:, None]
+        return -0.5 * z**2 - np.log(np.sqrt(2.0 * np.pi) * self.duration_stds_)[:, None]
+
+    def _log_parameters(self):
+        return _log(self.startprob_), _log(self.transmat_), self._log_durations()
+
+    def _posteriors(self, demo, log_parameters):
+        """Forward-backward on one demo: log-likelihood, state posteriors and counts."""
+        log_startprob, log_transmat, log_duration = log_parameters
+        log_emission = gaussian_log_pdf(demo, self.means_, self.covariances_)
+        log_alpha, log_alpha_in = _kernels.forward(
+            log_emission, log_startprob, log_transmat, log_duration
+        )
+        log_likelihood = np.logaddexp.reduce(log_alpha[-1])
+        if not np.isfinite(log_likelihood):
+            return log_likelihood, None
+        log_beta, log_beta_in, duration_counts = _kernels.backward(
+            log_emission, log_transmat, log_duration, log_alpha_in, log_likelihood
+        )
+        starts = np.exp(log_alpha_in + log_beta_in - log_likelihood)
+        ends = np.exp(log_alpha + log_beta - log_likelihood)
+        # In state i at t: segments started at or before t minus those ended before t.
+        gamma = np.cumsum(starts, axis=0) - np.concatenate(
+            [np.zeros((1, self.n_states)), np.cumsum(ends[:-1], axis=0)]
+        )
+        gamma = np.clip(gamma, 0.0, 1.0)
+        transitions = np.exp(
+            np.logaddexp.reduce(
+                log_alpha[:-1, :, None] + log_transmat[None] + log_beta_in[1:, None, :],
+                axis=0,
+            )
+            - log_likelihood
+        ) if len(demo) > 1 else np.zeros((self.n_states, self.n_states))  # fmt: skip
+        return log_likelihood, {
+            "gamma": gamma,
+            "starts": starts[0],
+            "transitions": transitions,
+            "durations": duration_counts,
+        }
+
+    def _expectation(self, demos):
+        n, n_dims = self.means_.shape
+        stats = {
+            "log_likelihood": 0.0,
+            "weight": np.zeros(n),
+            "sum": np.zeros((n, n_dims)),
+            "outer": np.zeros((n, n_dims, n_dims)),
+            "starts": np.zeros(n),
+            "transitions": np.zeros((n, n)),
+            "durations": np.zeros((n, self.max_duration_)),
+        }
+        log_parameters = self._log_parameters()
+        for demo in demos:
+            log_likelihood, post = self._posteriors(demo, log_parameters)
+            stats["log_likelihood"] += log_likelihood
+            if post is None:
+                return stats
+            gamma = post["gamma"]
+            stats["weight"] += gamma.sum(axis=0)
+            stats["sum"] += gamma.T @ demo
+            stats["outer"] += np.einsum("tn,td,te->nde", gamma, demo, demo)
+            for key in ("starts", "transitions", "durations"):
+                stats[key] += post[key]
+        return stats
+
+    def _maximisation(self, stats, scale):
+        weight = stats["weight"]
+        used = weight > 1e-10 * weight.sum()  # states with no mass keep their parameters
+        means = stats["sum"][used] / weight[used, None]
+        covariances = stats["outer"][used] / weight[used, None, None] - np.einsum(
+            "nd,ne->nde", means, means
+        )
+        self.means_[used] = means
+        self.covariances_[used] = self._floor_covariances(covariances, scale)
+        self.startprob_ = stats["starts"] / stats["starts"].sum()
+        self.transmat_ = self._normalise_rows(stats["transitions"], self.transmat_)
+        counts = stats["durations"]
+        total = counts.sum(axis=1)
+        has = total > 0
+        d = np.arange(1, self.max_duration_ + 1)
+        mean = counts[has] @ d / total[has]
+        variance = (counts[has] * (d[None, :] - mean[:, None]) ** 2).sum(axis=1) / total[has]
+        self.duration_means_[has] = mean
+        self.duration_stds_[has] = np.maximum(np.sqrt(variance), self.min_duration_std)
+        self.occupancy_ = weight / weight.sum()
+
+    # -------------------------------------------------------------- inference
+    def _check_fitted(self):
+        if not all(hasattr(self, name) for name in _FITTED):
+            raise ValueError("this HSMM is not fitted yet: call fit(demos) or HSMM.load(path)")
+
+    def _check_demo(self, demo):
+        self._check_fitted()
+        return check_demos([demo], n_dims=self.means_.shape[1])[0]
+
+    def log_likelihood(self, demo):
+        """log p(demo | lambda), the sequence ending with a complete segment.
+
+        Parameters
+        ----------
+        demo : array, shape (T, D)
+
+        Returns
+        -------
+        float (-inf if the model cannot produce the demo)
+        """
+        demo = self._check_demo(demo)
+        return float(self._posteriors(demo, self._log_parameters())[0])
+
+    def predict_states(self, demo):
+        """Most likely state at each step (argmax of the smoothed posterior).
+
+        Parameters
+        ----------
+        demo : array, shape (T, D)
+
+        Returns
+        -------
+        array of int, shape (T,)
+        """
+        demo = self._check_demo(demo)
+        log_likelihood, post = self._posteriors(demo, self._log_parameters())
+        if post is None:
+            raise ValueError("the model cannot produce this demo (log-likelihood is -inf)")
+        return np.argmax(post["gamma"], axis=1)
+
+    def _log_emission(self, demo_or_n_steps, observe):
+        """(T, N) emission log-likelihoods, zeros when not observing."""
+        if observe:
+            demo = self._check_demo(demo_or_n_steps)
+            return gaussian_log_pdf(demo, self.means_, self.covariances_)
+        n_steps = demo_or_n_steps
+        if isinstance(n_steps, np.ndarray):
+            n_steps = len(self._check_demo(n_steps))
+        if not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
+            raise ValueError(f"n_steps must be an integer >= 1, got {n_steps!r}")
+        self._check_fitted()
+        return np.zeros((int(n_steps), self.n_states))
+
+    def log_forward_variable(self, demo_or_n_steps, *, observe=True):
+        """log alpha_{i,t} of eq. 11: a segment of state i ends at step t.
+
+        Parameters
+        ----------
+        demo_or_n_steps : array, shape (T, D), or int
+            The observations, or (with ``observe=False``) the number of steps.
+        observe : bool
+            False drops the emission term (the timing alone).
+
+        Returns
+        -------
+        array, shape (T, N)
+        """
+        log_emission = self._log_emission(demo_or_n_steps, observe)
+        return _kernels.forward(log_emission, *self._log_parameters())[0]
+
+    def forward_variable(self, demo_or_n_steps, *, observe=True):
+        """State weights h_{i,t} = p(state i active at t | xi_0..t), normalised (eq. 12).
+
+        The residual-duration form of the forward variable (eq. 11 summed over
+        the remaining duration), which is what reproduction uses; see
+        :mod:`hemg_drake.learning.reproduce`.
+
+        Parameters
+        ----------
+        demo_or_n_steps : array, shape (T, D), or int
+        observe : bool
+
+        Returns
+        -------
+        array, shape (T, N), rows summing to 1
+        """
+        log_emission = self._log_emission(demo_or_n_steps, observe)
+        recursion = ResidualForward(self)
+        predicted = recursion.initial()
+        h = np.empty_like(log_emission)
+        for t, log_b in enumerate(log_emission):
+            h[t], predicted = recursion.step(predicted, log_b)
+        return h
+
+    # ------------------------------------------------------------ persistence
+    def save(self, path):
+        """Write the fitted model to ``path`` (NPZ with a format version), atomically."""
+        self._check_fitted()
+        settings = {
+            "n_states": self.n_states,
+            "max_duration": self.max_duration,
+            "reg_covar": self.reg_covar,
+            "min_duration_std": self.min_duration_std,
+            "n_iter": self.n_iter,
+            "tol": self.tol,
+            "init": self.init,
+            "n_init": self.n_init,
+            "n_position": self.n_position,
+            "seed": self.seed,
+        }
+        save_npz_atomic(
+            path,
+            format_version=np.array(FORMAT_VERSION),
+            settings=np.array(json.dumps(settings)),
+            max_duration_=np.array(self.max_duration_),
+            log_likelihood_history_=np.array(self.log_likelihood_history_, dtype=float),
+            **{name: getattr(self, name) for name in _FITTED},
+        )
+
+    @classmethod
+    def load(cls, path):
+        """Read a model written by :meth:`save`.
+
+        Raises ``FileNotFoundError`` for a missing file and ``ValueError``
+        naming the file for a damaged one or another format version.
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"no HSMM model file at {path}")
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                arrays = {key: data[key] for key in data.files}
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as error:
+            raise ValueError(f"{path}: not a readable HSMM model file ({error})") from None
+        version = arrays.get("format_version")
+        if version is None or version.shape != () or int(version) != FORMAT_VERSION:
+            raise ValueError(
+                f"{path}: HSMM model format version {version}, this code reads {FORMAT_VERSION}"
+            )
+        missing = [k for k in (*_FITTED, "settings", "max_duration_") if k not in arrays]
+        if missing:
+            raise ValueError(f"{path}: damaged HSMM model file, missing {missing}")
+        try:
+            model = cls(**json.loads(str(arrays["settings"])))
+        except (TypeError, json.JSONDecodeError) as error:
+            raise ValueError(f"{path}: damaged HSMM model settings ({error})") from None
+        for name in _FITTED:
+            setattr(model, name, arrays[name].astype(float))
+        model.max_duration_ = int(arrays["max_duration_"])
+        model.log_likelihood_history_ = arrays.get("log_likelihood_history_", []).tolist()
+        model.n_iter_ = len(model.log_likelihood_history_)
+        model.converged_ = None
+        model._check_loaded(path)
+        return model
+
+    def _check_loaded(self, path):
+        n = self.n_states
+        n_dims = self.means_.shape[1] if self.means_.ndim == 2 else -1
+        shapes = {
+            "startprob_": (n,), "transmat_": (n, n), "means_": (n, n_dims),
+            "covariances_": (n, n_dims, n_dims), "duration_means_": (n,),
+            "duration_stds_": (n,), "occupancy_": (n,),
+        }  # fmt: skip
+        for name, shape in shapes.items():
+            value = getattr(self, name)
+            if value.shape != shape or not np.all(np.isfinite(value)):
+                raise ValueError(
+                    f"{path}: damaged HSMM model file, {name} has shape {value.shape} "
+                    f"(expected {shape}) or non-finite values"
+                )
+        try:
+            np.linalg.cholesky(self.covariances_)
+        except np.linalg.LinAlgError:
+            raise ValueError(f"{path}: damaged HSMM model file, covariances_ not positive definite") from None
+        if np.any(self.duration_stds_ <= 0) or self.max_duration_ < 1:
+            raise ValueError(f"{path}: damaged HSMM model file, bad duration parameters")

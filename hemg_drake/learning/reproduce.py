@@ -1,0 +1,228 @@
+"""HSMM-GMR reproduction: state weights, GMR velocity and stiffness, integration (eqs. 12-18).
+
+One step, from the current position x_t and the predicted forward variable:
+
+1. state weights h_t (eq. 12), by one of three weightings:
+   ``"temporal"`` the forward variable without observation (timing alone);
+   ``"spatial"``  h_i proportional to pi_i N(x_t | mu_i^x, S_i^xx) (eq. 14);
+   ``"forward"``  the forward variable observing x_t (eqs. 11, 13);
+2. [xdot*; k*] = sum_i h_i [mu_i^O + S_i^OI (S_i^II)^-1 (x_t - mu_i^I)] (eqs. 15-17);
+3. x*_{t+1} = x*_t + dt xdot* (eq. 18).
+
+Modelling choices. The forward variable is kept in its residual-duration form
+(Yu 2010; Calinon's pbdlib ``demo_HSMM``): alpha[i, d] = p(state i active at
+t with d steps left, observations so far), normalised each step, so h_i =
+sum_d alpha[i, d] is the probability that state i is active (eq. 11 is its
+d = 1 column) and nothing underflows. The spatial prior pi_i is the state
+occupancy of the training data (``HSMM.occupancy_``), not the HSMM's initial
+distribution, which is one-hot for a left-to-right task and would pin eq. 14
+to the first state. A state the model never leaves (a zero row of A) is
+re-entered when its segment ends, so the final state holds after the task.
+If an observation is impossible under every predicted state, that step's
+weights fall back to the prediction without the observation.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hemg_drake.learning.gmr import Gmr, softmax
+
+WEIGHTINGS = ("temporal", "spatial", "forward")
+
+
+class ResidualForward:
+    """The residual-duration forward recursion of a fitted HSMM.
+
+    Parameters
+    ----------
+    model : HSMM
+        Fitted.
+    """
+
+    def __init__(self, model):
+        model._check_fitted()
+        self.durations = np.exp(model._log_durations())  # p_i(d), shape (N, d_max)
+        transmat = model.transmat_.copy()
+        final = transmat.sum(axis=1) == 0
+        transmat[final, final] = 1.0
+        self.transmat_T = transmat.T
+        self.startprob = model.startprob_
+
+    def initial(self):
+        """Predicted alpha before the first step, shape (N, d_max)."""
+        return self._normalised(self.startprob[:, None] * self.durations)
+
+    @staticmethod
+    def _normalised(alpha):
+        return alpha / alpha.sum()
+
+    def step(self, predicted, log_emission):
+        """Weigh the prediction by the observation; predict the next step.
+
+        Parameters
+        ----------
+        predicted : array, shape (N, d_max)
+        log_emission : array, shape (N,)
+            log-likelihood of the current observation under each state
+            (zeros: no observation).
+
+        Returns
+        -------
+        h : array, shape (N,)
+        predicted_next : array, shape (N, d_max)
+        """
+        weighted = predicted * np.exp(log_emission - log_emission.max())[:, None]
+        total = weighted.sum()
+        alpha = weighted / total if total > 0 else predicted
+        ends = alpha[:, 0]
+        predicted_next = np.empty_like(alpha)
+        predicted_next[:, :-1] = alpha[:, 1:]
+        predicted_next[:, -1] = 0.0
+        predicted_next += (self.transmat_T @ ends)[:, None] * self.durations
+        return alpha.sum(axis=1), self._normalised(predicted_next)
+
+
+class HsmmGmrPolicy:
+    """One reproduction step of a fitted HSMM, shared by :func:`reproduce` and the LeafSystem.
+
+    Parameters
+    ----------
+    model : HSMM
+        Fitted; its layout says which dimensions are x, xdot and k.
+    weighting : {"temporal", "spatial", "forward"}
+    dt : float
+        Step in seconds (eq. 18).
+    """
+
+    def __init__(self, model, *, weighting="forward", dt=0.01):
+        if weighting not in WEIGHTINGS:
+            raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be a finite number > 0, got {dt!r}")
+        self.forward = ResidualForward(model)
+        self.weighting = weighting
+        self.dt = float(dt)
+        self.n_position = len(model.position_dims_)
+        self.n_stiffness = len(model.stiffness_dims_)
+        self.n_states = model.n_states
+        self.gmr = Gmr(
+            priors=model.occupancy_,
+            means=model.means_,
+            covariances=model.covariances_,
+            input_dims=model.position_dims_,
+            output_dims=np.concatenate([model.velocity_dims_, model.stiffness_dims_]),
+        )
+
+    def check_position(self, x, name="position"):
+        """``x`` as a float array of shape (P,), or a ValueError naming ``name``."""
+        x = np.asarray(x, dtype=float)
+        if x.shape != (self.n_position,):
+            raise ValueError(
+                f"{name} must have shape ({self.n_position},) like the model's position, "
+                f"got {x.shape}"
+            )
+        if not np.all(np.isfinite(x)):
+            raise ValueError(f"{name} contains NaN or inf")
+        return x
+
+    def step(self, x, x_star, predicted):
+        """One step of eqs. 12-18.
+
+        Parameters
+        ----------
+        x : array, shape (P,)
+            Current position x_t, input of the weights and of GMR.
+        x_star : array, shape (P,)
+            Current reference x*_t, integrated by eq. 18.
+        predicted : array, shape (N, d_max)
+            Predicted forward variable for this step.
+
+        Returns
+        -------
+        h : array, shape (N,)
+        xdot : array, shape (P,)
+        k : array, shape (K,)
+        x_star_next : array, shape (P,)
+        predicted_next : array, shape (N, d_max)
+        """
+        query = x[None, :]
+        if self.weighting == "spatial":
+            h = softmax(self.gmr._log_priors + self.gmr._log_input_likelihood(query)[0])
+            predicted_next = predicted
+        else:
+            if self.weighting == "forward":
+                log_emission = self.gmr._log_input_likelihood(query)[0]
+            else:
+                log_emission = np.zeros(self.n_states)
+            h, predicted_next = self.forward.step(predicted, log_emission)
+        output = h @ self.gmr._component_means(query)[0]
+        xdot = output[: self.n_position]
+        return h, xdot, output[self.n_position :], x_star + self.dt * xdot, predicted_next
+
+
+@dataclass(frozen=True)
+class Reproduction:
+    """A reproduced trajectory, one row per step.
+
+    Attributes
+    ----------
+    t : array, shape (T,)
+        Time in s.
+    x : array, shape (T, P)
+        Position x*_t (x[0] is the start).
+    xdot : array, shape (T, P)
+        Velocity xdot*_t (eqs. 15-17).
+    k : array, shape (T, K) or None
+        Stiffness k*_t, None when the model has no stiffness dimension.
+    h : array, shape (T, N)
+        State weights.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    xdot: np.ndarray
+    k: np.ndarray | None
+    h: np.ndarray
+
+
+def reproduce(model, start, n_steps, *, dt=0.01, weighting="forward"):
+    """Reproduce a task from a start position, step by step (eqs. 12-18).
+
+    The position observed at each step is the reproduction's own x*_t.
+
+    Parameters
+    ----------
+    model : HSMM
+        Fitted.
+    start : array, shape (P,)
+        x*_0.
+    n_steps : int
+        Number of steps T >= 1.
+    dt : float
+        Step in s.
+    weighting : {"temporal", "spatial", "forward"}
+
+    Returns
+    -------
+    Reproduction
+    """
+    policy = HsmmGmrPolicy(model, weighting=weighting, dt=dt)
+    x = policy.check_position(start, "start")
+    if not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
+        raise ValueError(f"n_steps must be an integer >= 1, got {n_steps!r}")
+    positions = np.empty((n_steps, policy.n_position))
+    velocities = np.empty_like(positions)
+    stiffness = np.empty((n_steps, policy.n_stiffness))
+    weights = np.empty((n_steps, policy.n_states))
+    predicted = policy.forward.initial()
+    for t in range(n_steps):
+        positions[t] = x
+        weights[t], velocities[t], stiffness[t], x, predicted = policy.step(x, x, predicted)
+    return Reproduction(
+        t=dt * np.arange(n_steps),
+        x=positions,
+        xdot=velocities,
+        k=stiffness if policy.n_stiffness else None,
+        h=weights,
+    )
