@@ -1,0 +1,128 @@
+"""WorkspaceMapping and WorkspaceMap: round trips, stated rotation/scale, exact delay."""
+
+import numpy as np
+import pytest
+from pydrake.math import RollPitchYaw, RotationMatrix
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import (
+    ConstantVectorSource,
+    DiscreteTimeDelay,
+    LogVectorOutput,
+    Sine,
+)
+
+from hemg_drake.teleop.mapping import WorkspaceMap, WorkspaceMapping
+from hemg_drake.teleop.master import HapticMaster
+
+PERIOD = 1e-3
+
+
+@pytest.fixture
+def mapping():
+    return WorkspaceMapping(
+        scale=2.5,
+        R_WM=RotationMatrix(RollPitchYaw(0.3, -0.7, 1.9)),
+        p_WMo=[0.6, -0.2, 0.35],
+    )
+
+
+def test_round_trips_are_identity(mapping):
+    rng = np.random.default_rng(0)
+    points = rng.uniform(-0.08, 0.08, size=(20, 3))
+    np.testing.assert_allclose(mapping.slave_to_master(mapping.master_to_slave(points)), points, atol=1e-15)
+    np.testing.assert_allclose(mapping.velocity_to_master(mapping.velocity_to_slave(points)), points, atol=1e-15)
+    np.testing.assert_allclose(mapping.force_to_slave(mapping.force_to_master(points)), points, atol=1e-15)
+    # One vector in, one vector out.
+    assert mapping.master_to_slave(points[0]).shape == (3,)
+
+
+def test_default_rotation_puts_operator_behind_robot():
+    mapping = WorkspaceMapping(scale=2.0, p_WMo=[0.7, -0.3, 0.2])
+    np.testing.assert_allclose(mapping.master_to_slave([0.01, 0, 0]), [0.7, -0.32, 0.2])  # right
+    np.testing.assert_allclose(mapping.master_to_slave([0, 0.01, 0]), [0.7, -0.3, 0.22])  # up
+    np.testing.assert_allclose(mapping.master_to_slave([0, 0, 0.01]), [0.68, -0.3, 0.2])  # back
+    np.testing.assert_array_equal(mapping.velocity_to_slave([0, 0.1, 0]), [0, 0, 0.2])
+
+
+def test_scale_and_rotation_act_as_stated(mapping):
+    R = mapping.R_WM.matrix()
+    p_MS = np.array([0.01, -0.02, 0.03])
+    np.testing.assert_allclose(mapping.master_to_slave(p_MS), mapping.p_WMo + 2.5 * R @ p_MS)
+    # Distances scale by `scale`; forces come back rotated and divided by it.
+    a, b = np.array([0.01, 0, 0]), np.array([0, 0.02, -0.01])
+    distance_W = np.linalg.norm(mapping.master_to_slave(a) - mapping.master_to_slave(b))
+    assert distance_W == pytest.approx(2.5 * np.linalg.norm(a - b))
+    f_W = np.array([3.0, -1.0, 2.0])
+    np.testing.assert_allclose(mapping.force_to_master(f_W), R.T @ f_W / 2.5)
+
+
+def test_system_without_delay_is_the_mapping(mapping):
+    system = WorkspaceMap(mapping=mapping)
+    context = system.CreateDefaultContext()
+    p_MS, v_MS = np.array([0.02, 0.01, -0.03]), np.array([0.1, -0.2, 0.05])
+    system.GetInputPort("p_MS").FixValue(context, p_MS)
+    system.GetInputPort("v_MS").FixValue(context, v_MS)
+    np.testing.assert_allclose(system.GetOutputPort("p_WE_desired").Eval(context), mapping.master_to_slave(p_MS))
+    np.testing.assert_allclose(system.GetOutputPort("v_WE_desired").Eval(context), mapping.velocity_to_slave(v_MS))
+
+
+def run_delayed(mapping, delay_steps):
+    """A master pushed by a sinusoidal hand force, mapped with and without delay."""
+    builder = DiagramBuilder()
+    master = builder.AddSystem(HapticMaster(damping=1.0))
+    hand = builder.AddSystem(Sine(np.full(3, 0.2), np.array([3.0, 5.0, 7.0]) * 2 * np.pi, np.zeros(3), 3))
+    builder.Connect(hand.get_output_port(0), master.GetInputPort("hand_force"))
+    builder.Connect(builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(), master.GetInputPort("motor_force"))
+    logs = {}
+    # Ours, Drake's own DiscreteTimeDelay followed by an undelayed map, and no delay.
+    # Drake's samples its input first, which on a held input adds one period: n - 1 steps.
+    delayed = builder.AddSystem(WorkspaceMap(mapping=mapping, delay_steps=delay_steps, period=PERIOD))
+    drake_delay = builder.AddSystem(DiscreteTimeDelay(PERIOD, delay_steps - 1, 3))
+    after_drake_delay = builder.AddSystem(WorkspaceMap(mapping=mapping))
+    undelayed = builder.AddSystem(WorkspaceMap(mapping=mapping))
+    builder.Connect(master.GetOutputPort("p_MS"), drake_delay.get_input_port())
+    builder.Connect(drake_delay.get_output_port(), after_drake_delay.GetInputPort("p_MS"))
+    for system in (delayed, after_drake_delay, undelayed):
+        builder.Connect(master.GetOutputPort("v_MS"), system.GetInputPort("v_MS"))
+    for system in (delayed, undelayed):
+        builder.Connect(master.GetOutputPort("p_MS"), system.GetInputPort("p_MS"))
+    for name, system in (("ours", delayed), ("drake", after_drake_delay), ("none", undelayed)):
+        logs[name] = LogVectorOutput(system.GetOutputPort("p_WE_desired"), builder, publish_period=PERIOD)
+    logs["v_ours"] = LogVectorOutput(delayed.GetOutputPort("v_WE_desired"), builder, publish_period=PERIOD)
+    logs["v_none"] = LogVectorOutput(undelayed.GetOutputPort("v_WE_desired"), builder, publish_period=PERIOD)
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(0.3)
+    return {name: log.FindLog(simulator.get_context()).data().T for name, log in logs.items()}
+
+
+def test_delay_shifts_by_exactly_n_samples(mapping):
+    n = 7
+    logs = run_delayed(mapping, n)
+    assert np.ptp(logs["none"], axis=0).min() > 1e-3  # the signal really moves
+    np.testing.assert_array_equal(logs["ours"][n:], logs["none"][:-n])
+    np.testing.assert_array_equal(logs["v_ours"][n:], logs["v_none"][:-n])
+    np.testing.assert_array_equal(logs["ours"][:n], np.tile(mapping.p_WMo, (n, 1)))
+    np.testing.assert_allclose(logs["ours"], logs["drake"], atol=1e-15)
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(scale=0.0), "scale"),
+        (dict(scale=float("nan")), "scale"),
+        (dict(R_WM=np.diag([1.0, 1.0, -1.0])), "R_WM"),
+        (dict(R_WM=2 * np.eye(3)), "R_WM"),
+        (dict(R_WM=np.eye(2)), "R_WM"),
+        (dict(p_WMo=[0.0, 1.0]), "p_WMo"),
+    ],
+)
+def test_bad_mapping_is_named(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        WorkspaceMapping(**kwargs)
+
+
+@pytest.mark.parametrize("delay_steps", [-1, 1.5])
+def test_bad_delay_is_named(delay_steps):
+    with pytest.raises(ValueError, match="delay_steps"):
+        WorkspaceMap(mapping=WorkspaceMapping(), delay_steps=delay_steps)
