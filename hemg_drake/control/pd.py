@@ -1,0 +1,183 @@
+"""Variable-gain joint PD with gravity compensation (eq. 20), and its numpy twin.
+
+The paper's slave law is tau = K_p e + K_d edot with e = q_d - q, where K_p follows the
+operator's muscle activation (eq. 22) and Table I puts the nominal gain at 50. One scalar K
+cannot suit all seven joints: the shoulder carries about 3 kg m^2, the last wrist roll about
+6e-4 kg m^2. So each joint gets
+
+    k_j = K * s_j                       (stiffness, N m/rad; s_j in STIFFNESS_SCALE)
+    d_j = 2 * zeta * sqrt(k_j * M_jj)   (damping, N m s/rad; M_jj(q) from the plant)
+
+The damping follows K at a fixed damping ratio zeta. Why this form: the torque is explicit
+(the 1 ms discrete plant holds it over the step), and an explicit PD on a light joint is
+stable only while omega_j * dt stays well below 1, omega_j = sqrt(k_j / M_jj). With
+STIFFNESS_SCALE, K = 500 gives omega_j * dt <= 0.3 on every joint; the tests check K from 5 to
+500. (The plant's implicit joint PD, ``set_controller_gains``, would take any gain, but then a
+varying K means rewriting plant parameters every step, and the torque would not be an output
+that the rest of the diagram can log or saturate.)
+"""
+
+import numpy as np
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+# Per-joint stiffness per unit of K (rad^-1 N m per unit gain), s0 s1 e0 e1 w0 w1 w2. At
+# Table I's K = 50 the shoulder holds 1000 N m/rad (1 cm at 1 m reach under 10 N m), the
+# elbow 500, the wrist pitch/roll 100, the last wrist roll 5 (it carries almost no load and
+# has the least inertia).
+STIFFNESS_SCALE = np.array([20.0, 20.0, 10.0, 10.0, 2.0, 2.0, 0.1])
+# Tested range of K at a 1 ms plant step.
+GAIN_RANGE = (5.0, 500.0)
+
+
+def pd_gains(gain, stiffness_scale, mass_diagonal, damping_ratio):
+    """Joint stiffness and damping for a scalar gain.
+
+    Parameters
+    ----------
+    gain : float, K (> 0).
+    stiffness_scale : array, shape (n,), s_j.
+    mass_diagonal : array, shape (n,), M_jj(q), kg m^2.
+    damping_ratio : float, zeta.
+
+    Returns
+    -------
+    kp, kd : arrays, shape (n,): k_j = K s_j (N m/rad), d_j = 2 zeta sqrt(k_j M_jj) (N m s/rad).
+    """
+    kp = gain * np.asarray(stiffness_scale)
+    kd = 2.0 * damping_ratio * np.sqrt(kp * np.asarray(mass_diagonal))
+    return kp, kd
+
+
+def pd_torque(q, v, q_desired, v_desired, kp, kd, effort_limit, gravity_torque=0.0):
+    """Eq. 20 plus a feed-forward, saturated: clip(kp (q_d - q) + kd (v_d - v) + tau_ff).
+
+    Parameters
+    ----------
+    q, v, q_desired, v_desired, kp, kd, effort_limit : arrays, shape (n,).
+    gravity_torque : array, shape (n,), or 0.0. The torque that holds the arm against gravity
+        (``-CalcGravityGeneralizedForces``).
+
+    Returns
+    -------
+    tau : array, shape (n,), N m, within [-effort_limit, effort_limit].
+    """
+    tau = kp * (q_desired - q) + kd * (v_desired - v) + gravity_torque
+    return np.clip(tau, -effort_limit, effort_limit)
+
+
+class VariableGainPd(LeafSystem):
+    """Joint PD whose stiffness follows a scalar gain K, plus gravity compensation (eq. 20).
+
+    .. pydrake_system::
+
+        name: VariableGainPd
+        input_ports:
+        - q_desired
+        - v_desired
+        - state
+        - gain
+        output_ports:
+        - torque
+
+    Ports (n = 7 arm joints, order ``BaxterArm.joint_names``): ``q_desired`` (n, rad),
+    ``v_desired`` (n, rad/s; zero when not connected), ``state`` ([q; v], 2n, the arm model
+    instance's plant state), ``gain`` (1, K, dimensionless; the constructor's ``gain`` when not
+    connected); ``torque`` (n, N m) for the plant's actuation input of the arm.
+
+    Law: see the module docstring, k_j = K s_j and d_j = 2 zeta sqrt(k_j M_jj(q)), torque
+    ``pd_torque``; gravity compensation -g(q) from ``CalcGravityGeneralizedForces`` on the
+    controller's own plant context; then saturation at the actuators' effort limits.
+
+    Timing: stateless and direct-feedthrough; a discrete plant samples it once per step.
+    Table I's K = 50 lies inside the tested range ``GAIN_RANGE``.
+    """
+
+    def __init__(
+        self,
+        *,
+        plant,
+        arm,
+        gain=50.0,
+        stiffness_scale=STIFFNESS_SCALE,
+        damping_ratio=1.0,
+        gravity_compensation=True,
+    ):
+        """
+        Parameters
+        ----------
+        plant : MultibodyPlant, finalized, containing ``arm`` (the simulated plant will do).
+        arm : BaxterArm, from ``add_baxter_arm``.
+        gain : float, K used while the ``gain`` port is not connected.
+        stiffness_scale : array, shape (7,), s_j > 0.
+        damping_ratio : float, zeta > 0.
+        gravity_compensation : bool, add -g(q) to the torque.
+        """
+        LeafSystem.__init__(self)
+        n = len(arm.joint_names)
+        stiffness_scale = np.asarray(stiffness_scale, dtype=float)
+        if stiffness_scale.shape != (n,) or not np.all(stiffness_scale > 0):
+            raise ValueError(f"stiffness_scale must be {n} positive numbers, got {stiffness_scale}")
+        _check_gain(gain, "gain")
+        if not (np.isfinite(damping_ratio) and damping_ratio > 0):
+            raise ValueError(f"damping_ratio must be positive, got {damping_ratio}")
+        if not plant.is_finalized():
+            raise ValueError("VariableGainPd needs a finalized plant")
+        self._plant = plant
+        self._model = arm.model_instance
+        self._plant_context = plant.CreateDefaultContext()
+        self._default_gain = float(gain)
+        self._stiffness_scale = stiffness_scale
+        self._damping_ratio = float(damping_ratio)
+        self._gravity_compensation = bool(gravity_compensation)
+        self._effort_limit = np.asarray(arm.effort_limit, dtype=float)
+        # Positions of the arm's joints among all the plant's velocities (M and g are full size).
+        all_velocities = np.arange(plant.num_velocities(), dtype=float)
+        self._velocity_indices = plant.GetVelocitiesFromArray(self._model, all_velocities).astype(int)
+
+        self.q_desired_input = self.DeclareVectorInputPort("q_desired", n)
+        self.v_desired_input = self.DeclareVectorInputPort("v_desired", n)
+        self.state_input = self.DeclareVectorInputPort("state", 2 * n)
+        self.gain_input = self.DeclareVectorInputPort("gain", 1)
+        self.torque_output = self.DeclareVectorOutputPort(
+            "torque", BasicVector(n), self._calc_torque
+        )
+
+    def _calc_torque(self, context, output):
+        n = len(self._effort_limit)
+        x = self.state_input.Eval(context)
+        q, v = x[:n], x[n:]
+        q_desired = self.q_desired_input.Eval(context)
+        v_desired = (
+            self.v_desired_input.Eval(context)
+            if self.v_desired_input.HasValue(context)
+            else np.zeros(n)
+        )
+        gain = (
+            self.gain_input.Eval(context)[0]
+            if self.gain_input.HasValue(context)
+            else self._default_gain
+        )
+        _check_gain(gain, "gain input")
+        if not (np.all(np.isfinite(q_desired)) and np.all(np.isfinite(v_desired))):
+            raise ValueError("VariableGainPd: q_desired/v_desired contain NaN or inf")
+
+        self._plant.SetPositions(self._plant_context, self._model, q)
+        mass_diagonal = np.diag(self._plant.CalcMassMatrix(self._plant_context))
+        kp, kd = pd_gains(
+            gain,
+            self._stiffness_scale,
+            mass_diagonal[self._velocity_indices],
+            self._damping_ratio,
+        )
+        gravity_torque = 0.0
+        if self._gravity_compensation:
+            g = self._plant.CalcGravityGeneralizedForces(self._plant_context)
+            gravity_torque = -g[self._velocity_indices]
+        output.SetFromVector(
+            pd_torque(q, v, q_desired, v_desired, kp, kd, self._effort_limit, gravity_torque)
+        )
+
+
+def _check_gain(gain, name):
+    if not (np.isfinite(gain) and gain > 0):
+        raise ValueError(f"VariableGainPd: {name} must be a positive finite number, got {gain}")
