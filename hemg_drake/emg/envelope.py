@@ -86,15 +86,16 @@ class RmsEnvelope(LeafSystem):
     same units: of the channel sum by default (eq. 1 then eq. 2), or the
     per-channel RMS summed over channels with ``per_channel=True``.
 
-    Timing: a periodic discrete update every ``period`` (200 Hz, offset 0, as
-    the sources) stores the input's square in a ring buffer of the last
-    ``window`` squares with a running sum. The output is direct feedthrough:
-    the stored window minus its oldest square plus the current input's square.
-    In a diagram with a source updating at the same instants, the update at
-    t_k stores sample k-1 (Drake updates read pre-update values) and the output
-    then combines it with sample k, so there is no lag: the output is, sample
-    for sample, ``moving_rms`` of the source's samples (zeros before the start,
-    divided by L_win throughout; exact for integer samples).
+    Timing: a periodic discrete update every ``period`` reads the input, adds
+    its square to a ring buffer of the last ``window`` squares with a running
+    sum, and stores the envelope, which the output holds until the next update.
+    The update runs half a period after the sources' updates (offset
+    ``period / 2``; sources update at t_k = k * period), so it reads sample k
+    whether the source is discrete or a held signal, and envelope k is output
+    from t_k + period / 2. Fed by any source of this package, the output is
+    sample for sample ``moving_rms`` of the source's samples (zeros before the
+    start, divided by L_win throughout): exactly for integer samples, to
+    rounding otherwise.
 
     Modelling choice: the running sum is recomputed from the buffer each time
     the ring wraps, so rounding (non-integer input) cannot drift, and a NaN
@@ -124,11 +125,12 @@ class RmsEnvelope(LeafSystem):
         self._ring_state = self.DeclareDiscreteState(
             (self._window + 1) * self._columns + 1
         )
+        self._envelope_state = self.DeclareDiscreteState(1)
         self.DeclarePeriodicDiscreteUpdateEvent(
-            period_sec=period, offset_sec=0.0, update=self._update_ring
+            period_sec=period, offset_sec=period / 2, update=self._update_envelope
         )
-        self._envelope_output = self.DeclareVectorOutputPort(
-            "envelope", 1, self._calc_envelope
+        self._envelope_output = self.DeclareStateOutputPort(
+            "envelope", self._envelope_state
         )
 
     def get_emg_input_port(self):
@@ -137,20 +139,14 @@ class RmsEnvelope(LeafSystem):
     def get_envelope_output_port(self):
         return self._envelope_output
 
-    def _unpack(self, state):
+    def _update_envelope(self, context, discrete_state):
+        state = context.get_discrete_state(self._ring_state).CopyToVector()
         n = self._window * self._columns
         ring = state[:n].reshape(self._window, self._columns)
         total = state[n : n + self._columns]
-        return ring, total, int(state[-1])
-
-    def _input_squares(self, context):
+        oldest = int(state[-1])
         emg = self._emg_input.Eval(context).reshape(1, MYO_CHANNELS)
-        return _squares(emg, self._per_channel)[0]
-
-    def _update_ring(self, context, discrete_state):
-        state = context.get_discrete_state(self._ring_state).CopyToVector()
-        ring, total, oldest = self._unpack(state)
-        square = self._input_squares(context)
+        square = _squares(emg, self._per_channel)[0]
         total += square - ring[oldest]
         ring[oldest] = square
         oldest = (oldest + 1) % self._window
@@ -158,10 +154,6 @@ class RmsEnvelope(LeafSystem):
             total[:] = ring.sum(axis=0)
         state[-1] = oldest
         discrete_state.set_value(self._ring_state, state)
-
-    def _calc_envelope(self, context, output):
-        state = context.get_discrete_state(self._ring_state).get_value()
-        ring, total, oldest = self._unpack(state)
-        window_sum = total - ring[oldest] + self._input_squares(context)
         # Rounding of non-integer input must not push a zero sum below zero.
-        output.SetAtIndex(0, _combine(np.maximum(window_sum, 0.0) / self._window))
+        envelope = _combine(np.maximum(total, 0.0) / self._window)
+        discrete_state.set_value(self._envelope_state, [envelope])
