@@ -1,0 +1,169 @@
+"""Closed-loop inverse kinematics (CLIK) of the slave's tool point, eq. 21."""
+
+import numpy as np
+from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.systems.framework import LeafSystem
+
+CLIK_METHODS = ("transpose", "dls")
+
+
+class Clik(LeafSystem):
+    """Turns a desired tool-point position into a joint reference by CLIK (eq. 21).
+
+    .. pydrake_system::
+
+        name: Clik
+        input_ports:
+        - p_WE_desired
+        - state
+        output_ports:
+        - state_desired
+
+    The reference ``q_d`` is integrated in discrete state, one step per
+    ``period``::
+
+        e      = p_WE_desired - p_WE(q_d)
+        qdot_d = gain * J(q_d)^T e                                  (transpose)
+        qdot_d = gain * J^T (J J^T + damping^2 I)^-1 e              (dls)
+        q_d   <- clip(q_d + period * qdot_d, limits)
+
+    with ``J`` the translational Jacobian of point E (the tool point, fixed in
+    ``frame_E``) in the world frame W, from the plant. The transpose law is
+    the paper's; damped least squares converges faster near singularities.
+    The paper writes eq. 21 with the slave's measured ``q_s``; here the loop
+    is closed on the reference ``q_d`` itself (the classic kinematic CLIK),
+    so the reference does not inherit the arm's dynamics and tracking errors,
+    and the measured ``state`` (the arm's ``[q; v]``) only initialises
+    ``q_d`` at the start of a simulation. ``qdot_d`` is scaled down to the
+    velocity limits, and ``q_d`` is kept a small margin inside the position
+    limits (a joint at its limit has ``qdot_d = 0``).
+
+    Discrete stability of the transpose law needs
+    ``period * gain * sigma_max(J J^T) < 2``; for the Baxter arm
+    ``sigma_max`` is about 2 m^2, so the default gain suits a 1 ms period.
+
+    Output ``state_desired`` is ``[q_d; qdot_d]`` (14 for the arm), ready for
+    a joint PD controller.
+
+    Parameters
+    ----------
+    plant : MultibodyPlant
+        Finalised plant holding the arm (and possibly a scene).
+    model_instance : ModelInstanceIndex
+        The arm's model instance; its joints are the controlled ones.
+    frame_E : Frame
+        Frame that carries the tool point E.
+    p_EoE_E : array, shape (3,), optional
+        Tool point in ``frame_E`` (m); default its origin.
+    gain : float
+        CLIK gain ``K_sp``: 1/(m^2 s) for the transpose law, 1/s for dls.
+    method : {"transpose", "dls"}
+    damping : float
+        DLS damping (m); used with ``method="dls"``.
+    period : float
+        Update period (s).
+    limit_margin : float
+        Distance kept inside each position limit (rad).
+    """
+
+    def __init__(
+        self,
+        *,
+        plant,
+        model_instance,
+        frame_E,
+        p_EoE_E=None,
+        gain=300.0,
+        method="transpose",
+        damping=0.05,
+        period=1e-3,
+        limit_margin=0.02,
+    ):
+        LeafSystem.__init__(self)
+        if method not in CLIK_METHODS:
+            raise ValueError(f"Clik method must be one of {CLIK_METHODS}, got {method!r}")
+        for name, value in (("gain", gain), ("period", period)):
+            if not np.isfinite(value) or value <= 0:
+                raise ValueError(f"Clik {name} must be a positive number, got {value}")
+        if not np.isfinite(damping) or damping < 0:
+            raise ValueError(f"Clik damping must be >= 0, got {damping}")
+        self._plant = plant
+        self._plant_context = plant.CreateDefaultContext()
+        self._model = model_instance
+        self._frame_E = frame_E
+        self._p_EoE_E = np.zeros(3) if p_EoE_E is None else np.asarray(p_EoE_E, float)
+        if self._p_EoE_E.shape != (3,) or not np.all(np.isfinite(self._p_EoE_E)):
+            raise ValueError(f"Clik p_EoE_E must be 3 finite numbers, got {p_EoE_E}")
+        self._gain = float(gain)
+        self._method = method
+        self._damping = float(damping)
+        self._period = float(period)
+
+        nq = plant.num_positions(model_instance)
+        nv = plant.num_velocities(model_instance)
+        if nq != nv:
+            raise ValueError("Clik needs a model instance with one velocity per position")
+        self._n = nq
+        # Columns of the full-plant Jacobian that belong to the arm.
+        self._v_columns = plant.GetVelocitiesFromArray(model_instance, np.arange(plant.num_velocities()))
+        self._v_columns = self._v_columns.astype(int)
+        lower = plant.GetPositionLowerLimits()
+        upper = plant.GetPositionUpperLimits()
+        q_columns = plant.GetPositionsFromArray(model_instance, np.arange(plant.num_positions())).astype(int)
+        self._q_lower = lower[q_columns] + limit_margin
+        self._q_upper = upper[q_columns] - limit_margin
+        self._v_max = plant.GetVelocityUpperLimits()[self._v_columns]
+
+        self._p_desired = self.DeclareVectorInputPort("p_WE_desired", 3)
+        self._state = self.DeclareVectorInputPort("state", 2 * self._n)
+        # Discrete state [q_d; qdot_d].
+        self._xd = self.DeclareDiscreteState(2 * self._n)
+        self.DeclareInitializationDiscreteUpdateEvent(self._initialize)
+        self.DeclarePeriodicDiscreteUpdateEvent(
+            period_sec=self._period, offset_sec=0.0, update=self._update
+        )
+        self.DeclareStateOutputPort("state_desired", self._xd)
+
+    def _initialize(self, context, discrete_state):
+        q = np.clip(self._state.Eval(context)[: self._n], self._q_lower, self._q_upper)
+        discrete_state.set_value(self._xd, np.concatenate([q, np.zeros(self._n)]))
+
+    def p_WE(self, q):
+        """Tool-point position for arm configuration ``q`` (m), by forward kinematics."""
+        self._plant.SetPositions(self._plant_context, self._model, q)
+        return self._plant.CalcPointsPositions(
+            self._plant_context, self._frame_E, self._p_EoE_E, self._plant.world_frame()
+        ).ravel()
+
+    def qdot(self, q, p_WE_desired):
+        """The CLIK joint velocity of eq. 21 at ``q`` (rad/s), before limits."""
+        e = np.asarray(p_WE_desired, float) - self.p_WE(q)
+        J = self._plant.CalcJacobianTranslationalVelocity(
+            self._plant_context,
+            JacobianWrtVariable.kV,
+            self._frame_E,
+            self._p_EoE_E,
+            self._plant.world_frame(),
+            self._plant.world_frame(),
+        )[:, self._v_columns]
+        if self._method == "transpose":
+            return self._gain * J.T @ e
+        JJt = J @ J.T + self._damping**2 * np.eye(3)
+        return self._gain * J.T @ np.linalg.solve(JJt, e)
+
+    def _update(self, context, discrete_state):
+        q_d = context.get_discrete_state(self._xd).get_value()[: self._n]
+        p_desired = self._p_desired.Eval(context)
+        if not np.all(np.isfinite(p_desired)):
+            # Hold the reference rather than integrate a NaN into it.
+            discrete_state.set_value(self._xd, np.concatenate([q_d, np.zeros(self._n)]))
+            return
+        qdot = self.qdot(q_d, p_desired)
+        # Uniform scaling keeps the direction of the step within the velocity limits.
+        ratio = np.max(np.abs(qdot) / self._v_max)
+        if ratio > 1.0:
+            qdot = qdot / ratio
+        q_next = np.clip(q_d + self._period * qdot, self._q_lower, self._q_upper)
+        discrete_state.set_value(
+            self._xd, np.concatenate([q_next, (q_next - q_d) / self._period])
+        )
