@@ -1,0 +1,142 @@
+"""The HSMM-GMR reproducer (eqs. 12-18) and the tracking force (eq. 23) as Drake systems."""
+
+import numpy as np
+from pydrake.systems.framework import LeafSystem
+
+from hemg_drake.learning.reproduce import HsmmGmrPolicy
+
+
+class HsmmGmrReproducer(LeafSystem):
+    """Generates the reference x*, xdot*, stiffness k* and state weights h from a fitted HSMM.
+
+    .. pydrake_system::
+
+        name: HsmmGmrReproducer
+        input_ports:
+        - p_WE
+        output_ports:
+        - x_star
+        - xdot_star
+        - k_star
+        - h
+
+    Units: m, m/s, the stiffness channel's units (N/m); h is dimensionless.
+    Equations 12-18 of the paper, one step of
+    :class:`hemg_drake.learning.reproduce.HsmmGmrPolicy` per period: at
+    t_k = k dt the system reads ``p_WE`` as the current position x_k (input of
+    the weighting and of GMR), then stores h_k, xdot*_k, k*_k and
+    x*_{k+1} = x*_k + dt xdot*_k (eq. 18). With ``p_WE`` fed from ``x_star``
+    this is exactly :func:`hemg_drake.learning.reproduce.reproduce`.
+
+    Every output is a state output, so the system has no direct feedthrough
+    and ``x_star`` can close a loop. Before the first update, ``xdot_star``,
+    ``k_star`` and ``h`` hold the step evaluated at the start position, so the
+    stiffness is meaningful from t = 0. The discrete state also holds the
+    predicted forward variable (residual-duration form, N x d_max values).
+
+    Parameters
+    ----------
+    model : HSMM
+        Fitted; its layout gives P (position size) and K (stiffness size).
+    start : array, shape (P,)
+        x*_0 in m.
+    dt : float
+        Period in s (Table I: 0.01).
+    weighting : {"temporal", "spatial", "forward"}
+        See :mod:`hemg_drake.learning.reproduce`.
+    """
+
+    def __init__(self, *, model, start, dt=0.01, weighting="forward"):
+        LeafSystem.__init__(self)
+        self._policy = HsmmGmrPolicy(model, weighting=weighting, dt=dt)
+        start = self._policy.check_position(start, "start")
+        predicted = self._policy.forward.initial()
+        h, xdot, k, _, _ = self._policy.step(start, start, predicted)
+        self._forward_shape = predicted.shape
+
+        self._p_WE_input = self.DeclareVectorInputPort("p_WE", len(start))
+        self._x_star_state = self.DeclareDiscreteState(start)
+        self._xdot_star_state = self.DeclareDiscreteState(xdot)
+        self._k_star_state = self.DeclareDiscreteState(k)
+        self._h_state = self.DeclareDiscreteState(h)
+        self._forward_state = self.DeclareDiscreteState(predicted.ravel())
+        self.DeclarePeriodicDiscreteUpdateEvent(
+            period_sec=dt, offset_sec=0.0, update=self._calc_step
+        )
+        self._x_star_output = self.DeclareStateOutputPort("x_star", self._x_star_state)
+        self._xdot_star_output = self.DeclareStateOutputPort("xdot_star", self._xdot_star_state)
+        self._k_star_output = self.DeclareStateOutputPort("k_star", self._k_star_state)
+        self._h_output = self.DeclareStateOutputPort("h", self._h_state)
+
+    def _calc_step(self, context, discrete_state):
+        p_WE = self._policy.check_position(self._p_WE_input.Eval(context), "p_WE")
+        x_star = context.get_discrete_state(self._x_star_state).get_value()
+        predicted = context.get_discrete_state(self._forward_state).get_value()
+        h, xdot, k, x_star_next, predicted_next = self._policy.step(
+            p_WE, x_star, predicted.reshape(self._forward_shape)
+        )
+        discrete_state.set_value(self._x_star_state, x_star_next)
+        discrete_state.set_value(self._xdot_star_state, xdot)
+        discrete_state.set_value(self._k_star_state, k)
+        discrete_state.set_value(self._h_state, h)
+        discrete_state.set_value(self._forward_state, predicted_next.ravel())
+
+
+class TrackingForce(LeafSystem):
+    """The tracking force of the reproduction, a PD on the goal error (eq. 23).
+
+    .. pydrake_system::
+
+        name: TrackingForce
+        input_ports:
+        - x_star
+        - xdot_star
+        - x_goal
+        output_ports:
+        - F_tr
+
+    F_tr = K_ptr (x_g - x*) + K_dtr xdot* (eq. 23), in N, from positions in m
+    and velocities in m/s. Evaluated whenever it is read (direct feedthrough,
+    no state): it follows the rate of its inputs.
+
+    Parameters
+    ----------
+    kp : float or array, shape (size,)
+        K_ptr in N/m, >= 0 (per axis if an array).
+    kd : float or array, shape (size,)
+        K_dtr in N s/m, >= 0.
+    size : int
+        Number of axes (3 for a point in space).
+    """
+
+    def __init__(self, *, kp, kd, size=3):
+        LeafSystem.__init__(self)
+        if not isinstance(size, (int, np.integer)) or size < 1:
+            raise ValueError(f"size must be an integer >= 1, got {size!r}")
+        self._kp = self._check_gain(kp, "kp", size)
+        self._kd = self._check_gain(kd, "kd", size)
+        self._x_star_input = self.DeclareVectorInputPort("x_star", size)
+        self._xdot_star_input = self.DeclareVectorInputPort("xdot_star", size)
+        self._x_goal_input = self.DeclareVectorInputPort("x_goal", size)
+        self._F_tr_output = self.DeclareVectorOutputPort("F_tr", size, self._calc_force)
+
+    @staticmethod
+    def _check_gain(gain, name, size):
+        try:
+            gain = np.broadcast_to(np.asarray(gain, dtype=float), (size,)).copy()
+        except ValueError:
+            raise ValueError(f"{name} must be a scalar or have shape ({size},)") from None
+        if not np.all(np.isfinite(gain)) or np.any(gain < 0):
+            raise ValueError(f"{name} must be finite and >= 0, got {gain}")
+        return gain
+
+    def _calc_force(self, context, output):
+        x_star = self._x_star_input.Eval(context)
+        xdot_star = self._xdot_star_input.Eval(context)
+        x_goal = self._x_goal_input.Eval(context)
+        output.SetFromVector(tracking_force(x_star, xdot_star, x_goal, kp=self._kp, kd=self._kd))
+
+
+def tracking_force(x_star, xdot_star, x_goal, *, kp, kd):
+    """F_tr = kp (x_goal - x_star) + kd xdot_star (eq. 23); arrays of shape (..., size)."""
+    return kp * (np.asarray(x_goal) - x_star) + kd * np.asarray(xdot_star)

@@ -1,0 +1,84 @@
+"""Small hand-set HSMMs, a sampler and smooth 3-D demonstrations for the learning tests."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from hemg_drake.learning.hsmm import HSMM
+
+
+def set_parameters(*, means, covariances, startprob, transmat, duration_means,
+                   duration_stds, max_duration, n_position=None):
+    """An HSMM with the given parameters, as if fitted."""
+    model = HSMM(len(means), max_duration=max_duration, n_position=n_position)
+    model.means_ = np.asarray(means, dtype=float)
+    model.covariances_ = np.asarray(covariances, dtype=float)
+    model.startprob_ = np.asarray(startprob, dtype=float)
+    model.transmat_ = np.asarray(transmat, dtype=float)
+    model.duration_means_ = np.asarray(duration_means, dtype=float)
+    model.duration_stds_ = np.asarray(duration_stds, dtype=float)
+    model.occupancy_ = np.full(len(means), 1.0 / len(means))
+    model.max_duration_ = max_duration
+    model.log_likelihood_history_ = []
+    return model
+
+
+def random_model(rng, n_states, n_dims, max_duration):
+    """Random full-covariance HSMM with a random zero-diagonal transition matrix."""
+    factors = rng.standard_normal((n_states, n_dims, n_dims))
+    transmat = rng.uniform(0.1, 1.0, (n_states, n_states))
+    np.fill_diagonal(transmat, 0.0)
+    return set_parameters(
+        means=rng.standard_normal((n_states, n_dims)),
+        covariances=factors @ factors.transpose(0, 2, 1) + 0.5 * np.eye(n_dims),
+        startprob=rng.dirichlet(np.ones(n_states)),
+        transmat=transmat / transmat.sum(axis=1, keepdims=True),
+        duration_means=rng.uniform(1.0, max_duration, n_states),
+        duration_stds=rng.uniform(0.5, 2.0, n_states),
+        max_duration=max_duration,
+    )
+
+
+def sample(rng, *, means, covariances, startprob, transmat, duration_means,
+           duration_stds, n_segments):
+    """Observations and states of ``n_segments`` complete segments of an HSMM."""
+    states, observations = [], []
+    state = rng.choice(len(means), p=startprob)
+    for _ in range(n_segments):
+        duration = max(1, int(round(rng.normal(duration_means[state], duration_stds[state]))))
+        observations.append(
+            rng.multivariate_normal(means[state], covariances[state], size=duration)
+        )
+        states += [state] * duration
+        state = rng.choice(len(means), p=transmat[state])
+    return np.concatenate(observations), np.array(states)
+
+
+def smooth_demos(*, n_demos=3, n_steps=500, dt=0.01, noise=5e-4, n_dims=7, seed=0):
+    """Noisy demonstrations of one smooth 3-D path with a stiffness channel.
+
+    Columns [x (3), xdot (3), k (1)] in m, m/s, N/m (the first ``n_dims``);
+    each demo has its own noise and a slightly different speed.
+    """
+    rng = np.random.default_rng(seed)
+    demos = []
+    for c in range(n_demos):
+        s = np.linspace(0.0, 1.0, n_steps + 20 * c) ** (1.0 + 0.05 * c)
+        x = 0.1 * np.stack([np.sin(2 * np.pi * s), np.cos(np.pi * s), 0.5 * s], axis=1)
+        x += noise * rng.standard_normal(x.shape)
+        xdot = np.gradient(x, dt, axis=0)
+        k = 100.0 + 300.0 * np.sin(np.pi * s)[:, None]  # stiff in the middle of the task
+        demos.append(np.hstack([x, xdot, k])[:, :n_dims])
+    return demos
+
+
+@pytest.fixture
+def models():
+    """Helpers: set_parameters, random_model, sample, smooth_demos."""
+    return SimpleNamespace(
+        set_parameters=set_parameters,
+        random_model=random_model,
+        sample=sample,
+        smooth_demos=smooth_demos,
+    )

@@ -1,0 +1,225 @@
+"""HSMM: forward variable against brute force, EM, recovery, persistence, bad input."""
+
+import itertools
+
+import numpy as np
+import pytest
+from scipy.stats import multivariate_normal, norm
+
+from hemg_drake.learning.hsmm import HSMM
+
+
+def segmentations(n_steps, n_states, max_duration):
+    """Every (states, durations) path covering exactly n_steps, no self-transitions."""
+    for n_segments in range(1, n_steps + 1):
+        for durations in itertools.product(range(1, max_duration + 1), repeat=n_segments):
+            if sum(durations) != n_steps:
+                continue
+            for states in itertools.product(range(n_states), repeat=n_segments):
+                if all(a != b for a, b in zip(states, states[1:])):
+                    yield states, durations
+
+
+def brute_force(model, demo, observe):
+    """alpha (segment of i ends at t) and occupancy (i active at t), summed over all paths.
+
+    Independent of the package: scipy densities, explicit products over paths.
+    """
+    n_steps, n = len(demo), model.n_states
+    d_max = model.max_duration_
+    emission = np.ones((n_steps, n))
+    if observe:
+        for i in range(n):
+            emission[:, i] = multivariate_normal(model.means_[i], model.covariances_[i]).pdf(demo)
+    p_d = norm.pdf(np.arange(1, d_max + 1)[None, :], model.duration_means_[:, None],
+                   model.duration_stds_[:, None])
+    survival = np.cumsum(p_d[:, ::-1], axis=1)[:, ::-1]  # sum over d' >= d
+    alpha = np.zeros((n_steps, n))
+    occupancy = np.zeros((n_steps, n))
+    for t in range(n_steps):
+        for states, durations in segmentations(t + 1, n, d_max):
+            weight = model.startprob_[states[0]]
+            for k, (state, duration) in enumerate(zip(states, durations)):
+                if k:
+                    weight *= model.transmat_[states[k - 1], state]
+                begin = sum(durations[:k])
+                weight *= np.prod(emission[begin:begin + duration, state])
+            last = states[-1]
+            before = np.prod([p_d[s, d - 1] for s, d in zip(states[:-1], durations[:-1])])
+            alpha[t, last] += weight * before * p_d[last, durations[-1] - 1]
+            occupancy[t, last] += weight * before * survival[last, durations[-1] - 1]
+    return alpha, occupancy / occupancy.sum(axis=1, keepdims=True)
+
+
+@pytest.mark.parametrize("n_states, n_steps, max_duration", [(2, 6, 6), (3, 6, 3), (3, 5, 2)])
+@pytest.mark.parametrize("observe", [True, False])
+def test_forward_variable_equals_brute_force(models, n_states, n_steps, max_duration, observe):
+    rng = np.random.default_rng(n_states * 10 + n_steps)
+    model = models.random_model(rng, n_states, 2, max_duration)
+    demo = rng.standard_normal((n_steps, 2))
+    alpha, occupancy = brute_force(model, demo, observe)
+
+    given = demo if observe else n_steps
+    np.testing.assert_allclose(
+        np.exp(model.log_forward_variable(given, observe=observe)), alpha, rtol=1e-10, atol=0
+    )
+    np.testing.assert_allclose(
+        model.forward_variable(given, observe=observe), occupancy, rtol=1e-10, atol=1e-300
+    )
+    if observe:
+        assert model.log_likelihood(demo) == pytest.approx(np.log(alpha[-1].sum()), rel=1e-10)
+
+
+def seeded_truth():
+    transmat = np.array([[0.0, 0.8, 0.2], [0.3, 0.0, 0.7], [0.6, 0.4, 0.0]])
+    return dict(
+        means=np.array([[0.0, 0.0], [3.0, 0.0], [0.0, 3.0]]),
+        covariances=np.array([[[0.3, 0.1], [0.1, 0.2]], 0.2 * np.eye(2), [[0.2, -0.05], [-0.05, 0.3]]]),
+        startprob=np.array([1.0, 0.0, 0.0]),
+        transmat=transmat,
+        duration_means=np.array([12.0, 20.0, 8.0]),
+        duration_stds=np.array([2.0, 3.0, 1.5]),
+    )
+
+
+def test_em_recovers_a_known_hsmm(models):
+    truth = seeded_truth()
+    rng = np.random.default_rng(1)
+    data = [models.sample(rng, **truth, n_segments=12) for _ in range(4)]
+    demos = [observations for observations, _ in data]
+    model = HSMM(3, max_duration=50, n_iter=30, seed=3).fit(demos)
+
+    # Match fitted states to true ones by their means.
+    order = [np.argmin(np.linalg.norm(model.means_ - mu, axis=1)) for mu in truth["means"]]
+    assert sorted(order) == [0, 1, 2]
+    np.testing.assert_allclose(model.means_[order], truth["means"], atol=0.15)
+    np.testing.assert_allclose(model.duration_means_[order], truth["duration_means"], rtol=0.15)
+    np.testing.assert_allclose(model.transmat_[np.ix_(order, order)], truth["transmat"], atol=0.15)
+    np.testing.assert_array_equal(np.diag(model.transmat_), 0.0)
+    states = np.asarray(order)[data[0][1]]
+    assert np.mean(model.predict_states(demos[0]) == states) > 0.97
+
+
+@pytest.mark.parametrize("init", ["kmeans", "time"])
+def test_em_log_likelihood_never_decreases(models, init):
+    truth = seeded_truth()
+    rng = np.random.default_rng(2)
+    demos = [models.sample(rng, **truth, n_segments=8)[0] for _ in range(3)]
+    model = HSMM(4, n_iter=15, tol=0.0, init=init, seed=0).fit(demos)
+    history = np.asarray(model.log_likelihood_history_)
+    assert len(history) == 15
+    assert np.all(np.diff(history) >= -1e-9 * np.abs(history[1:]))
+    assert history[-1] > history[0]  # it did learn something
+
+
+def test_fit_is_deterministic_for_a_seed(models):
+    demos = models.smooth_demos(n_demos=2, n_steps=120, n_dims=3)
+    first = HSMM(4, n_iter=3, seed=7).fit(demos)
+    second = HSMM(4, n_iter=3, seed=7).fit(demos)
+    np.testing.assert_array_equal(first.means_, second.means_)
+    assert first.log_likelihood_history_ == second.log_likelihood_history_
+
+
+def test_long_sequences_do_not_underflow(models):
+    truth = seeded_truth()
+    demo, _ = models.sample(np.random.default_rng(4), **truth, n_segments=800)
+    assert len(demo) > 10_000
+    model = models.set_parameters(**truth, max_duration=40)
+    log_likelihood = model.log_likelihood(demo)
+    # Per step, close to the expected emission log-density of the data (about -1.5 nats).
+    assert np.isfinite(log_likelihood) and -3.0 < log_likelihood / len(demo) < 0.0
+    h = model.forward_variable(demo)
+    assert np.all(np.isfinite(h)) and np.allclose(h.sum(axis=1), 1.0)
+
+
+def test_default_max_duration_follows_the_data(models):
+    demos = models.smooth_demos(n_demos=2, n_steps=200, n_dims=3)
+    model = HSMM(5, n_iter=1).fit(demos)
+    mean_length = np.mean([len(d) for d in demos])
+    assert model.max_duration_ == int(np.ceil(3 * mean_length / 5))
+
+
+def test_save_and_load_round_trip(models, tmp_path):
+    demos = models.smooth_demos(n_demos=2, n_steps=150, n_dims=7)
+    model = HSMM(4, n_iter=3, n_position=3).fit(demos)
+    path = tmp_path / "model.npz"
+    model.save(path)
+    loaded = HSMM.load(path)
+    for name in ("means_", "covariances_", "transmat_", "duration_stds_", "occupancy_"):
+        np.testing.assert_array_equal(getattr(loaded, name), getattr(model, name))
+    assert loaded.log_likelihood(demos[0]) == model.log_likelihood(demos[0])
+    assert loaded.n_position == 3 and loaded.max_duration_ == model.max_duration_
+
+
+def test_load_rejects_damaged_and_other_version_files(models, tmp_path):
+    model = HSMM(3, n_iter=2).fit(models.smooth_demos(n_demos=2, n_steps=100, n_dims=4))
+    good = tmp_path / "good.npz"
+    model.save(good)
+
+    truncated = tmp_path / "truncated.npz"
+    truncated.write_bytes(good.read_bytes()[:200])
+    with pytest.raises(ValueError, match="truncated.npz"):
+        HSMM.load(truncated)
+
+    text = tmp_path / "text.npz"
+    text.write_text("not a model\n")
+    with pytest.raises(ValueError, match="text.npz"):
+        HSMM.load(text)
+
+    with np.load(good) as data:
+        arrays = dict(data)
+    np.savez(tmp_path / "future.npz", **{**arrays, "format_version": np.array(2)})
+    with pytest.raises(ValueError, match="version 2"):
+        HSMM.load(tmp_path / "future.npz")
+
+    np.savez(tmp_path / "bad.npz", **{**arrays, "transmat_": arrays["transmat_"][:2]})
+    with pytest.raises(ValueError, match="transmat_"):
+        HSMM.load(tmp_path / "bad.npz")
+
+    with pytest.raises(FileNotFoundError):
+        HSMM.load(tmp_path / "missing.npz")
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(n_states=0), "n_states"),
+        (dict(n_states=2.5), "n_states"),
+        (dict(n_states=2, max_duration=0), "max_duration"),
+        (dict(n_states=2, reg_covar=0.0), "reg_covar"),
+        (dict(n_states=2, init="random"), "init"),
+        (dict(n_states=2, n_iter=0), "n_iter"),
+    ],
+)
+def test_bad_parameters_are_rejected(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        HSMM(**kwargs)
+
+
+def test_bad_demos_are_rejected():
+    rng = np.random.default_rng(0)
+    good = rng.standard_normal((20, 3))
+    with_nan = good.copy()
+    with_nan[3, 1] = np.nan
+    with pytest.raises(ValueError, match="demo 1 contains NaN"):
+        HSMM(2).fit([good, with_nan])
+    with pytest.raises(ValueError, match="demo 0 contains NaN or inf"):
+        HSMM(2).fit([np.where(with_nan == with_nan, good, np.inf)])
+    with pytest.raises(ValueError, match="demo 1 has D = 2"):
+        HSMM(2).fit([good, good[:, :2]])
+    with pytest.raises(ValueError, match="fewer than n_states"):
+        HSMM(4).fit([good, good[:3]])
+    with pytest.raises(ValueError, match="shape"):
+        HSMM(2).fit([good[:, 0]])
+    with pytest.raises(ValueError, match="max_duration"):
+        HSMM(1, max_duration=5).fit([good])  # one state cannot last 20 steps
+
+
+def test_model_and_data_of_different_dimension_are_rejected(models):
+    model = HSMM(2, n_iter=2).fit(models.smooth_demos(n_demos=2, n_steps=60, n_dims=4))
+    wrong = np.zeros((10, 3))
+    for method in (model.log_likelihood, model.predict_states, model.forward_variable):
+        with pytest.raises(ValueError, match="model's is D = 4"):
+            method(wrong)
+    with pytest.raises(ValueError, match="not fitted"):
+        HSMM(2).log_likelihood(wrong)
