@@ -17,7 +17,8 @@ class Clik(LeafSystem):
         - p_WE_desired
         - state
         output_ports:
-        - state_desired
+        - q_desired
+        - v_desired
 
     The reference ``q_d`` is integrated in discrete state, one step per
     ``period``::
@@ -42,8 +43,8 @@ class Clik(LeafSystem):
     ``period * gain * sigma_max(J J^T) < 2``; for the Baxter arm
     ``sigma_max`` is about 2 m^2, so the default gain suits a 1 ms period.
 
-    Output ``state_desired`` is ``[q_d; qdot_d]`` (14 for the arm), ready for
-    a joint PD controller.
+    Outputs ``q_desired`` and ``v_desired`` (``qdot_d``) match the inputs of
+    :class:`~hemg_drake.control.pd.VariableGainPd`.
 
     Parameters
     ----------
@@ -122,7 +123,14 @@ class Clik(LeafSystem):
         self.DeclarePeriodicDiscreteUpdateEvent(
             period_sec=self._period, offset_sec=0.0, update=self._update
         )
-        self.DeclareStateOutputPort("state_desired", self._xd)
+        self.DeclareVectorOutputPort("q_desired", self._n, self._calc_q_desired)
+        self.DeclareVectorOutputPort("v_desired", self._n, self._calc_v_desired)
+
+    def _calc_q_desired(self, context, output):
+        output.SetFromVector(context.get_discrete_state(self._xd).get_value()[: self._n])
+
+    def _calc_v_desired(self, context, output):
+        output.SetFromVector(context.get_discrete_state(self._xd).get_value()[self._n :])
 
     def _initialize(self, context, discrete_state):
         q = np.clip(self._state.Eval(context)[: self._n], self._q_lower, self._q_upper)

@@ -22,7 +22,8 @@ def make_clik(**kwargs):
     )
     builder.ExportInput(clik.GetInputPort("p_WE_desired"), "p_WE_desired")
     builder.ExportInput(clik.GetInputPort("state"), "state")
-    builder.ExportOutput(clik.GetOutputPort("state_desired"), "state_desired")
+    builder.ExportOutput(clik.GetOutputPort("q_desired"), "q_desired")
+    builder.ExportOutput(clik.GetOutputPort("v_desired"), "v_desired")
     diagram = builder.Build()
     return diagram, clik, arm
 
@@ -35,8 +36,9 @@ def run_clik(target, q0, seconds, **kwargs):
     diagram.GetInputPort("state").FixValue(context, np.concatenate([q0, np.zeros(7)]))
     simulator.Initialize()
     simulator.AdvanceTo(seconds)
-    x_d = diagram.GetOutputPort("state_desired").Eval(context)
-    return x_d[:7], x_d[7:], clik, arm
+    q_d = diagram.GetOutputPort("q_desired").Eval(context)
+    v_d = diagram.GetOutputPort("v_desired").Eval(context)
+    return q_d, v_d, clik, arm
 
 
 @pytest.mark.parametrize("method, gain", [("transpose", 300.0), ("dls", 50.0)])
