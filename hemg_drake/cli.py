@@ -11,7 +11,7 @@ from pathlib import Path
 def _demo(args):
     from hemg_drake.diagrams.arm_demo import run_arm_demo
 
-    replay = run_arm_demo(out_dir=Path(args.out))
+    replay = run_arm_demo(out_dir=Path(args.out), duration=args.duration)
     print(f"wrote {replay}")
 
 
@@ -39,6 +39,7 @@ def build_parser():
 
     demo = commands.add_parser("demo", help="run the main job (make demo)")
     demo.add_argument("--out", default="runs/demo", help="output folder")
+    demo.add_argument("--duration", type=float, default=6.0, help="simulated seconds")
     demo.set_defaults(func=_demo)
 
     emg = commands.add_parser(

@@ -23,6 +23,9 @@ JOINT_NAMES = ("right_s0", "right_s1", "right_e0", "right_e1", "right_w0", "righ
 # Elbow bent, forearm tilted down, hand in front of the robot: close to the Baxter SDK's
 # "neutral" pose, far from every joint limit, gravity loading shoulder, elbow and wrist.
 HOME_POSITIONS = np.array([0.0, -0.55, 0.0, 0.75, 0.0, 1.26, 0.0])
+# Height of the floor in the world (base frame welded at the origin): the pedestal's foot in
+# the URDF, 0.93 m below base.
+FLOOR_Z = -0.93
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,84 @@
+"""Render an HTML replay to a PNG with headless Chromium (Debian package ``chromium``)."""
+
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+from hemg_drake.fileio import write_bytes_atomic
+
+# Meshcat needs WebGL; headless Chromium only has it through SwiftShader (software).
+# Without these flags the screenshot is a blank page.
+_WEBGL_FLAGS = ("--headless=new", "--use-angle=swiftshader", "--enable-unsafe-swiftshader")
+# A throw-away profile that talks to no one.
+_QUIET_FLAGS = (
+    "--no-sandbox",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--hide-scrollbars",
+    # No name resolves: the page must render from the file alone.
+    "--host-resolver-rules=MAP * ~NOTFOUND",
+)
+
+
+def find_chromium():
+    """Path of the Chromium executable, or None."""
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        found = shutil.which(name)
+        if found:
+            return found
+    return None
+
+
+def render_html_to_png(html_path, png_path, *, size=(800, 600), budget_ms=10000, timeout=120):
+    """Load ``html_path`` in headless Chromium and save a screenshot to ``png_path``.
+
+    Parameters
+    ----------
+    html_path, png_path : path-like.
+    size : (int, int), window width and height in pixels.
+    budget_ms : int, virtual time the page gets to load and draw before the shot.
+    timeout : float, seconds of wall time before giving up.
+
+    Returns
+    -------
+    Path, ``png_path``.
+
+    Raises
+    ------
+    FileNotFoundError
+        No ``html_path``, or no Chromium (install the Debian package ``chromium``).
+    RuntimeError
+        Chromium failed or wrote no picture.
+    """
+    html_path = Path(html_path).resolve()
+    png_path = Path(png_path).resolve()
+    if not html_path.is_file():
+        raise FileNotFoundError(f"HTML file not found: {html_path}")
+    width, height = (int(s) for s in size)
+    if width <= 0 or height <= 0:
+        raise ValueError(f"size must be two positive integers, got {size}")
+    chromium = find_chromium()
+    if chromium is None:
+        raise FileNotFoundError("chromium not found on PATH: install it (apt-get install chromium)")
+    with tempfile.TemporaryDirectory(prefix="hemg-chromium-") as profile:
+        # Chromium writes the shot into the temporary profile; it is then copied atomically.
+        shot = Path(profile) / "shot.png"
+        command = [
+            chromium,
+            *_WEBGL_FLAGS,
+            *_QUIET_FLAGS,
+            f"--user-data-dir={profile}/user-data",
+            f"--window-size={width},{height}",
+            f"--virtual-time-budget={int(budget_ms)}",
+            f"--screenshot={shot}",
+            html_path.as_uri(),
+        ]
+        result = subprocess.run(command, capture_output=True, text=True, timeout=timeout)
+        if result.returncode != 0 or not shot.is_file():
+            tail = "\n".join(result.stderr.strip().splitlines()[-5:])
+            raise RuntimeError(f"chromium could not render {html_path} (exit {result.returncode}):\n{tail}")
+        write_bytes_atomic(png_path, shot.read_bytes())
+    return png_path
