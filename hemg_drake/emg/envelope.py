@@ -6,7 +6,6 @@ first sample rather than being undefined.
 """
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 from pydrake.systems.framework import LeafSystem
 
 from hemg_drake.emg.sources import MYO_CHANNELS, MYO_PERIOD
@@ -21,8 +20,8 @@ def _check_window(window):
 def _squares(samples, per_channel):
     """Squares of the signal eq. 2 averages: of the channel sum (eq. 1) or per channel."""
     if per_channel:
-        return np.square(samples)
-    return np.square(samples.sum(axis=1, keepdims=True))
+        return np.square(samples, dtype=float)
+    return np.square(samples.sum(axis=1, keepdims=True, dtype=float))
 
 
 def _combine(mean_squares):
@@ -56,18 +55,24 @@ def moving_rms(samples, window=20, *, per_channel=False):
         The envelope, in the units of ``samples``.
     """
     window = _check_window(window)
-    samples = np.asarray(samples, dtype=float)
+    samples = np.asarray(samples)
+    if not (np.issubdtype(samples.dtype, np.integer) or np.issubdtype(samples.dtype, np.floating)):
+        samples = samples.astype(float)
     if samples.ndim != 2 or samples.shape[0] == 0:
         raise ValueError(
             f"samples must have shape (n_samples, n_channels) with n_samples > 0, "
             f"got {samples.shape}"
         )
-    if not np.all(np.isfinite(samples)):
+    # Integer recordings (the MYO's int8) are used as they are: no float copy.
+    if samples.dtype.kind == "f" and not np.all(np.isfinite(samples)):
         raise ValueError("samples contain NaN or infinite values")
     squares = _squares(samples, per_channel)
-    padded = np.concatenate([np.zeros((window - 1, squares.shape[1])), squares])
-    # Each window summed on its own: exact for integer samples, no cumulative drift.
-    sums = sliding_window_view(padded, window, axis=0).sum(axis=-1)
+    # Each window summed on its own (the current square plus the window - 1
+    # earlier ones, zeros before the start): exact for integer samples, and
+    # free of the cancellation of a difference of cumulative sums.
+    sums = squares.copy()
+    for lag in range(1, window):
+        sums[lag:] += squares[:-lag]
     return _combine(sums / window)
 
 
