@@ -81,4 +81,22 @@ def models():
         random_model=random_model,
         sample=sample,
         smooth_demos=smooth_demos,
+        resample=resample,
     )
+
+
+def resample(demo, n_steps):
+    """``demo`` linearly resampled over its phase to ``n_steps`` rows."""
+    phase = np.linspace(0.0, 1.0, len(demo))
+    target = np.linspace(0.0, 1.0, n_steps)
+    return np.stack([np.interp(target, phase, column) for column in demo.T], axis=1)
+
+
+@pytest.fixture(scope="session")
+def path_task():
+    """A model fitted to three noisy 3-D path demos with stiffness, and their mean."""
+    demos = smooth_demos()
+    n_steps = int(round(np.mean([len(d) for d in demos])))
+    mean = np.mean([resample(d, n_steps) for d in demos], axis=0)
+    model = HSMM(8, n_iter=20, seed=0).fit(demos)
+    return SimpleNamespace(demos=demos, mean=mean, model=model)

@@ -1,0 +1,95 @@
+"""GMR (eqs. 14-17): closed form, the gmr package, batches, bad input."""
+
+import gmr
+import numpy as np
+import pytest
+
+from hemg_drake.learning.gmr import Gmr, gaussian_log_pdf
+
+
+def random_mixture(rng, n_states, n_dims):
+    factors = rng.standard_normal((n_states, n_dims, n_dims))
+    return dict(
+        priors=rng.dirichlet(np.ones(n_states)),
+        means=rng.standard_normal((n_states, n_dims)),
+        covariances=factors @ factors.transpose(0, 2, 1) + 0.3 * np.eye(n_dims),
+    )
+
+
+def test_single_gaussian_equals_the_closed_form_conditional():
+    rng = np.random.default_rng(0)
+    mixture = random_mixture(rng, 1, 5)
+    inputs, outputs = [3, 0], [1, 4]  # an arbitrary, unordered split
+    model = Gmr(**mixture, input_dims=inputs, output_dims=outputs)
+    x = rng.standard_normal(2)
+
+    mu, sigma = mixture["means"][0], mixture["covariances"][0]
+    s_ii_inverse = np.linalg.inv(sigma[np.ix_(inputs, inputs)])
+    s_oi = sigma[np.ix_(outputs, inputs)]
+    expected_mean = mu[outputs] + s_oi @ s_ii_inverse @ (x - mu[inputs])
+    expected_cov = sigma[np.ix_(outputs, outputs)] - s_oi @ s_ii_inverse @ s_oi.T
+
+    mean, cov = model.predict(x)
+    np.testing.assert_allclose(mean, expected_mean, rtol=1e-12)
+    np.testing.assert_allclose(cov, expected_cov, rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize("inputs", [[0], [1, 3], [4, 0, 2]])
+def test_mixture_agrees_with_the_gmr_package(inputs):
+    rng = np.random.default_rng(len(inputs))
+    mixture = random_mixture(rng, 4, 5)
+    model = Gmr(**mixture, input_dims=inputs)
+    reference = gmr.GMM(n_components=4, random_state=0, **mixture)
+    queries = rng.standard_normal((6, len(inputs)))
+
+    means, covs = model.predict(queries)
+    np.testing.assert_allclose(means, reference.predict(np.array(inputs), queries), rtol=1e-8)
+    for query, mean, cov in zip(queries, means, covs):
+        conditional = reference.condition(np.array(inputs), query)
+        np.testing.assert_allclose(model.responsibilities(query), conditional.priors, rtol=1e-8)
+        collapsed = conditional.to_mvn()
+        np.testing.assert_allclose(mean, collapsed.mean, rtol=1e-8)
+        np.testing.assert_allclose(cov, collapsed.covariance, rtol=1e-8, atol=1e-12)
+
+
+def test_batch_equals_single_queries_and_weights_can_be_given():
+    rng = np.random.default_rng(5)
+    model = Gmr(**random_mixture(rng, 3, 4), input_dims=[0, 1])
+    queries = rng.standard_normal((5, 2))
+    weights = rng.dirichlet(np.ones(3), size=5)
+    means, covs = model.predict(queries, weights=weights)
+    for k in range(5):
+        mean, cov = model.predict(queries[k], weights=weights[k])
+        np.testing.assert_allclose(means[k], mean, rtol=1e-13)
+        np.testing.assert_allclose(covs[k], cov, rtol=1e-13)
+        # With given weights the mean is the weighted sum of component conditionals (eq. 15).
+        np.testing.assert_allclose(mean, weights[k] @ model.component_means(queries[k]), rtol=1e-12)
+
+
+def test_gaussian_log_pdf_matches_scipy():
+    from scipy.stats import multivariate_normal
+
+    rng = np.random.default_rng(6)
+    mixture = random_mixture(rng, 3, 4)
+    x = rng.standard_normal((7, 4))
+    expected = np.stack(
+        [multivariate_normal(m, c).logpdf(x) for m, c in zip(mixture["means"], mixture["covariances"])],
+        axis=1,
+    )
+    np.testing.assert_allclose(gaussian_log_pdf(x, mixture["means"], mixture["covariances"]), expected, rtol=1e-12)
+
+
+def test_bad_input_is_rejected():
+    rng = np.random.default_rng(7)
+    mixture = random_mixture(rng, 2, 3)
+    with pytest.raises(ValueError, match="overlap"):
+        Gmr(**mixture, input_dims=[0, 1], output_dims=[1, 2])
+    with pytest.raises(ValueError, match="indices"):
+        Gmr(**mixture, input_dims=[3])
+    with pytest.raises(ValueError, match="covariances must have shape"):
+        Gmr(**{**mixture, "covariances": mixture["covariances"][:, :2]}, input_dims=[0])
+    model = Gmr(**mixture, input_dims=[0])
+    with pytest.raises(ValueError, match="query must have shape"):
+        model.predict(np.zeros(2))
+    with pytest.raises(ValueError, match="NaN"):
+        model.predict(np.array([np.nan]))

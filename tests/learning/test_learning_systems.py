@@ -1,0 +1,123 @@
+"""HsmmGmrReproducer and TrackingForce in Drake diagrams, against the numpy reproduction."""
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource
+
+from hemg_drake.learning.reproduce import HsmmGmrPolicy, reproduce
+from hemg_drake.learning.systems import HsmmGmrReproducer, TrackingForce
+
+DT = 0.01
+
+
+def run(diagram, systems, n_steps):
+    """Advance to the middle of each period; read every output of ``systems``."""
+    simulator = Simulator(diagram)
+    root = simulator.get_mutable_context()
+    rows = []
+    for k in range(n_steps):
+        simulator.AdvanceTo((k + 0.5) * DT)
+        rows.append({
+            (name, port): system.GetOutputPort(port).Eval(system.GetMyContextFromRoot(root)).copy()
+            for name, system in systems.items()
+            for port in [system.get_output_port(i).get_name() for i in range(system.num_output_ports())]
+        })  # fmt: skip
+    return {key: np.array([row[key] for row in rows]) for key in rows[0]}
+
+
+@pytest.mark.parametrize("weighting", ["temporal", "spatial", "forward"])
+def test_reproducer_in_a_simulator_equals_the_numpy_reproduction(path_task, weighting):
+    start, n_steps = path_task.mean[0, :3], 80
+    builder = DiagramBuilder()
+    reproducer = builder.AddSystem(
+        HsmmGmrReproducer(model=path_task.model, start=start, dt=DT, weighting=weighting)
+    )
+    builder.Connect(reproducer.GetOutputPort("x_star"), reproducer.GetInputPort("p_WE"))
+    log = run(builder.Build(), {"r": reproducer}, n_steps)
+
+    expected = reproduce(path_task.model, start, n_steps + 1, dt=DT, weighting=weighting)
+    # After the update at t_k the state holds step k's outputs and x*_{k+1}.
+    np.testing.assert_allclose(log["r", "x_star"], expected.x[1:], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(log["r", "xdot_star"], expected.xdot[:-1], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(log["r", "k_star"], expected.k[:-1], rtol=1e-9)
+    np.testing.assert_allclose(log["r", "h"], expected.h[:-1], rtol=0, atol=1e-9)
+
+
+def test_reproducer_reads_the_measured_position(path_task):
+    # An open loop: the slave "sticks" at p_WE while x* integrates on.
+    start = path_task.mean[0, :3]
+    p_WE = path_task.mean[100, :3]
+    builder = DiagramBuilder()
+    reproducer = builder.AddSystem(HsmmGmrReproducer(model=path_task.model, start=start))
+    source = builder.AddSystem(ConstantVectorSource(p_WE))
+    builder.Connect(source.get_output_port(), reproducer.GetInputPort("p_WE"))
+    log = run(builder.Build(), {"r": reproducer}, 20)
+
+    policy = HsmmGmrPolicy(path_task.model, weighting="forward", dt=DT)
+    x_star, predicted = start, policy.forward.initial()
+    for k in range(20):
+        h, xdot, stiffness, x_star, predicted = policy.step(p_WE, x_star, predicted)
+        np.testing.assert_allclose(log["r", "x_star"][k], x_star, atol=1e-12)
+        np.testing.assert_allclose(log["r", "h"][k], h, atol=1e-12)
+    # The velocity is the one learned near p_WE, not near the start.
+    assert np.linalg.norm(log["r", "xdot_star"][-1] - path_task.mean[100, 3:6]) < np.linalg.norm(
+        log["r", "xdot_star"][-1] - path_task.mean[0, 3:6]
+    )
+
+
+def test_ports_and_initial_outputs(path_task):
+    model = path_task.model
+    start = path_task.mean[0, :3]
+    reproducer = HsmmGmrReproducer(model=model, start=start)
+    context = reproducer.CreateDefaultContext()
+    sizes = {name: reproducer.GetOutputPort(name).size() for name in ("x_star", "xdot_star", "k_star", "h")}
+    assert sizes == {"x_star": 3, "xdot_star": 3, "k_star": 1, "h": model.n_states}
+    assert reproducer.GetInputPort("p_WE").size() == 3
+    np.testing.assert_array_equal(reproducer.GetOutputPort("x_star").Eval(context), start)
+    # Before the first update the stiffness is already the one learned at the start.
+    first = reproduce(model, start, 1)
+    np.testing.assert_allclose(reproducer.GetOutputPort("k_star").Eval(context), first.k[0])
+
+
+def test_tracking_force_is_eq_23():
+    system = TrackingForce(kp=[10.0, 20.0, 30.0], kd=2.0)
+    context = system.CreateDefaultContext()
+    system.GetInputPort("x_star").FixValue(context, [0.1, 0.2, 0.3])
+    system.GetInputPort("xdot_star").FixValue(context, [1.0, -1.0, 0.5])
+    system.GetInputPort("x_goal").FixValue(context, [0.5, 0.5, 0.5])
+    # K_ptr (x_g - x*) + K_dtr xdot*, worked by hand.
+    np.testing.assert_allclose(system.GetOutputPort("F_tr").Eval(context), [6.0, 4.0, 7.0])
+
+
+def test_tracking_force_follows_the_reproducer(path_task):
+    start, goal = path_task.mean[0, :3], path_task.mean[-1, :3]
+    builder = DiagramBuilder()
+    reproducer = builder.AddSystem(HsmmGmrReproducer(model=path_task.model, start=start))
+    force = builder.AddSystem(TrackingForce(kp=50.0, kd=5.0))
+    goal_source = builder.AddSystem(ConstantVectorSource(goal))
+    builder.Connect(reproducer.GetOutputPort("x_star"), reproducer.GetInputPort("p_WE"))
+    builder.Connect(reproducer.GetOutputPort("x_star"), force.GetInputPort("x_star"))
+    builder.Connect(reproducer.GetOutputPort("xdot_star"), force.GetInputPort("xdot_star"))
+    builder.Connect(goal_source.get_output_port(), force.GetInputPort("x_goal"))
+    log = run(builder.Build(), {"r": reproducer, "f": force}, 30)
+    expected = 50.0 * (goal - log["r", "x_star"]) + 5.0 * log["r", "xdot_star"]
+    np.testing.assert_allclose(log["f", "F_tr"], expected, rtol=1e-12)
+
+
+def test_bad_parameters_and_inputs_are_rejected(path_task):
+    model, start = path_task.model, path_task.mean[0, :3]
+    with pytest.raises(ValueError, match="kp must be finite and >= 0"):
+        TrackingForce(kp=-1.0, kd=1.0)
+    with pytest.raises(ValueError, match=r"kd must be a scalar or have shape \(3,\)"):
+        TrackingForce(kp=1.0, kd=[1.0, 2.0])
+    with pytest.raises(ValueError, match="start must have shape"):
+        HsmmGmrReproducer(model=model, start=start[:2])
+    with pytest.raises(ValueError, match="weighting"):
+        HsmmGmrReproducer(model=model, start=start, weighting="spacial")
+    reproducer = HsmmGmrReproducer(model=model, start=start)
+    simulator = Simulator(reproducer)
+    reproducer.GetInputPort("p_WE").FixValue(simulator.get_mutable_context(), [0.0, np.nan, 0.0])
+    with pytest.raises(ValueError, match="p_WE contains NaN"):
+        simulator.AdvanceTo(0.5 * DT)
