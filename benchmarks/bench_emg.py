@@ -13,8 +13,8 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
 from hemg_drake.emg.calibration import EmgCalibration
-from hemg_drake.emg.envelope import RmsEnvelope, moving_rms
-from hemg_drake.emg.gain import VariableGain
+from hemg_drake.emg.chain import add_emg_gain_chain
+from hemg_drake.emg.envelope import moving_rms
 from hemg_drake.emg.sources import MYO_PERIOD, SyntheticEmgSource, synthesize_emg
 
 N_SAMPLES = 10**7
@@ -41,11 +41,8 @@ def bench_diagram():
     builder = DiagramBuilder()
     activation = builder.AddSystem(ConstantVectorSource([0.5]))
     source = builder.AddSystem(SyntheticEmgSource(seed=0))
-    rms = builder.AddSystem(RmsEnvelope(window=20))
-    gain = builder.AddSystem(VariableGain(calibration=calibration))
     builder.Connect(activation.get_output_port(), source.get_activation_input_port())
-    builder.Connect(source.get_emg_output_port(), rms.get_emg_input_port())
-    builder.Connect(rms.get_envelope_output_port(), gain.get_envelope_input_port())
+    _, gain = add_emg_gain_chain(builder, source.get_emg_output_port(), calibration=calibration)
     # The gain is computed on demand: a 200 Hz logger stands in for its consumer.
     LogVectorOutput(gain.get_gain_output_port(), builder, publish_period=MYO_PERIOD)
     simulator = Simulator(builder.Build())

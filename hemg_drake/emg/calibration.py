@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 
-from hemg_drake.emg.envelope import moving_rms
+from hemg_drake.emg.envelope import _check_window, moving_rms
 from hemg_drake.fileio import write_text_atomic
 
 
@@ -50,8 +50,7 @@ class EmgCalibration:
                 f"calibration needs finite levels with 0 <= rest_level < mvc_level, "
                 f"got rest_level={rest!r}, mvc_level={mvc!r}"
             )
-        if isinstance(self.window, bool) or int(self.window) != self.window or self.window < 1:
-            raise ValueError(f"window must be a positive integer, got {self.window!r}")
+        _check_window(self.window)
 
     @classmethod
     def from_recordings(cls, rest, mvc, window=20, *, per_channel=False):

@@ -8,13 +8,13 @@ first sample rather than being undefined.
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
-from hemg_drake.emg.sources import MYO_CHANNELS, MYO_PERIOD
+from hemg_drake.emg.sources import MYO_CHANNELS, MYO_PERIOD, _check_period
 
 
 def _check_window(window):
-    if isinstance(window, bool) or int(window) != window or window < 1:
-        raise ValueError(f"window must be a positive integer, got {window!r}")
-    return int(window)
+    if isinstance(window, (int, np.integer)) and not isinstance(window, bool) and window >= 1:
+        return int(window)
+    raise ValueError(f"window must be a positive integer, got {window!r}")
 
 
 def _squares(samples, per_channel):
@@ -122,8 +122,7 @@ class RmsEnvelope(LeafSystem):
         self._window = _check_window(window)
         self._per_channel = bool(per_channel)
         self._columns = MYO_CHANNELS if per_channel else 1
-        if not period > 0:
-            raise ValueError(f"period must be positive, got {period!r}")
+        period = _check_period(period)
         self._emg_input = self.DeclareVectorInputPort("emg", MYO_CHANNELS)
         # Layout: ring of squares (window x columns, row-major), running sum
         # (columns), index of the oldest row.
@@ -137,6 +136,16 @@ class RmsEnvelope(LeafSystem):
         self._envelope_output = self.DeclareStateOutputPort(
             "envelope", self._envelope_state
         )
+
+    @property
+    def window(self):
+        """L_win, samples per window."""
+        return self._window
+
+    @property
+    def per_channel(self):
+        """True for the per-channel form."""
+        return self._per_channel
 
     def get_emg_input_port(self):
         return self._emg_input

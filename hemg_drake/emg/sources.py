@@ -354,7 +354,9 @@ class LiveEmgSource(LeafSystem):
     ``emg`` (8, MYO units). The device is any object with a ``read_emg()``
     method returning the newest sample (8 integers) or ``None`` when nothing
     new arrived; ``open_myo_device()`` gives one for a real MYO (optional extra
-    ``hemg-drake[myo]``), tests pass a fake. With ``None`` the output holds.
+    ``hemg-drake[myo]``), tests pass a fake. With ``None`` the output holds;
+    values are clipped to -128..127, and a sample that is not 8 finite values
+    raises ValueError.
 
     Timing: periodic discrete update every ``period`` (offset 0). Run the
     simulator at real-time rate (``Simulator.set_target_realtime_rate(1)``) so

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 from hemg_drake.emg.calibration import EmgCalibration
+from hemg_drake.emg.chain import add_emg_gain_chain
 from hemg_drake.emg.envelope import RmsEnvelope
-from hemg_drake.emg.gain import VariableGain, activation, gain_from_activation
+from hemg_drake.emg.gain import activation, gain_from_activation
 from hemg_drake.emg.sources import SyntheticEmgSource, synthesize_emg
 
 WINDOW = 20
@@ -26,11 +27,10 @@ def chain(builder, simulate, held_signal, calibration):
     step = np.where(np.arange(N) < STEP, 0.1, 0.8)
     signal = builder.AddSystem(held_signal(step))
     source = builder.AddSystem(SyntheticEmgSource(seed=7))
-    rms = builder.AddSystem(RmsEnvelope(window=WINDOW))
-    gain = builder.AddSystem(VariableGain(calibration=calibration, k_min=K_MIN, k_max=K_MAX))
     builder.Connect(signal.get_output_port(), source.get_activation_input_port())
-    builder.Connect(source.get_emg_output_port(), rms.get_emg_input_port())
-    builder.Connect(rms.get_envelope_output_port(), gain.get_envelope_input_port())
+    rms, gain = add_emg_gain_chain(
+        builder, source.get_emg_output_port(), calibration=calibration, k_min=K_MIN, k_max=K_MAX
+    )
     ports = {
         "envelope": rms.get_envelope_output_port(),
         "activation": gain.get_activation_output_port(),
@@ -67,3 +67,11 @@ def test_gain_settles_where_the_calibrated_law_says(chain):
     for u, settled in ((0.1, gain[WINDOW:STEP]), (0.8, gain[STEP + WINDOW :])):
         expected = gain_from_activation(activation(u), k_min=K_MIN, k_max=K_MAX)
         assert np.mean(settled) == pytest.approx(expected, rel=0.1)
+
+
+def test_chain_takes_window_and_form_from_calibration(builder):
+    calibration = EmgCalibration(rest_level=1.0, mvc_level=9.0, window=7, per_channel=True)
+    source = builder.AddSystem(SyntheticEmgSource(seed=0))
+    rms, _ = add_emg_gain_chain(builder, source.get_emg_output_port(), calibration=calibration)
+    assert isinstance(rms, RmsEnvelope)
+    assert (rms.window, rms.per_channel) == (7, True)
