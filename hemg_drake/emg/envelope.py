@@ -126,16 +126,12 @@ class RmsEnvelope(LeafSystem):
         self._emg_input = self.DeclareVectorInputPort("emg", MYO_CHANNELS)
         # Layout: ring of squares (window x columns, row-major), running sum
         # (columns), index of the oldest row.
-        self._ring_state = self.DeclareDiscreteState(
-            (self._window + 1) * self._columns + 1
-        )
+        self._ring_state = self.DeclareDiscreteState((self._window + 1) * self._columns + 1)
         self._envelope_state = self.DeclareDiscreteState(1)
         self.DeclarePeriodicDiscreteUpdateEvent(
             period_sec=period, offset_sec=period / 2, update=self._update_envelope
         )
-        self._envelope_output = self.DeclareStateOutputPort(
-            "envelope", self._envelope_state
-        )
+        self._envelope_output = self.DeclareStateOutputPort("envelope", self._envelope_state)
 
     @property
     def window(self):

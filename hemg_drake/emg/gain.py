@@ -113,9 +113,7 @@ class VariableGain(LeafSystem):
         Gain at rest and at maximum contraction.
     """
 
-    def __init__(
-        self, *, calibration=None, A_emg=A_EMG, k_min=DEFAULT_K_MIN, k_max=DEFAULT_K_MAX
-    ):
+    def __init__(self, *, calibration=None, A_emg=A_EMG, k_min=DEFAULT_K_MIN, k_max=DEFAULT_K_MAX):
         LeafSystem.__init__(self)
         _check_a_emg(A_emg)
         _check_gains(k_min, k_max)

@@ -200,8 +200,7 @@ def _load_csv(path):
             where = f"{path}: line {line_number}"
             if len(fields) != MYO_CHANNELS:
                 raise ValueError(
-                    f"{where}: expected {MYO_CHANNELS} comma-separated columns, "
-                    f"found {len(fields)}"
+                    f"{where}: expected {MYO_CHANNELS} comma-separated columns, found {len(fields)}"
                 )
             row = []
             for column, field in enumerate(fields, start=1):
@@ -226,9 +225,7 @@ def _load_npz(path):
         raise ValueError(f"{path}: not a readable NPZ file ({error})") from None
     with archive:
         if NPZ_KEY not in archive.files:
-            raise ValueError(
-                f"{path}: no array named {NPZ_KEY!r} (found {sorted(archive.files)})"
-            )
+            raise ValueError(f"{path}: no array named {NPZ_KEY!r} (found {sorted(archive.files)})")
         emg = archive[NPZ_KEY]
     if emg.ndim != 2 or emg.shape[1] != MYO_CHANNELS:
         raise ValueError(
@@ -326,13 +323,6 @@ class FileEmgSource(LeafSystem):
 
     def get_emg_output_port(self):
         return self._emg_output
-
-    @property
-    def recording(self):
-        """The replayed samples, shape (n_samples, 8) (read only)."""
-        view = self._recording.view()
-        view.flags.writeable = False
-        return view
 
     def _update_sample(self, context, discrete_state):
         k = int(context.get_discrete_state(self._count_state).GetAtIndex(0))

@@ -56,7 +56,7 @@ def plot_emg_envelopes(samples, windows=(10, 20, 30), *, rate=MYO_RATE, per_chan
     raw_axes, envelope_axes = figure.subplots(2, 1, sharex=True)
     raw_axes.plot(time, summed, color="0.5", linewidth=0.6)
     raw_axes.set_ylabel("summed sEMG u (eq. 1)")
-    for window, envelope in zip(windows, envelopes):
+    for window, envelope in zip(windows, envelopes, strict=True):
         envelope_axes.plot(time, envelope, linewidth=1.2, label=f"L_win = {window}")
     envelope_axes.set_ylabel("per-channel RMS sum" if per_channel else "RMS of u (eq. 2)")
     envelope_axes.set_xlabel("time (s)")

@@ -55,7 +55,9 @@ def test_gain_is_monotonic_and_bounded_over_unit_interval():
 def test_paper_bound_naming_direction():
     # Paper: alpha_min is the upper bound (strongest contraction), alpha_max the lower.
     alpha_min, alpha_max = 0.9, 0.2
-    K = gain_from_activation([alpha_max, alpha_min], k_min=5.0, k_max=50.0, a_rest=alpha_max, a_mvc=alpha_min)
+    K = gain_from_activation(
+        [alpha_max, alpha_min], k_min=5.0, k_max=50.0, a_rest=alpha_max, a_mvc=alpha_min
+    )
     np.testing.assert_allclose(K, [5.0, 50.0])
 
 

@@ -21,7 +21,7 @@ def test_emg_envelopes_plot_the_summed_signal_and_each_window(samples):
     np.testing.assert_allclose(raw_line.get_xdata()[[0, -1]], [0.0, 399 / 200.0])
     lines = envelope_axes.get_lines()
     assert [line.get_label() for line in lines] == ["L_win = 10", "L_win = 30"]
-    for line, window in zip(lines, (10, 30)):
+    for line, window in zip(lines, (10, 30), strict=True):
         np.testing.assert_array_equal(line.get_ydata(), moving_rms(samples, window))
 
 
