@@ -20,6 +20,7 @@ visualizer. pydrake objects form reference cycles, so the server stops once the 
 dropped and the garbage collector has run (``gc.collect()``, or at exit).
 """
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -85,8 +86,15 @@ class ReplayRecorder:
         """
         if self._visualizer is not None:
             raise ValueError("this ReplayRecorder is already attached to a diagram")
-        # Only localhost: the machine is shared, and nothing remote needs to connect.
-        self._meshcat = Meshcat(MeshcatParams(host="localhost", port=self._port))
+        # Only localhost: the machine is shared, and nothing remote needs to connect. Its
+        # "listening at http://..." notice would invite users to a page nobody serves later.
+        drake_logger = logging.getLogger("drake")
+        level = drake_logger.level
+        drake_logger.setLevel(logging.WARNING)
+        try:
+            self._meshcat = Meshcat(MeshcatParams(host="localhost", port=self._port))
+        finally:
+            drake_logger.setLevel(level)
         self._meshcat.SetCameraPose(*self._camera)
         self._meshcat.SetTransform("/Grid", RigidTransform([0.0, 0.0, self._floor_z]))
         params = MeshcatVisualizerParams(publish_period=self._publish_period)
