@@ -1,6 +1,8 @@
 """Task plans: timed waypoints in the slave's task space, with seeded human variability."""
 
+import bisect
 import dataclasses as dc
+import math
 
 import numpy as np
 
@@ -42,6 +44,11 @@ def _minimum_jerk(tau):
     s = tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2)
     ds = 30.0 * tau**2 * (1.0 - tau) ** 2
     return s, ds
+
+
+def _per_point(value):
+    """A float as is; an array of values gains an axis to scale (..., 3) points."""
+    return value if isinstance(value, float) else value[..., None]
 
 
 @dc.dataclass(frozen=True, eq=False)
@@ -130,6 +137,9 @@ class TaskPlan:
         times.flags.writeable = points.flags.writeable = effort.flags.writeable = False
         for name, value in zip(_FIELDS, (times, points, kinds, tuple(map(bool, pen_down)), effort)):
             object.__setattr__(self, name, value)
+        # Cached for the 1 kHz path: times for bisect, each segment's displacement.
+        object.__setattr__(self, "_times", times.tolist())
+        object.__setattr__(self, "_steps", np.diff(points, axis=0))
 
     @classmethod
     def from_dict(cls, data):
@@ -172,27 +182,37 @@ class TaskPlan:
         return float(self.times[-1])
 
     def _locate(self, t):
-        """Segment index and normalised phase tau in [0, 1] for times t (any shape)."""
+        """Segment index, phase tau in [0, 1] and segment duration for times t (any shape).
+
+        Scalars take a plain-float path: it runs at the 1 kHz haptic rate, where numpy's
+        per-call overhead on 0-d arrays would dominate.
+        """
+        last = len(self.kinds) - 1
+        if isinstance(t, (float, int)):
+            if not math.isfinite(t):
+                raise ValueError(f"TaskPlan time must be finite, got {t}")
+            index = min(max(bisect.bisect_right(self._times, t) - 1, 0), last)
+            start, end = self._times[index], self._times[index + 1]
+            return index, min(max((t - start) / (end - start), 0.0), 1.0), end - start
         t = np.asarray(t, dtype=float)
-        if not np.all(np.isfinite(t)):
+        if not np.isfinite(t).all():
             raise ValueError(f"TaskPlan time must be finite, got {t}")
-        index = np.clip(np.searchsorted(self.times, t, side="right") - 1, 0, len(self.kinds) - 1)
+        index = np.minimum(np.maximum(np.searchsorted(self.times, t, side="right") - 1, 0), last)
         duration = self.times[index + 1] - self.times[index]
-        tau = np.clip((t - self.times[index]) / duration, 0.0, 1.0)
+        tau = np.minimum(np.maximum((t - self.times[index]) / duration, 0.0), 1.0)
         return index, tau, duration
 
     def position(self, t):
         """Planned p_WE at time t (s): shape (3,) for a scalar t, (..., 3) for an array."""
         index, tau, _ = self._locate(t)
         s, _ = _minimum_jerk(tau)
-        start = self.points[index]
-        return start + (self.points[index + 1] - start) * s[..., None]
+        return self.points[index] + self._steps[index] * _per_point(s)
 
     def velocity(self, t):
         """Planned v_WE at time t (m/s), shaped like :meth:`position`; zero outside the plan."""
         index, tau, duration = self._locate(t)
         _, ds = _minimum_jerk(tau)
-        return (self.points[index + 1] - self.points[index]) * (ds / duration)[..., None]
+        return self._steps[index] * _per_point(ds / duration)
 
     def segment(self, t):
         """The :class:`Segment` in force at scalar time t (the first/last outside the plan)."""

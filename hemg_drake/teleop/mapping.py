@@ -54,13 +54,14 @@ class WorkspaceMapping:
             raise ValueError(f"R_WM must be a rotation (orthonormal, det +1), got {R.tolist()}")
         object.__setattr__(self, "scale", scale)
         object.__setattr__(self, "R_WM", RotationMatrix(R))
+        object.__setattr__(self, "_R", R)  # numpy copy: the maps run at 1 kHz
         object.__setattr__(self, "p_WMo", as_vector("p_WMo", self.p_WMo, 3))
 
     def _rotate_to_world(self, vectors_M):
-        return np.asarray(vectors_M, dtype=float) @ self.R_WM.matrix().T
+        return np.asarray(vectors_M, dtype=float) @ self._R.T
 
     def _rotate_to_master(self, vectors_W):
-        return np.asarray(vectors_W, dtype=float) @ self.R_WM.matrix()
+        return np.asarray(vectors_W, dtype=float) @ self._R
 
     def master_to_slave(self, p_MS):
         """Stylus point in M (m) -> desired slave point in W (m)."""

@@ -4,6 +4,8 @@ Frame M is the device frame, centred in its workspace, with the OpenHaptics axes
 operator's right, y up, z towards the operator. Point S is the stylus tip.
 """
 
+import math
+
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 from scipy.linalg import expm
@@ -28,7 +30,7 @@ def saturate_norm(force, limit):
     -------
     array, shape (3,)
     """
-    norm = np.linalg.norm(force)
+    norm = math.sqrt(force @ force)  # not np.linalg.norm: this runs at 1 kHz
     return force if norm <= limit else force * (limit / norm)
 
 
@@ -107,8 +109,17 @@ class MasterDynamics:
                 ],
             ]
         )
-        self._A_free, self._B_free = _zero_order_hold(free, B, self.period)
-        self._A_wall, self._B_wall = _zero_order_hold(wall, B, self.period)
+        # One row per mode (0 free, 1 beyond a wall): a00 a01 a10 a11 b0 b1 of the step.
+        self._coefficients = np.array(
+            [
+                np.concatenate([A.ravel(), B_d.ravel()])
+                for A, B_d in (
+                    _zero_order_hold(free, B, self.period),
+                    _zero_order_hold(wall, B, self.period),
+                )
+            ]
+        )
+        self._half_size = 0.5 * self.workspace_size
 
     def step(self, p_MS, v_MS, hand_force, motor_force):
         """Advance the tip by one period under forces held constant over it.
@@ -125,24 +136,18 @@ class MasterDynamics:
         p_MS, v_MS : array, shape (3,)
             At the end of the sample.
         """
-        p_MS, v_MS = np.asarray(p_MS, float), np.asarray(v_MS, float)
-        force = np.asarray(hand_force, float) + saturate_norm(
-            np.asarray(motor_force, float), self.peak_force
-        )
-        # The force that brings v to zero in one free-space step; friction can supply up
-        # to its limit of the difference (stick), else it slides at its limit.
-        stop_force = -self._A_free[1, 1] * v_MS / self._B_free[1, 0]
-        force = force + saturate_norm(stop_force - force, self.friction)
-        half = 0.5 * self.workspace_size
-        p_wall = np.clip(p_MS, -half, half)
+        force = hand_force + saturate_norm(motor_force, self.peak_force)
+        if self.friction > 0.0:
+            # The force that stops the tip within one free-space step; friction supplies
+            # up to its limit of the difference (stick), else it slides at its limit.
+            a11, b1 = self._coefficients[0, 3], self._coefficients[0, 5]
+            force = force + saturate_norm(-a11 * v_MS / b1 - force, self.friction)
+        p_wall = np.minimum(np.maximum(p_MS, -self._half_size), self._half_size)
         outside = p_MS != p_wall
-        A = np.where(outside[:, None, None], self._A_wall, self._A_free)
-        B = np.where(outside[:, None], self._B_wall[:, 0], self._B_free[:, 0])
-        # Beyond the wall, -k (x - x_wall) = -k x + k x_wall: the constant joins the input.
-        u = force + np.where(outside, self.wall_stiffness * p_wall, 0.0)
-        x = np.stack([p_MS, v_MS], axis=1)
-        x_next = np.einsum("aij,aj->ai", A, x) + B * u[:, None]
-        return x_next[:, 0], x_next[:, 1]
+        a00, a01, a10, a11, b0, b1 = self._coefficients[outside.astype(np.intp)].T
+        # Beyond a wall, -k (x - x_wall) = -k x + k x_wall: the constant joins the input.
+        u = force + self.wall_stiffness * (p_wall * outside)
+        return a00 * p_MS + a01 * v_MS + b0 * u, a10 * p_MS + a11 * v_MS + b1 * u
 
 
 class HapticMaster(LeafSystem):

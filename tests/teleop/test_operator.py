@@ -1,0 +1,147 @@
+"""SimulatedOperator with the HapticMaster: tracking, activation levels, co-contraction, seeds."""
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
+
+from hemg_drake.tasks.plan import TaskPlan
+from hemg_drake.teleop.mapping import WorkspaceMapping
+from hemg_drake.teleop.master import HapticMaster
+from hemg_drake.teleop.operator import OperatorModel, SimulatedOperator
+
+PERIOD = 1e-3
+MAPPING = WorkspaceMapping(scale=3.0, p_WMo=[0.7, -0.2, 0.25])
+PLAN = TaskPlan(
+    times=[0.0, 0.6, 1.4, 2.0],
+    points=[[0.7, -0.2, 0.25], [0.75, -0.3, 0.25], [0.75, -0.3, 0.2], [0.7, -0.2, 0.25]],
+    kinds=["free", "forceful", "free"],
+)
+
+
+def run_operator(plan=PLAN, feedback_force=(0.0, 0.0, 0.0), duration=2.0, **operator_parameters):
+    """Operator and master in closed loop; logs at every sample instant."""
+    builder = DiagramBuilder()
+    master = builder.AddSystem(HapticMaster(p_MS_initial=MAPPING.slave_to_master(plan.points[0])))
+    operator = builder.AddSystem(SimulatedOperator(plan=plan, mapping=MAPPING, **operator_parameters))
+    felt = builder.AddSystem(ConstantVectorSource(np.asarray(feedback_force, float)))
+    builder.Connect(felt.get_output_port(), operator.GetInputPort("feedback_force"))
+    builder.Connect(operator.GetOutputPort("hand_force"), master.GetInputPort("hand_force"))
+    builder.Connect(
+        builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(),
+        master.GetInputPort("motor_force"),
+    )
+    for name in ("p_MS", "v_MS"):
+        builder.Connect(master.GetOutputPort(name), operator.GetInputPort(name))
+    logs = {
+        "p_MS": LogVectorOutput(master.GetOutputPort("p_MS"), builder, publish_period=PERIOD),
+        "activation": LogVectorOutput(operator.GetOutputPort("activation"), builder, publish_period=PERIOD),
+        "hand_force": LogVectorOutput(operator.GetOutputPort("hand_force"), builder, publish_period=PERIOD),
+    }
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(duration)
+    context = simulator.get_context()
+    result = {name: log.FindLog(context).data().T for name, log in logs.items()}
+    result["t"] = logs["p_MS"].FindLog(context).sample_times()
+    result["activation"] = result["activation"][:, 0]
+    return result
+
+
+@pytest.fixture(scope="module")
+def nominal():
+    return run_operator()
+
+
+def test_stylus_follows_the_mapped_plan(nominal):
+    planned = MAPPING.slave_to_master(PLAN.position(nominal["t"]))
+    error = np.linalg.norm(nominal["p_MS"] - planned, axis=1)
+    assert np.ptp(planned, axis=0).max() > 0.02  # the plan moves the stylus by centimetres
+    assert error.max() < 1e-3  # measured 0.12 mm on the master (0.36 mm on the slave)
+    assert np.linalg.norm(nominal["hand_force"], axis=1).max() < 15.0
+
+
+def test_activation_is_higher_in_forceful_segments(nominal):
+    t, a = nominal["t"], nominal["activation"]
+    settled = 5 * 0.04  # five time constants into a segment
+    free = a[(t > settled) & (t < 0.6)]
+    forceful = a[(t > 0.6 + settled) & (t < 1.4)]
+    assert forceful.min() > free.max() + 0.3
+    # Settled levels are the documented targets (default rest 0.05, free 0.2, forceful 0.7).
+    assert free[-1] == pytest.approx(0.2, abs=1e-3)
+    assert forceful[-1] == pytest.approx(0.7, abs=1e-3)
+    assert np.all((a >= 0.0) & (a <= 1.0))
+
+
+def test_activation_is_an_exact_first_order_lag(nominal):
+    # From rest (0.05) towards the free level (0.2) with tau = 40 ms, sampled exactly.
+    t, a = nominal["t"], nominal["activation"]
+    early = t < 0.3
+    expected = 0.2 + (0.05 - 0.2) * np.exp(-t[early] / 0.04)
+    np.testing.assert_allclose(a[early], expected, atol=1e-12)
+
+
+def test_system_matches_numpy_twin_and_saturates_the_hand():
+    system = SimulatedOperator(plan=PLAN, mapping=MAPPING)
+    model = OperatorModel(plan=PLAN, mapping=MAPPING)
+    context = system.CreateDefaultContext()
+    context.SetTime(0.9)
+    p_MS, v_MS, felt = np.array([0.03, 0.01, -0.02]), np.array([0.1, 0.0, -0.05]), np.array([1.0, 2.0, 0.5])
+    for name, value in (("p_MS", p_MS), ("v_MS", v_MS), ("feedback_force", felt)):
+        system.GetInputPort(name).FixValue(context, value)
+    hand_force = system.GetOutputPort("hand_force").Eval(context)
+    np.testing.assert_allclose(hand_force, model.hand_force(0.9, p_MS, v_MS), atol=1e-12)
+    next_activation = system.EvalUniquePeriodicDiscreteUpdate(context).get_vector().GetAtIndex(0)
+    assert next_activation == pytest.approx(model.activation_step(0.9, 0.05, felt), abs=1e-15)
+    # Far from the plan, the hand pushes at its limit, towards the plan.
+    system.GetInputPort("p_MS").FixValue(context, [0.07, -0.05, 0.05])
+    far = system.GetOutputPort("hand_force").Eval(context)
+    assert np.linalg.norm(far) == pytest.approx(15.0)
+
+
+def test_activation_rises_with_the_felt_force(nominal):
+    felt = run_operator(feedback_force=[0.0, 3.0, -4.0], duration=1.2)  # 5 N felt
+    n = len(felt["t"])
+    gain = felt["activation"] - nominal["activation"][:n]
+    assert gain[-1] == pytest.approx(0.05 * 5.0, abs=1e-3)
+    assert np.all(gain >= -1e-15)
+    saturated = run_operator(feedback_force=[0.0, 0.0, 30.0], duration=0.6)
+    assert saturated["activation"][-1] == pytest.approx(1.0, abs=1e-3)  # clipped at full
+
+
+def test_effort_scales_the_activation_above_rest():
+    strong = TaskPlan(PLAN.times, PLAN.points, PLAN.kinds, effort=[1.0, 1.2, 1.0])
+    t_end = 1.35
+    a = run_operator(plan=strong, duration=t_end)["activation"][-1]
+    assert a == pytest.approx(0.05 + 1.2 * (0.7 - 0.05), abs=1e-3)
+
+
+def test_same_seed_same_run_different_seed_different_run():
+    def run(seed):
+        return run_operator(plan=PLAN.perturbed(seed, path_std=0.002), duration=1.0)
+
+    a, b, c = run(11), run(11), run(12)
+    for name in ("p_MS", "hand_force", "activation"):
+        np.testing.assert_array_equal(a[name], b[name])
+    assert np.abs(a["p_MS"] - c["p_MS"]).max() > 1e-4
+    assert np.abs(a["activation"] - c["activation"]).max() > 1e-3
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(plan="pull the pin"), "plan"),
+        (dict(mapping=None), "mapping"),
+        (dict(hand_stiffness=-300.0), "hand_stiffness"),
+        (dict(forceful_activation=1.5), "forceful_activation"),
+        (dict(activation_time_constant=0.0), "activation_time_constant"),
+    ],
+)
+def test_bad_parameters_are_named(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        SimulatedOperator(**{"plan": PLAN, "mapping": MAPPING, **kwargs})
+
+
+def test_nan_feedback_force_is_rejected():
+    with pytest.raises(ValueError, match="feedback_force"):
+        run_operator(feedback_force=[np.nan, 0.0, 0.0], duration=0.01)
