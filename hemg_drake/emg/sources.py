@@ -33,9 +33,9 @@ def _check_seed(seed):
 
 
 def _check_period(period):
-    if not (np.isfinite(period) and period > 0):
-        raise ValueError(f"period must be a positive number of seconds, got {period!r}")
-    return float(period)
+    if isinstance(period, (int, float, np.number)) and np.isfinite(period) and period > 0:
+        return float(period)
+    raise ValueError(f"period must be a positive number of seconds, got {period!r}")
 
 
 class _NoiseModel:
