@@ -135,7 +135,8 @@ class TaskPlan:
                 f"segment), got {effort.tolist()}"
             )
         times.flags.writeable = points.flags.writeable = effort.flags.writeable = False
-        for name, value in zip(_FIELDS, (times, points, kinds, tuple(map(bool, pen_down)), effort)):
+        values = (times, points, kinds, tuple(map(bool, pen_down)), effort)
+        for name, value in zip(_FIELDS, values, strict=True):
             object.__setattr__(self, name, value)
         # Cached for the 1 kHz path: times for bisect, each segment's displacement.
         object.__setattr__(self, "_times", times.tolist())
@@ -251,8 +252,7 @@ class TaskPlan:
         path_std = np.broadcast_to(_field_array("path_std", path_std), (3,))
         if not np.all(np.isfinite(path_std) & (path_std >= 0)):
             raise ValueError(
-                f"path_std must be finite and >= 0 (a number or 3 numbers), "
-                f"got {path_std.tolist()}"
+                f"path_std must be finite and >= 0 (a number or 3 numbers), got {path_std.tolist()}"
             )
         rng = np.random.default_rng(seed)
         n_segments = len(self.kinds)
@@ -261,9 +261,7 @@ class TaskPlan:
         u = ((self.times - self.times[0]) / (self.times[-1] - self.times[0]))[:, None]
         c = rng.standard_normal((3, 3))
         phase = rng.uniform(0.0, 2.0 * np.pi, (2, 3))
-        bend = (
-            c[0] + c[1] * np.sin(np.pi * u + phase[0]) + c[2] * np.sin(2 * np.pi * u + phase[1])
-        )
+        bend = c[0] + c[1] * np.sin(np.pi * u + phase[0]) + c[2] * np.sin(2 * np.pi * u + phase[1])
         points = self.points + path_std * bend / np.sqrt(2.0)
         effort = self.effort * np.exp(effort_std * rng.standard_normal(n_segments))
         return TaskPlan(times, points, self.kinds, self.pen_down, effort)

@@ -79,8 +79,12 @@ class OperatorModel:
             if level > 1.0:
                 raise ValueError(f"{name}_activation must be in [0, 1], got {level}")
             self.levels[name] = level
-        self.co_contraction_gain = as_scalar("co_contraction_gain", co_contraction_gain, strict=False)
-        self.activation_time_constant = as_scalar("activation_time_constant", activation_time_constant)
+        self.co_contraction_gain = as_scalar(
+            "co_contraction_gain", co_contraction_gain, strict=False
+        )
+        self.activation_time_constant = as_scalar(
+            "activation_time_constant", activation_time_constant
+        )
         self.period = as_scalar("period", period)
         # Exact discretisation of a' = (a* - a) / tau with a* held over the period.
         self._decay = np.exp(-self.period / self.activation_time_constant)

@@ -50,7 +50,12 @@ def test_holds_end_points_outside_the_plan(plan):
 
 
 def test_segments_carry_kind_and_pen(plan):
-    assert [plan.segment(t).kind for t in (0.5, 1.0, 2.0, 2.9)] == ["free", "forceful", "forceful", "free"]
+    assert [plan.segment(t).kind for t in (0.5, 1.0, 2.0, 2.9)] == [
+        "free",
+        "forceful",
+        "forceful",
+        "free",
+    ]
     assert plan.segment(1.7).pen_down and not plan.segment(0.2).pen_down
     assert plan.segment(-3.0).index == 0 and plan.segment(9.0).index == 2
     assert plan.segment(2.0).effort == 1.0
@@ -73,11 +78,16 @@ def test_perturbed_is_seeded(plan):
     assert np.max(np.abs(arrays(a) - arrays(c))) > 1e-4
     assert a.kinds == plan.kinds and a.pen_down == plan.pen_down
     assert a.start_time == plan.start_time and np.all(np.diff(a.times) > 0)
-    np.testing.assert_array_equal(arrays(plan.perturbed(3, timing_std=0, path_std=0, effort_std=0)), arrays(plan))
+    np.testing.assert_array_equal(
+        arrays(plan.perturbed(3, timing_std=0, path_std=0, effort_std=0)), arrays(plan)
+    )
 
 
 def test_perturbed_variability_has_the_requested_size(plan):
-    runs = [plan.perturbed(seed, timing_std=0.1, path_std=(0.004, 0.002, 0.0), effort_std=0.2) for seed in range(300)]
+    runs = [
+        plan.perturbed(seed, timing_std=0.1, path_std=(0.004, 0.002, 0.0), effort_std=0.2)
+        for seed in range(300)
+    ]
     offsets = np.array([run.points - plan.points for run in runs])  # (runs, waypoints, 3)
     np.testing.assert_allclose(offsets.std(axis=0).mean(axis=0)[:2], [0.004, 0.002], rtol=0.2)
     assert np.all(offsets[..., 2] == 0.0)  # a zero-std axis stays put (pen on the paper)
@@ -102,7 +112,10 @@ BASE = yaml_load_data(PLAN_YAML)
         (dict(times=[0.0, 1.0, float("nan"), 3.0]), r"'times' is not finite at index \[2\]"),
         (dict(points=[[0, 0, 0]] * 3 + [[0, 0]]), "'points'"),
         (dict(points=[[0, 0, 0]] * 3), r"'points' must have shape \(4, 3\)"),
-        (dict(points=[[0, 0, 0]] * 3 + [[0, float("nan"), 0]]), r"'points' is not finite at index \[3, 1\]"),
+        (
+            dict(points=[[0, 0, 0]] * 3 + [[0, float("nan"), 0]]),
+            r"'points' is not finite at index \[3, 1\]",
+        ),
         (dict(kinds=["free", "slow", "free"]), r"'kinds'\[1\] = 'slow'"),
         (dict(kinds=["free", "free"]), "'kinds' must have 3 entries"),
         (dict(pen_down=[1, 0, 0]), "'pen_down'"),

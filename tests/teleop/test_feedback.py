@@ -46,7 +46,10 @@ def test_force_mode_pushes_the_stylus_the_way_the_slave_is_pushed(mapping):
     source = builder.AddSystem(ConstantVectorSource(f_WE))
     builder.Connect(source.get_output_port(), feedback.GetInputPort("f_WE"))
     builder.Connect(feedback.GetOutputPort("motor_force"), master.GetInputPort("motor_force"))
-    builder.Connect(builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(), master.GetInputPort("hand_force"))
+    builder.Connect(
+        builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(),
+        master.GetInputPort("hand_force"),
+    )
     simulator = Simulator(builder.Build())
     simulator.AdvanceTo(0.02)
     p_MS = master.GetOutputPort("p_MS").Eval(master.GetMyContextFromRoot(simulator.get_context()))
@@ -64,7 +67,9 @@ def test_position_error_mode_is_the_table_one_pd(mapping):
     )
     force = motor_force(feedback, p_WE=p_WE, v_WE=v_WE, p_MS=p_MS, v_MS=v_MS)
     np.testing.assert_allclose(force, expected)
-    assert motor_force(feedback, p_WE=mapping.master_to_slave(p_MS), v_WE=np.zeros(3), p_MS=p_MS, v_MS=np.zeros(3)) == pytest.approx(np.zeros(3))
+    assert motor_force(
+        feedback, p_WE=mapping.master_to_slave(p_MS), v_WE=np.zeros(3), p_MS=p_MS, v_MS=np.zeros(3)
+    ) == pytest.approx(np.zeros(3))
 
 
 def test_position_error_mode_pulls_the_stylus_onto_a_still_slave(mapping):
@@ -73,11 +78,17 @@ def test_position_error_mode_pulls_the_stylus_onto_a_still_slave(mapping):
     master = builder.AddSystem(HapticMaster())
     feedback = builder.AddSystem(ForceFeedback(mapping=mapping, mode="position_error"))
     for name, value in (("p_WE", p_WE), ("v_WE", np.zeros(3))):
-        builder.Connect(builder.AddSystem(ConstantVectorSource(value)).get_output_port(), feedback.GetInputPort(name))
+        builder.Connect(
+            builder.AddSystem(ConstantVectorSource(value)).get_output_port(),
+            feedback.GetInputPort(name),
+        )
     for name in ("p_MS", "v_MS"):
         builder.Connect(master.GetOutputPort(name), feedback.GetInputPort(name))
     builder.Connect(feedback.GetOutputPort("motor_force"), master.GetInputPort("motor_force"))
-    builder.Connect(builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(), master.GetInputPort("hand_force"))
+    builder.Connect(
+        builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(),
+        master.GetInputPort("hand_force"),
+    )
     simulator = Simulator(builder.Build())
     # Table I's gains on the 45 g tip: overdamped, slow pole at about K/(K_d + b) = 1 /s.
     simulator.AdvanceTo(5.0)

@@ -30,9 +30,15 @@ def mapping():
 def test_round_trips_are_identity(mapping):
     rng = np.random.default_rng(0)
     points = rng.uniform(-0.08, 0.08, size=(20, 3))
-    np.testing.assert_allclose(mapping.slave_to_master(mapping.master_to_slave(points)), points, atol=1e-15)
-    np.testing.assert_allclose(mapping.velocity_to_master(mapping.velocity_to_slave(points)), points, atol=1e-15)
-    np.testing.assert_allclose(mapping.force_to_slave(mapping.force_to_master(points)), points, atol=1e-15)
+    np.testing.assert_allclose(
+        mapping.slave_to_master(mapping.master_to_slave(points)), points, atol=1e-15
+    )
+    np.testing.assert_allclose(
+        mapping.velocity_to_master(mapping.velocity_to_slave(points)), points, atol=1e-15
+    )
+    np.testing.assert_allclose(
+        mapping.force_to_slave(mapping.force_to_master(points)), points, atol=1e-15
+    )
     # One vector in, one vector out.
     assert mapping.master_to_slave(points[0]).shape == (3,)
 
@@ -63,21 +69,32 @@ def test_system_without_delay_is_the_mapping(mapping):
     p_MS, v_MS = np.array([0.02, 0.01, -0.03]), np.array([0.1, -0.2, 0.05])
     system.GetInputPort("p_MS").FixValue(context, p_MS)
     system.GetInputPort("v_MS").FixValue(context, v_MS)
-    np.testing.assert_allclose(system.GetOutputPort("p_WE_desired").Eval(context), mapping.master_to_slave(p_MS))
-    np.testing.assert_allclose(system.GetOutputPort("v_WE_desired").Eval(context), mapping.velocity_to_slave(v_MS))
+    np.testing.assert_allclose(
+        system.GetOutputPort("p_WE_desired").Eval(context), mapping.master_to_slave(p_MS)
+    )
+    np.testing.assert_allclose(
+        system.GetOutputPort("v_WE_desired").Eval(context), mapping.velocity_to_slave(v_MS)
+    )
 
 
 def run_delayed(mapping, delay_steps):
     """A master pushed by a sinusoidal hand force, mapped with and without delay."""
     builder = DiagramBuilder()
     master = builder.AddSystem(HapticMaster(damping=1.0))
-    hand = builder.AddSystem(Sine(np.full(3, 0.2), np.array([3.0, 5.0, 7.0]) * 2 * np.pi, np.zeros(3), 3))
+    hand = builder.AddSystem(
+        Sine(np.full(3, 0.2), np.array([3.0, 5.0, 7.0]) * 2 * np.pi, np.zeros(3), 3)
+    )
     builder.Connect(hand.get_output_port(0), master.GetInputPort("hand_force"))
-    builder.Connect(builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(), master.GetInputPort("motor_force"))
+    builder.Connect(
+        builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(),
+        master.GetInputPort("motor_force"),
+    )
     logs = {}
     # Ours, Drake's own DiscreteTimeDelay followed by an undelayed map, and no delay.
     # Drake's samples its input first, which on a held input adds one period: n - 1 steps.
-    delayed = builder.AddSystem(WorkspaceMap(mapping=mapping, delay_steps=delay_steps, period=PERIOD))
+    delayed = builder.AddSystem(
+        WorkspaceMap(mapping=mapping, delay_steps=delay_steps, period=PERIOD)
+    )
     drake_delay = builder.AddSystem(DiscreteTimeDelay(PERIOD, delay_steps - 1, 3))
     after_drake_delay = builder.AddSystem(WorkspaceMap(mapping=mapping))
     undelayed = builder.AddSystem(WorkspaceMap(mapping=mapping))
@@ -88,9 +105,15 @@ def run_delayed(mapping, delay_steps):
     for system in (delayed, undelayed):
         builder.Connect(master.GetOutputPort("p_MS"), system.GetInputPort("p_MS"))
     for name, system in (("ours", delayed), ("drake", after_drake_delay), ("none", undelayed)):
-        logs[name] = LogVectorOutput(system.GetOutputPort("p_WE_desired"), builder, publish_period=PERIOD)
-    logs["v_ours"] = LogVectorOutput(delayed.GetOutputPort("v_WE_desired"), builder, publish_period=PERIOD)
-    logs["v_none"] = LogVectorOutput(undelayed.GetOutputPort("v_WE_desired"), builder, publish_period=PERIOD)
+        logs[name] = LogVectorOutput(
+            system.GetOutputPort("p_WE_desired"), builder, publish_period=PERIOD
+        )
+    logs["v_ours"] = LogVectorOutput(
+        delayed.GetOutputPort("v_WE_desired"), builder, publish_period=PERIOD
+    )
+    logs["v_none"] = LogVectorOutput(
+        undelayed.GetOutputPort("v_WE_desired"), builder, publish_period=PERIOD
+    )
     simulator = Simulator(builder.Build())
     simulator.AdvanceTo(0.3)
     return {name: log.FindLog(simulator.get_context()).data().T for name, log in logs.items()}

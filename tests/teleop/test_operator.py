@@ -24,7 +24,9 @@ def run_operator(plan=PLAN, feedback_force=(0.0, 0.0, 0.0), duration=2.0, **oper
     """Operator and master in closed loop; logs at every sample instant."""
     builder = DiagramBuilder()
     master = builder.AddSystem(HapticMaster(p_MS_initial=MAPPING.slave_to_master(plan.points[0])))
-    operator = builder.AddSystem(SimulatedOperator(plan=plan, mapping=MAPPING, **operator_parameters))
+    operator = builder.AddSystem(
+        SimulatedOperator(plan=plan, mapping=MAPPING, **operator_parameters)
+    )
     felt = builder.AddSystem(ConstantVectorSource(np.asarray(feedback_force, float)))
     builder.Connect(felt.get_output_port(), operator.GetInputPort("feedback_force"))
     builder.Connect(operator.GetOutputPort("hand_force"), master.GetInputPort("hand_force"))
@@ -36,8 +38,12 @@ def run_operator(plan=PLAN, feedback_force=(0.0, 0.0, 0.0), duration=2.0, **oper
         builder.Connect(master.GetOutputPort(name), operator.GetInputPort(name))
     logs = {
         "p_MS": LogVectorOutput(master.GetOutputPort("p_MS"), builder, publish_period=PERIOD),
-        "activation": LogVectorOutput(operator.GetOutputPort("activation"), builder, publish_period=PERIOD),
-        "hand_force": LogVectorOutput(operator.GetOutputPort("hand_force"), builder, publish_period=PERIOD),
+        "activation": LogVectorOutput(
+            operator.GetOutputPort("activation"), builder, publish_period=PERIOD
+        ),
+        "hand_force": LogVectorOutput(
+            operator.GetOutputPort("hand_force"), builder, publish_period=PERIOD
+        ),
     }
     simulator = Simulator(builder.Build())
     simulator.AdvanceTo(duration)
@@ -86,7 +92,11 @@ def test_system_matches_numpy_twin_and_saturates_the_hand():
     model = OperatorModel(plan=PLAN, mapping=MAPPING)
     context = system.CreateDefaultContext()
     context.SetTime(0.9)
-    p_MS, v_MS, felt = np.array([0.03, 0.01, -0.02]), np.array([0.1, 0.0, -0.05]), np.array([1.0, 2.0, 0.5])
+    p_MS, v_MS, felt = (
+        np.array([0.03, 0.01, -0.02]),
+        np.array([0.1, 0.0, -0.05]),
+        np.array([1.0, 2.0, 0.5]),
+    )
     for name, value in (("p_MS", p_MS), ("v_MS", v_MS), ("feedback_force", felt)):
         system.GetInputPort(name).FixValue(context, value)
     hand_force = system.GetOutputPort("hand_force").Eval(context)
