@@ -19,7 +19,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from hemg_drake.diagrams.arm_demo import build_arm_demo
-from hemg_drake.robots.baxter import FLOOR_Z, HOME_POSITIONS, add_baxter_arm
+from hemg_drake.robots.baxter import FLOOR_Z, add_baxter_arm
 from hemg_drake.viz.recording import ReplayRecorder
 
 SIMULATED_SECONDS = 10.0
@@ -31,10 +31,8 @@ def build_bare_arm(recorder, approximation=None):
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=TIME_STEP)
     if approximation is not None:
         plant.set_discrete_contact_approximation(approximation)
-    arm = add_baxter_arm(plant)
+    add_baxter_arm(plant)  # starts at home
     plant.Finalize()
-    for name, q in zip(arm.joint_names, HOME_POSITIONS):
-        plant.GetJointByName(name).set_default_angle(q)
     if recorder is not None:
         recorder.add_to_builder(builder, scene_graph)
     return builder.Build()

@@ -56,7 +56,7 @@ def waypoint_trajectory(waypoints, duration):
 
 
 def build_arm_demo(*, duration, time_step=MAX_TIME_STEP, gain=50.0, recorder=None):
-    """Build the demo diagram; the plant's default positions are the first waypoint.
+    """Build the demo diagram; the arm starts at rest at home, the first waypoint.
 
     Parameters
     ----------
@@ -79,8 +79,6 @@ def build_arm_demo(*, duration, time_step=MAX_TIME_STEP, gain=50.0, recorder=Non
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=time_step)
     arm = add_baxter_arm(plant)
     plant.Finalize()
-    for name, q0 in zip(arm.joint_names, WAYPOINTS[0]):
-        plant.GetJointByName(name, arm.model_instance).set_default_angle(q0)
 
     trajectory = waypoint_trajectory(WAYPOINTS, duration)
     q_desired = builder.AddNamedSystem("q_desired", TrajectorySource(trajectory))

@@ -70,7 +70,8 @@ def add_baxter_arm(plant, scene_graph=None, *, weld_base=True, model_path=None):
     """Add the Baxter right arm on its torso and pedestal to ``plant``.
 
     Self-collisions of the robot are filtered in the model, so only contacts between the arm
-    and a scene count. Call before ``plant.Finalize()``.
+    and a scene count. The joints' default angles are ``HOME_POSITIONS``, so a new context
+    starts there. Call before ``plant.Finalize()``.
 
     Parameters
     ----------
@@ -116,6 +117,8 @@ def add_baxter_arm(plant, scene_graph=None, *, weld_base=True, model_path=None):
         if not plant.HasJointNamed(name, model):
             raise ValueError(f"robot model {path} has no joint named {name!r}")
     joints = [plant.GetJointByName(name, model) for name in JOINT_NAMES]
+    for joint, angle in zip(joints, HOME_POSITIONS):
+        joint.set_default_angle(angle)
     efforts = _effort_limits(plant, model, joints, path)
     return BaxterArm(
         model_instance=model,

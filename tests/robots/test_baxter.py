@@ -11,8 +11,11 @@ from pydrake.systems.framework import DiagramBuilder
 from hemg_drake.robots.baxter import BAXTER_URDF, JOINT_NAMES, add_baxter_arm
 
 
-def _load_csv(path):
-    return np.loadtxt(path, delimiter=",", skiprows=1)
+def _facts_rows(facts_dir, name):
+    """The 10 configurations of a facts CSV: q (7 columns) then the reference values."""
+    rows = np.loadtxt(facts_dir / name, delimiter=",", skiprows=1)
+    assert rows.shape == (10, 14), f"{name}: unexpected shape {rows.shape}"
+    return rows
 
 
 @pytest.fixture(scope="module")
@@ -28,9 +31,7 @@ def test_forward_kinematics_matches_facts(arm_plant, facts_dir):
     # Frames: pose of right_hand expressed in right_arm_mount, as in baxter_fk_vectors.csv.
     plant, arm = arm_plant
     context = plant.CreateDefaultContext()
-    rows = _load_csv(facts_dir / "baxter_fk_vectors.csv")
-    assert rows.shape == (10, 14)
-    for row in rows:
+    for row in _facts_rows(facts_dir, "baxter_fk_vectors.csv"):
         plant.SetPositions(context, arm.model_instance, row[:7])
         X_MH = plant.CalcRelativeTransform(context, arm.mount_frame, arm.hand_frame)
         quaternion = row[10:14] / np.linalg.norm(row[10:14])
@@ -44,9 +45,7 @@ def test_forward_kinematics_matches_facts(arm_plant, facts_dir):
 def test_gravity_forces_match_facts(arm_plant, facts_dir):
     plant, arm = arm_plant
     context = plant.CreateDefaultContext()
-    rows = _load_csv(facts_dir / "baxter_gravity_vectors.csv")
-    assert rows.shape == (10, 14)
-    for row in rows:
+    for row in _facts_rows(facts_dir, "baxter_gravity_vectors.csv"):
         plant.SetPositions(context, arm.model_instance, row[:7])
         g = plant.GetVelocitiesFromArray(
             arm.model_instance, plant.CalcGravityGeneralizedForces(context)
@@ -79,6 +78,7 @@ def test_limits_equal_facts(arm_plant):
         assert plant.GetJointByName(name).default_damping() == pytest.approx(0.7)
     assert np.all(arm.position_lower < arm.home_positions)
     assert np.all(arm.home_positions < arm.position_upper)
+    np.testing.assert_allclose(plant.GetDefaultPositions(), arm.home_positions)
 
 
 def test_mount_and_total_mass(arm_plant):

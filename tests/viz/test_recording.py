@@ -37,15 +37,12 @@ def _record_arm(path, duration=0.3):
     """Record the bare arm falling under gravity from its home pose; return the server's port."""
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
-    arm = add_baxter_arm(plant)
+    add_baxter_arm(plant)  # starts at home
     plant.Finalize()
     recorder = ReplayRecorder(floor_z=FLOOR_Z)
     recorder.add_to_builder(builder, scene_graph)
     port = recorder.meshcat.port()
     simulator = Simulator(builder.Build())
-    plant.SetPositions(
-        plant.GetMyMutableContextFromRoot(simulator.get_mutable_context()), arm.home_positions
-    )
     recorder.start()
     simulator.AdvanceTo(duration)
     assert recorder.stop_and_export(path) == path
