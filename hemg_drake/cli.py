@@ -24,6 +24,8 @@ def _emg_figure(args):
     if args.input:
         samples = load_emg_recording(args.input)
     else:
+        if not args.duration * MYO_RATE >= 1:
+            raise ValueError(f"--duration must be at least one sample (5 ms), got {args.duration}")
         # Two contractions rising from rest and relaxing, 2.5 s each, then rest.
         time = np.arange(int(args.duration * MYO_RATE)) / MYO_RATE
         activation = 0.05 + 0.9 * np.clip(np.sin(np.pi * time / 2.5), 0.0, None) ** 2

@@ -117,6 +117,8 @@ class VariableGain(LeafSystem):
         LeafSystem.__init__(self)
         _check_a_emg(A_emg)
         _check_gains(k_min, k_max)
+        if calibration is not None and not isinstance(calibration, EmgCalibration):
+            raise ValueError(f"calibration must be an EmgCalibration or None, got {calibration!r}")
         self._calibration = EmgCalibration() if calibration is None else calibration
         self._A_emg = float(A_emg)
         self._k_min, self._k_max = float(k_min), float(k_max)

@@ -33,3 +33,8 @@ def test_bad_recording_is_a_one_line_error(tmp_path, capsys):
     error = capsys.readouterr().err
     assert error.count("\n") == 1 and "bad.csv: line 1: expected 8" in error
     assert not out.exists()
+
+
+def test_bad_duration_is_a_one_line_error(tmp_path, capsys):
+    assert main(["emg-figure", "--duration", "0", "-o", str(tmp_path / "f.png")]) == 2
+    assert "--duration must be at least one sample" in capsys.readouterr().err

@@ -84,6 +84,7 @@ def test_nan_envelope_gives_k_min_and_no_nan(bad):
         ({"k_min": 50.0, "k_max": 50.0}, "k_min < k_max"),
         ({"k_min": -1.0}, "k_min"),
         ({"k_max": np.inf}, "k_max"),
+        ({"calibration": {"rest_level": 1.0}}, "EmgCalibration"),
     ],
 )
 def test_bad_parameters(kwargs, message):
