@@ -69,7 +69,8 @@ def main():
         for label, build in cases:
             for record in (False, True):
                 rate, export = measure(build, record, out_dir)
-                line = f"{label:10s} recorder={'on ' if record else 'off'}  real-time factor {rate:6.1f}x"
+                state = "on " if record else "off"
+                line = f"{label:10s} recorder={state}  real-time factor {rate:6.1f}x"
                 if export is not None:
                     size = (Path(out_dir) / "replay.html").stat().st_size / 1e6
                     line += f"  (HTML export {export:.2f} s, {size:.1f} MB)"

@@ -136,7 +136,8 @@ class VariableGainPd(LeafSystem):
         self._effort_limit = np.asarray(arm.effort_limit, dtype=float)
         # Positions of the arm's joints among all the plant's velocities (M and g are full size).
         all_velocities = np.arange(plant.num_velocities(), dtype=float)
-        self._velocity_indices = plant.GetVelocitiesFromArray(self._model, all_velocities).astype(int)
+        arm_velocities = plant.GetVelocitiesFromArray(self._model, all_velocities)
+        self._velocity_indices = arm_velocities.astype(int)
 
         self.q_desired_input = self.DeclareVectorInputPort("q_desired", n)
         self.v_desired_input = self.DeclareVectorInputPort("v_desired", n)

@@ -48,7 +48,9 @@ def waypoint_trajectory(waypoints, duration):
     """
     waypoints = np.asarray(waypoints, dtype=float)
     if waypoints.ndim != 2 or waypoints.shape[0] < 2 or not np.all(np.isfinite(waypoints)):
-        raise ValueError(f"waypoints must be finite, shape (n_points >= 2, n_joints), got {waypoints.shape}")
+        raise ValueError(
+            f"waypoints must be finite, shape (n_points >= 2, n_joints), got {waypoints.shape}"
+        )
     times = np.linspace(0.0, duration, waypoints.shape[0])
     return PiecewisePolynomial.CubicWithContinuousSecondDerivatives(
         times, waypoints.T, np.zeros(waypoints.shape[1]), np.zeros(waypoints.shape[1])

@@ -79,6 +79,8 @@ def render_html_to_png(html_path, png_path, *, size=(800, 600), budget_ms=10000,
         result = subprocess.run(command, capture_output=True, text=True, timeout=timeout)
         if result.returncode != 0 or not shot.is_file():
             tail = "\n".join(result.stderr.strip().splitlines()[-5:])
-            raise RuntimeError(f"chromium could not render {html_path} (exit {result.returncode}):\n{tail}")
+            raise RuntimeError(
+                f"chromium could not render {html_path} (exit {result.returncode}):\n{tail}"
+            )
         write_bytes_atomic(png_path, shot.read_bytes())
     return png_path

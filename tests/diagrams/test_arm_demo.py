@@ -4,7 +4,12 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from hemg_drake.diagrams.arm_demo import WAYPOINTS, build_arm_demo, run_arm_demo, waypoint_trajectory
+from hemg_drake.diagrams.arm_demo import (
+    WAYPOINTS,
+    build_arm_demo,
+    run_arm_demo,
+    waypoint_trajectory,
+)
 
 
 def test_waypoints_are_within_limits():

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from pydrake.geometry import GeometrySet, Sphere
+from pydrake.geometry import Sphere
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.common.eigen_geometry import Quaternion
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, CoulombFriction, MultibodyPlant
