@@ -24,7 +24,6 @@ import logging
 from pathlib import Path
 
 import numpy as np
-
 from pydrake.geometry import Meshcat, MeshcatParams, MeshcatVisualizer, MeshcatVisualizerParams
 from pydrake.math import RigidTransform
 

@@ -4,7 +4,11 @@ import numpy as np
 import pytest
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.math import SpatialForce
-from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, ExternallyAppliedSpatialForce
+from pydrake.multibody.plant import (
+    AddMultibodyPlantSceneGraph,
+    ExternallyAppliedSpatialForce,
+    MultibodyPlant,
+)
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
@@ -165,11 +169,22 @@ def test_bad_parameters(kwargs, message):
         VariableGainPd(plant=plant, arm=arm, **kwargs)
 
 
-def test_nan_gain_input_is_rejected():
+def test_unfinalized_plant_is_rejected():
+    plant = MultibodyPlant(1e-3)
+    arm = add_baxter_arm(plant)
+    with pytest.raises(ValueError, match="finalized"):
+        VariableGainPd(plant=plant, arm=arm)
+
+
+@pytest.mark.parametrize(
+    "gain, q_offset, message",
+    [(float("nan"), 0.0, "gain input"), (-1.0, 0.0, "gain input"), (50.0, np.nan, "q_desired")],
+)
+def test_bad_inputs_are_rejected(gain, q_offset, message):
     diagram, _, arm, pd = _build()
     pd_context = pd.GetMyMutableContextFromRoot(diagram.CreateDefaultContext())
     pd.state_input.FixValue(pd_context, np.zeros(14))
-    pd.q_desired_input.FixValue(pd_context, arm.home_positions)
-    pd.gain_input.FixValue(pd_context, [float("nan")])
-    with pytest.raises(ValueError, match="gain input"):
+    pd.q_desired_input.FixValue(pd_context, arm.home_positions + q_offset)
+    pd.gain_input.FixValue(pd_context, [gain])
+    with pytest.raises(ValueError, match=message):
         pd.torque_output.Eval(pd_context)

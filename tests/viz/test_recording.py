@@ -92,6 +92,12 @@ def test_recorder_errors(tmp_path):
         ReplayRecorder(publish_period=0.0)
     with pytest.raises(ValueError, match="camera_in_world"):
         ReplayRecorder(camera_in_world=(1.0, 2.0))
+    builder = DiagramBuilder()
+    _, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
+    recorder.add_to_builder(builder, scene_graph)
+    with pytest.raises(ValueError, match="already attached"):
+        recorder.add_to_builder(builder, scene_graph)
+    recorder.close()
 
 
 def test_render_errors(tmp_path, monkeypatch):
