@@ -117,7 +117,7 @@ def add_baxter_arm(plant, scene_graph=None, *, weld_base=True, model_path=None):
         if not plant.HasJointNamed(name, model):
             raise ValueError(f"robot model {path} has no joint named {name!r}")
     joints = [plant.GetJointByName(name, model) for name in JOINT_NAMES]
-    for joint, angle in zip(joints, HOME_POSITIONS):
+    for joint, angle in zip(joints, HOME_POSITIONS, strict=True):
         joint.set_default_angle(angle)
     efforts = _effort_limits(plant, model, joints, path)
     return BaxterArm(
