@@ -78,7 +78,10 @@ class ForceFeedback(LeafSystem):
         names = ("f_WE",) if mode == "force" else ("p_WE", "v_WE", "p_MS", "v_MS")
         self._inputs = {name: self.DeclareVectorInputPort(name, 3) for name in names}
         self._motor_force_output = self.DeclareVectorOutputPort(
-            "motor_force", 3, self._calc_motor_force
+            "motor_force",
+            3,
+            self._calc_motor_force,
+            prerequisites_of_calc={self.all_input_ports_ticket()},
         )
 
     def _input(self, context, name):

@@ -119,6 +119,7 @@ class MasterDynamics:
                 )
             ]
         )
+        self._free_coefficients = self._coefficients[0].tolist()
         self._half_size = 0.5 * self.workspace_size
 
     def step(self, p_MS, v_MS, hand_force, motor_force):
@@ -144,7 +145,10 @@ class MasterDynamics:
             force = force + saturate_norm(-a11 * v_MS / b1 - force, self.friction)
         p_wall = np.minimum(np.maximum(p_MS, -self._half_size), self._half_size)
         outside = p_MS != p_wall
-        a00, a01, a10, a11, b0, b1 = self._coefficients[outside.astype(np.intp)].T
+        if outside.any():
+            a00, a01, a10, a11, b0, b1 = self._coefficients[outside.astype(np.intp)].T
+        else:  # the usual case, as plain floats
+            a00, a01, a10, a11, b0, b1 = self._free_coefficients
         # Beyond a wall, -k (x - x_wall) = -k x + k x_wall: the constant joins the input.
         u = force + self.wall_stiffness * (p_wall * outside)
         return a00 * p_MS + a01 * v_MS + b0 * u, a10 * p_MS + a11 * v_MS + b1 * u
@@ -181,6 +185,10 @@ class HapticMaster(LeafSystem):
     whole diagram for a 45 g mass whose walls are stiff. The outputs depend on the state
     only (no direct feedthrough), so the master closes loops with the operator and the
     force feedback without algebraic loops. A NaN or infinite input raises ValueError.
+
+    Modelling choices: the walls' damper acts whenever the tip is beyond a wall (on the way
+    out too); the Touch X's continuous-force rating (1.75 N, a thermal limit over minutes)
+    is not enforced, only the peak force.
     """
 
     def __init__(self, *, p_MS_initial=(0.0, 0.0, 0.0), **dynamics_parameters):
