@@ -2,7 +2,6 @@
 
 import math
 
-import numpy as np
 from pydrake.systems.framework import LeafSystem
 
 from hemg_drake.tasks.plan import TaskPlan
@@ -87,7 +86,7 @@ class OperatorModel:
         )
         self.period = as_scalar("period", period)
         # Exact discretisation of a' = (a* - a) / tau with a* held over the period.
-        self._decay = np.exp(-self.period / self.activation_time_constant)
+        self._decay = math.exp(-self.period / self.activation_time_constant)
 
     def hand_force(self, t, p_MS, v_MS):
         """Force (N, in M, shape (3,)) the hand puts on the stylus at time t (s)."""
