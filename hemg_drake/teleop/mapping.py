@@ -14,7 +14,7 @@ from hemg_drake.teleop._validate import as_scalar, as_vector
 R_WM_BEHIND_ROBOT = RotationMatrix(np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]))
 
 
-@dc.dataclass(frozen=True)
+@dc.dataclass(frozen=True, eq=False)
 class WorkspaceMapping:
     """Map points, velocities and forces between the master frame M and the world W.
 
