@@ -28,3 +28,14 @@ def test_npz_round_trip(tmp_path):
     save_npz_atomic(path, x=np.arange(3.0))
     with np.load(path) as data:
         np.testing.assert_array_equal(data["x"], np.arange(3.0))
+
+
+def test_file_mode_follows_the_umask(tmp_path):
+    import os
+
+    old = os.umask(0o022)
+    try:
+        write_text_atomic(tmp_path / "a.txt", "x")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "a.txt").stat().st_mode & 0o777 == 0o644
