@@ -80,23 +80,38 @@ class MasterConfig:
 
 @dc.dataclass
 class OperatorConfig:
-    """The simulated operator's hand and muscles, and its seeded variability."""
+    """The simulated operator (:class:`~hemg_drake.teleop.operator.SimulatedOperator`) and
+    its seeded variability between demonstrations."""
 
-    # Hand impedance pushing the stylus toward the planned point: stiffness (N/m) and
-    # damping (N s/m), in master coordinates.
-    hand_stiffness: float = 200.0
-    hand_damping: float = 8.0
-    # Muscle activation in free segments, and at effort 1 in forceful segments, in [0, 1].
-    rest_activation: float = 0.1
-    forceful_activation: float = 0.8
+    # Hand impedance pushing the stylus toward the planned point, in the master frame:
+    # stiffness (N/m), damping (N s/m), and the saturation of the hand force's norm (N).
+    hand_stiffness: float = 300.0
+    hand_damping: float = 5.0
+    max_hand_force: float = 15.0
+    # Muscle activation in [0, 1]: relaxed, moving freely, working against the task (at
+    # effort 1).
+    rest_activation: float = 0.05
+    free_activation: float = 0.2
+    forceful_activation: float = 0.7
     # Co-contraction: activation added per newton of force felt on the stylus (1/N).
-    feedback_activation: float = 0.05
-    # Variability between demonstrations (TaskPlan.perturbed): log-normal spread of each
-    # segment's duration, the path offset's standard deviation per world axis (m), and the
-    # log-normal spread of each segment's effort.
+    co_contraction_gain: float = 0.05
+    # Time constant of the muscle activation (s).
+    activation_time_constant: float = 0.04
+    # Sample period of the activation (s): the MYO's 1/200 s, the rate at which the sEMG
+    # source reads it (a faster update would be computed and never seen).
+    period: float = 0.005
+    # Variability (TaskPlan.perturbed): log-normal spread of each segment's duration, the
+    # path offset's standard deviation per world axis (m), log-normal spread of the effort.
     timing_std: float = 0.1
     path_std: list[float] = dc.field(default_factory=lambda: [0.003, 0.003, 0.003])
     effort_std: float = 0.1
+
+    def model_parameters(self):
+        """Keyword arguments of ``SimulatedOperator`` (all fields but the variability)."""
+        data = dc.asdict(self)
+        for name in ("timing_std", "path_std", "effort_std"):
+            del data[name]
+        return data
 
 
 @dc.dataclass
@@ -212,7 +227,8 @@ _SIGNED = {"plan.points", "mapping.offset", "mapping.rpy_deg", "emg.A_emg"}
 _POSITIVE = {
     "plant.time_step", "duration", "log_period", "num_demonstrations", "num_states",
     "mapping.scale", "master.mass", "master.workspace_size", "operator.hand_stiffness",
-    "emg.window", "emg.calibration_duration", "clik.gain", "clik.period",
+    "operator.activation_time_constant", "operator.period", "emg.window", "emg.calibration_duration",
+    "clik.gain", "clik.period",
 }
 # Vectors of fixed length.
 _SIZES = {
@@ -220,7 +236,9 @@ _SIZES = {
     "operator.path_std": 3,
 }
 # Values in [0, 1].
-_FRACTIONS = {"operator.rest_activation", "operator.forceful_activation"}
+_FRACTIONS = {
+    "operator.rest_activation", "operator.free_activation", "operator.forceful_activation",
+}
 _CHOICES = {
     "task": TASKS,
     "clik.method": ("transpose", "dls"),
