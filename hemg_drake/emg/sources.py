@@ -13,6 +13,8 @@ from pathlib import Path
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
+from hemg_drake.fileio import save_npz_atomic, write_text_atomic
+
 MYO_CHANNELS = 8
 MYO_RATE = 200.0
 MYO_PERIOD = 1.0 / MYO_RATE
@@ -280,6 +282,34 @@ def load_emg_recording(path):
     if len(emg) == 0:
         raise ValueError(f"{path}: the recording holds no samples")
     return emg
+
+
+def save_emg_recording(path, emg):
+    """Write raw sEMG atomically in the layout ``load_emg_recording`` reads.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.npz``: an array named ``"emg"``; any other suffix: CSV, 8 integer
+        columns, no header.
+    emg : array-like, shape (n_samples, 8)
+        Integers in -128..127, at least one sample.
+    """
+    emg = np.asarray(emg)
+    if emg.ndim != 2 or emg.shape[1] != MYO_CHANNELS or len(emg) == 0:
+        raise ValueError(
+            f"emg must have shape (n_samples >= 1, {MYO_CHANNELS}), got {emg.shape}"
+        )
+    if not np.issubdtype(emg.dtype, np.number) or np.any(~np.isfinite(emg)):
+        raise ValueError("emg must hold finite numbers")
+    if np.any(np.round(emg) != emg) or np.any((emg < INT8_MIN) | (emg > INT8_MAX)):
+        raise ValueError(f"emg must hold integers in {INT8_MIN}..{INT8_MAX}")
+    emg = emg.astype(np.int64)
+    path = Path(path)
+    if path.suffix.lower() == ".npz":
+        save_npz_atomic(path, **{NPZ_KEY: emg.astype(np.int8)})
+    else:
+        write_text_atomic(path, "".join(",".join(map(str, row)) + "\n" for row in emg))
 
 
 class FileEmgSource(LeafSystem):

@@ -4,10 +4,15 @@ import numpy as np
 import pytest
 
 from hemg_drake.emg.calibration import EmgCalibration
-from hemg_drake.emg.chain import add_emg_gain_chain
-from hemg_drake.emg.envelope import RmsEnvelope
+from hemg_drake.emg.chain import add_emg_gain_chain, run_emg_chain
+from hemg_drake.emg.envelope import RmsEnvelope, moving_rms
 from hemg_drake.emg.gain import activation, gain_from_activation
-from hemg_drake.emg.sources import SyntheticEmgSource, synthesize_emg
+from hemg_drake.emg.sources import (
+    FileEmgSource,
+    SyntheticEmgSource,
+    save_emg_recording,
+    synthesize_emg,
+)
 
 WINDOW = 20
 K_MIN, K_MAX = 10.0, 100.0
@@ -75,3 +80,52 @@ def test_chain_takes_window_and_form_from_calibration(builder):
     rms, _ = add_emg_gain_chain(builder, source.get_emg_output_port(), calibration=calibration)
     assert isinstance(rms, RmsEnvelope)
     assert (rms.window, rms.per_channel) == (7, True)
+
+
+def test_run_emg_chain_matches_the_numpy_twins_sample_for_sample(calibration):
+    profile = np.concatenate([np.full(60, 0.1), np.linspace(0.1, 0.9, 80), np.full(60, 0.9)])
+    result = run_emg_chain(
+        SyntheticEmgSource(seed=5), len(profile), activation=profile,
+        calibration=calibration, k_min=K_MIN, k_max=K_MAX,
+    )
+    emg = synthesize_emg(profile, 5)
+    np.testing.assert_array_equal(result["emg"], emg)
+    envelope = moving_rms(emg, WINDOW)
+    np.testing.assert_allclose(result["envelope"], envelope, atol=1e-12)
+    a = activation(calibration.normalise(envelope))
+    np.testing.assert_allclose(result["activation"], a, atol=1e-12)
+    expected = gain_from_activation(a, k_min=K_MIN, k_max=K_MAX)
+    np.testing.assert_allclose(result["gain"], expected, atol=1e-9)
+    np.testing.assert_allclose(result["time"], np.arange(len(profile)) / 200.0)
+
+
+def test_run_emg_chain_replays_a_saved_recording_to_the_same_gain(tmp_path, calibration):
+    profile = np.linspace(0.0, 1.0, 120)
+    synthetic = run_emg_chain(
+        SyntheticEmgSource(seed=9), 120, activation=profile, calibration=calibration
+    )
+    path = tmp_path / "recording.csv"
+    save_emg_recording(path, synthetic["emg"])
+    replayed = run_emg_chain(FileEmgSource(filename=path), 120, calibration=calibration)
+    np.testing.assert_array_equal(replayed["gain"], synthetic["gain"])
+
+
+@pytest.mark.parametrize(
+    "make_source, n_samples, kwargs, message",
+    [
+        (lambda: SyntheticEmgSource(seed=0), 10, {}, "pass activation="),
+        (lambda: SyntheticEmgSource(seed=0), 10, {"activation": np.ones(9)}, "10 numbers"),
+        (lambda: SyntheticEmgSource(seed=0), 2, {"activation": [0.1, np.nan]}, "without NaN"),
+        (lambda: SyntheticEmgSource(seed=0), 0, {"activation": []}, "positive integer"),
+    ],
+)
+def test_run_emg_chain_bad_input(make_source, n_samples, kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        run_emg_chain(make_source(), n_samples, **kwargs)
+
+
+def test_run_emg_chain_rejects_activation_for_a_file_source(tmp_path):
+    path = tmp_path / "recording.npz"
+    save_emg_recording(path, np.zeros((5, 8), dtype=int))
+    with pytest.raises(ValueError, match="no activation input"):
+        run_emg_chain(FileEmgSource(filename=path), 5, activation=np.zeros(5))

@@ -10,6 +10,7 @@ from hemg_drake.emg.sources import (
     LiveEmgSource,
     SyntheticEmgSource,
     load_emg_recording,
+    save_emg_recording,
     synthesize_emg,
 )
 from hemg_drake.fileio import save_npz_atomic, write_text_atomic
@@ -178,3 +179,29 @@ def test_live_source_rejects_bad_device_and_bad_samples(builder, simulate):
     source = builder.AddSystem(LiveEmgSource(device=FakeDevice([[1, 2, 3]])))
     with pytest.raises(ValueError, match="8 finite values"):
         simulate(builder, {"emg": source.get_emg_output_port()}, 2)
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+def test_saved_recording_reads_back_exactly(tmp_path, suffix):
+    emg = synthesize_emg(np.linspace(0.0, 1.0, 50), 2)
+    emg[0, :2] = (-128, 127)  # both ends of the int8 range survive
+    path = tmp_path / f"recording{suffix}"
+    save_emg_recording(path, emg)
+    np.testing.assert_array_equal(load_emg_recording(path), emg)
+
+
+@pytest.mark.parametrize(
+    "emg, message",
+    [
+        (np.zeros((4, 7)), "shape"),
+        (np.zeros((0, 8)), "shape"),
+        (np.full((2, 8), np.nan), "finite"),
+        (np.full((2, 8), 0.5), "integers"),
+        (np.full((2, 8), 128), "integers in -128..127"),
+    ],
+)
+def test_save_recording_rejects_bad_samples(tmp_path, emg, message):
+    path = tmp_path / "bad.csv"
+    with pytest.raises(ValueError, match=message):
+        save_emg_recording(path, emg)
+    assert not path.exists()
