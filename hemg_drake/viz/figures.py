@@ -11,6 +11,13 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from hemg_drake.emg.envelope import moving_rms
+from hemg_drake.emg.gain import (
+    A_EMG,
+    DEFAULT_K_MAX,
+    DEFAULT_K_MIN,
+    activation,
+    gain_from_activation,
+)
 from hemg_drake.emg.sources import MYO_RATE
 from hemg_drake.fileio import write_bytes_atomic
 
@@ -62,4 +69,85 @@ def plot_emg_envelopes(samples, windows=(10, 20, 30), *, rate=MYO_RATE, per_chan
     envelope_axes.set_xlabel("time (s)")
     envelope_axes.legend(loc="upper right")
     raw_axes.set_title("sEMG and its moving-RMS envelope (Fig. 6)")
+    return figure
+
+
+def plot_gain_law(A_emg_values=(A_EMG,), *, k_min=DEFAULT_K_MIN, k_max=DEFAULT_K_MAX):
+    """Eq. 22: activation a(u) and gain K against the normalised envelope u, per A_emg.
+
+    Parameters
+    ----------
+    A_emg_values : sequence of float
+        Shape factors to compare (Table I: -0.6981); each non-zero.
+    k_min, k_max : float
+        Gain at rest and at maximum contraction.
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure
+        Two axes sharing u in [0, 1]: a(u), then K(u); one line per A_emg.
+    """
+    A_emg_values = list(A_emg_values)
+    if not A_emg_values:
+        raise ValueError("A_emg_values must list at least one shape factor")
+    u = np.linspace(0.0, 1.0, 101)
+    figure = Figure(figsize=(8, 3.5), layout="constrained")
+    activation_axes, gain_axes = figure.subplots(1, 2, sharex=True)
+    for A_emg in A_emg_values:
+        a = activation(u, A_emg)
+        label = f"A_emg = {A_emg:g}"
+        activation_axes.plot(u, a, label=label)
+        gain_axes.plot(u, gain_from_activation(a, k_min=k_min, k_max=k_max), label=label)
+    activation_axes.set_ylabel("activation a(u)")
+    gain_axes.set_ylabel("gain K")
+    for axes in (activation_axes, gain_axes):
+        axes.set_xlabel("normalised envelope u")
+    activation_axes.legend(loc="lower right")
+    figure.suptitle("Gain law (eq. 22): a stronger contraction gives a stiffer slave")
+    return figure
+
+
+def plot_time_series(time, series, *, title=None):
+    """Signals against time, one axis each, sharing the time axis.
+
+    Parameters
+    ----------
+    time : array-like, shape (T,)
+        Seconds.
+    series : dict of str to array-like, shape (T,) or (T, k)
+        Axis label -> signal; a (T, k) signal draws k lines labelled by column.
+    title : str, optional
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure
+    """
+    time = np.asarray(time, dtype=float)
+    if time.ndim != 1:
+        raise ValueError(f"time must have shape (T,), got {time.shape}")
+    if not series:
+        raise ValueError("series must name at least one signal")
+    arrays = {}
+    for label, values in series.items():
+        values = np.asarray(values, dtype=float)
+        if values.ndim not in (1, 2) or len(values) != len(time):
+            raise ValueError(
+                f"signal {label!r} must have shape ({len(time)},) or ({len(time)}, k), "
+                f"got {values.shape}"
+            )
+        arrays[label] = values
+    figure = Figure(figsize=(8, 1.8 * len(arrays) + 0.6), layout="constrained")
+    axes_list = np.atleast_1d(figure.subplots(len(arrays), 1, sharex=True))
+    for axes, (label, values) in zip(axes_list, arrays.items(), strict=True):
+        if values.ndim == 1:
+            axes.plot(time, values, linewidth=1.0)
+        else:
+            names = "xyz" if values.shape[1] == 3 else [str(i) for i in range(values.shape[1])]
+            for column, name in zip(values.T, names, strict=True):
+                axes.plot(time, column, linewidth=1.0, label=name)
+            axes.legend(loc="upper right", fontsize="small")
+        axes.set_ylabel(label)
+    axes_list[-1].set_xlabel("time (s)")
+    if title:
+        figure.suptitle(title)
     return figure
