@@ -11,6 +11,11 @@ import numba
 import numpy as np
 
 _NEG_INF = -np.inf
+# Terms more than this many nats below the largest are skipped in a log-sum-exp:
+# together (at most n_durations of them) they change it by less than 1e-19
+# relative, below double precision, and skipping their exp() saves most of
+# the time, since durations far from a state's mean are that unlikely.
+_NEGLIGIBLE = 50.0
 
 
 @numba.njit(cache=True)
@@ -24,7 +29,8 @@ def _logsumexp(values, n):
         return _NEG_INF
     total = 0.0
     for k in range(n):
-        total += np.exp(values[k] - top)
+        if values[k] > top - _NEGLIGIBLE:
+            total += np.exp(values[k] - top)
     return top + np.log(total)
 
 
@@ -75,14 +81,14 @@ def forward(log_emission, log_startprob, log_transmat, log_duration):
 
 
 @numba.njit(cache=True)
-def backward(log_emission, log_transmat, log_duration, log_alpha_in, log_likelihood):
-    """Backward variables and the expected duration counts of one sequence.
+def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, log_likelihood):
+    """Backward variables and the expected transition and duration counts of one sequence.
 
     Parameters
     ----------
     log_emission, log_transmat, log_duration : arrays
         As for :func:`forward`.
-    log_alpha_in : array, shape (T, N)
+    log_alpha, log_alpha_in : arrays, shape (T, N)
         From :func:`forward`.
     log_likelihood : float
         log p(xi_0..T-1), a segment ending at T - 1.
@@ -93,6 +99,8 @@ def backward(log_emission, log_transmat, log_duration, log_alpha_in, log_likelih
         log p(xi_t+1..T-1 | a segment of state i ends at t).
     log_beta_in : array, shape (T, N)
         log p(xi_t..T-1 | a segment of state i starts at t).
+    transition_counts : array, shape (N, N)
+        Posterior expected number of transitions i -> j at [i, j].
     duration_counts : array, shape (N, n_durations)
         Posterior expected number of segments of state i lasting d steps.
     """
@@ -100,16 +108,24 @@ def backward(log_emission, log_transmat, log_duration, log_alpha_in, log_likelih
     n_durations = log_duration.shape[1]
     log_beta = np.empty((n_steps, n_states))
     log_beta_in = np.empty((n_steps, n_states))
+    transition_counts = np.zeros((n_states, n_states))
     duration_counts = np.zeros((n_states, n_durations))
     terms = np.empty(max(n_durations, n_states))
     for s in range(n_steps - 1, -1, -1):
         for i in range(n_states):
             if s == n_steps - 1:
                 log_beta[s, i] = 0.0
-            else:
-                for j in range(n_states):
-                    terms[j] = log_transmat[i, j] + log_beta_in[s + 1, j]
-                log_beta[s, i] = _logsumexp(terms, n_states)
+                continue
+            for j in range(n_states):
+                terms[j] = log_transmat[i, j] + log_beta_in[s + 1, j]
+            log_beta[s, i] = _logsumexp(terms, n_states)
+            if log_beta[s, i] == _NEG_INF:
+                continue
+            # p(segment of i ends at s, one of j starts at s + 1 | all).
+            scale = log_alpha[s, i] - log_likelihood
+            for j in range(n_states):
+                if terms[j] > log_beta[s, i] - _NEGLIGIBLE:
+                    transition_counts[i, j] += np.exp(terms[j] + scale)
         for i in range(n_states):
             n_terms = min(n_durations, n_steps - s)
             segment = 0.0  # log-likelihood of xi_{s..s+d-1} under state i
@@ -125,8 +141,9 @@ def backward(log_emission, log_transmat, log_duration, log_alpha_in, log_likelih
             total = 0.0
             scale = np.exp(top + log_alpha_in[s, i] - log_likelihood)
             for d in range(n_terms):
-                weight = np.exp(terms[d] - top)
-                total += weight
-                duration_counts[i, d] += weight * scale
+                if terms[d] > top - _NEGLIGIBLE:
+                    weight = np.exp(terms[d] - top)
+                    total += weight
+                    duration_counts[i, d] += weight * scale
             log_beta_in[s, i] = top + np.log(total)
-    return log_beta, log_beta_in, duration_counts
+    return log_beta, log_beta_in, transition_counts, duration_counts
