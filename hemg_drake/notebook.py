@@ -1,0 +1,68 @@
+"""Small helpers for the walkthroughs in ``notebooks/``: a scale switch and inline replays.
+
+The test suite executes every notebook with ``HEMG_DRAKE_NOTEBOOK_SCALE=small`` so that each
+runs in seconds; a user who opens one gets the full scale::
+
+    duration = at_scale(full=8.0, small=1.0)
+    HTML(replay_iframe("replay.html"))   # from IPython.display
+"""
+
+import html
+import os
+from pathlib import Path
+
+SCALE_VARIABLE = "HEMG_DRAKE_NOTEBOOK_SCALE"
+SCALES = ("full", "small")
+
+
+def notebook_scale():
+    """The scale the notebooks run at: ``"full"`` (default) or ``"small"``.
+
+    Read from the environment variable ``HEMG_DRAKE_NOTEBOOK_SCALE``.
+
+    Raises
+    ------
+    ValueError
+        The variable holds something other than ``full`` or ``small``.
+    """
+    scale = os.environ.get(SCALE_VARIABLE, "full").strip().lower() or "full"
+    if scale not in SCALES:
+        raise ValueError(f"{SCALE_VARIABLE} must be one of {SCALES}, got {scale!r}")
+    return scale
+
+
+def at_scale(*, full, small):
+    """``small`` when the notebooks run at small scale, else ``full``."""
+    return small if notebook_scale() == "small" else full
+
+
+def replay_iframe(replay, *, height=480):
+    """An ``<iframe>`` showing an HTML replay inline, its page embedded through ``srcdoc``.
+
+    The replay (``ReplayRecorder.stop_and_export``) is self-contained, so the frame needs no
+    server and no network; wrap the result in ``IPython.display.HTML`` to show it.
+
+    Parameters
+    ----------
+    replay : str or Path
+        The replay's HTML file.
+    height : int
+        Frame height in pixels (the width fills the cell).
+
+    Returns
+    -------
+    str
+        The ``<iframe>`` element.
+    """
+    path = Path(replay)
+    if not path.is_file():
+        raise FileNotFoundError(f"replay file not found: {path}")
+    if isinstance(height, bool) or not isinstance(height, int) or height <= 0:
+        raise ValueError(f"height must be a positive number of pixels, got {height!r}")
+    page = path.read_text(encoding="utf-8")
+    if "<html" not in page[:1000].lower():
+        raise ValueError(f"{path}: not an HTML page")
+    return (
+        f'<iframe srcdoc="{html.escape(page, quote=True)}" width="100%" height="{height}" '
+        f'style="border: none"></iframe>'
+    )

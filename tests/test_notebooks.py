@@ -1,0 +1,75 @@
+"""Every notebook in notebooks/ runs headless, top to bottom, at small scale, and is committed
+without outputs.
+
+Each runs in a fresh kernel of this Python (the project's virtualenv) inside a temporary
+working directory, so nothing it writes lands in the repository; the kernel is shut down
+whatever happens, which also stops any Meshcat server it started.
+"""
+
+import os
+import sys
+from pathlib import Path
+
+import nbformat
+import pytest
+from jupyter_client import KernelManager
+from nbclient import NotebookClient
+from nbclient.exceptions import CellExecutionError
+
+from hemg_drake.notebook import SCALE_VARIABLE
+
+NOTEBOOKS_DIR = Path(__file__).resolve().parents[1] / "notebooks"
+NOTEBOOKS = sorted(NOTEBOOKS_DIR.glob("*.ipynb"))
+CELL_TIMEOUT = 180  # s; the whole set takes well under 3 minutes
+# Appended to the executed copy: where the kernel ran, with which settings.
+PROBE = "import os, sys; print(sys.prefix); print(os.environ['{}']); print(os.getcwd())"
+
+
+def test_notebooks_folder_holds_notebooks():
+    assert NOTEBOOKS, f"no notebook found in {NOTEBOOKS_DIR}"
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda path: path.name)
+def test_committed_without_outputs(path):
+    notebook = nbformat.read(path, as_version=4)
+    nbformat.validate(notebook)
+    assert notebook.metadata.kernelspec.name == "python3"
+    for index, cell in enumerate(notebook.cells):
+        if cell.cell_type == "code":
+            assert cell.outputs == [], f"{path.name}: cell {index} has outputs; strip them"
+            assert cell.execution_count is None, f"{path.name}: cell {index} has a count"
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda path: path.name)
+def test_notebook_runs_top_to_bottom(path, tmp_path, monkeypatch):
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    monkeypatch.setenv(SCALE_VARIABLE, "small")
+    notebook = nbformat.read(path, as_version=4)
+    notebook.cells.append(nbformat.v4.new_code_cell(PROBE.format(SCALE_VARIABLE)))
+    before = sorted(NOTEBOOKS_DIR.iterdir())
+    manager = KernelManager(kernel_name="python3")
+    client = NotebookClient(
+        notebook,
+        km=manager,
+        timeout=CELL_TIMEOUT,
+        resources={"metadata": {"path": str(tmp_path)}},
+    )
+    kernel_pid = None
+    try:
+        with client.setup_kernel():
+            kernel_pid = manager.provisioner.pid
+            client.execute()
+    except CellExecutionError as error:
+        pytest.fail(f"{path.name}: a cell failed:\n{error}", pytrace=False)
+    finally:
+        if client.kc is not None:
+            client.kc.stop_channels()
+        if manager.has_kernel:
+            manager.shutdown_kernel(now=True)
+    assert not manager.is_alive()
+    if kernel_pid is not None:
+        with pytest.raises(ProcessLookupError):
+            os.kill(kernel_pid, 0)  # the kernel process, and any server in it, is gone
+    probe = "".join(output.get("text", "") for output in notebook.cells[-1].outputs).split("\n")
+    assert probe[:3] == [sys.prefix, "small", str(tmp_path)]
+    assert sorted(NOTEBOOKS_DIR.iterdir()) == before, "the notebook wrote into notebooks/"
