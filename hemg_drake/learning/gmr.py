@@ -28,9 +28,9 @@ def _whitening(covariances):
 
 
 def _log_pdf_whitened(x, means, inverse_cholesky, log_det):
-    diff = x[:, None, :] - means[None]  # (T, N, D)
-    white = np.einsum("nij,tnj->tni", inverse_cholesky, diff)
-    mahalanobis = np.einsum("tni,tni->tn", white, white)
+    diff = x[:, None, :, None] - means[None, :, :, None]  # (T, N, D, 1)
+    white = inverse_cholesky @ diff
+    mahalanobis = np.square(white).sum(axis=(2, 3))
     return -0.5 * (mahalanobis + log_det + means.shape[1] * np.log(2.0 * np.pi))
 
 

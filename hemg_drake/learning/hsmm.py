@@ -474,7 +474,8 @@ class HSMM:
 
         The residual-duration form of the forward variable (eq. 11 summed over
         the remaining duration), which is what reproduction uses; see
-        :mod:`hemg_drake.learning.reproduce`.
+        :mod:`hemg_drake.learning.reproduce` (a state the model never leaves
+        holds once its segment ends).
 
         Parameters
         ----------

@@ -73,14 +73,17 @@ class ResidualForward:
         predicted_next : array, shape (N, d_max)
         """
         weighted = predicted * np.exp(log_emission - log_emission.max())[:, None]
-        total = weighted.sum()
-        alpha = weighted / total if total > 0 else predicted
-        ends = alpha[:, 0]
-        predicted_next = np.empty_like(alpha)
-        predicted_next[:, :-1] = alpha[:, 1:]
+        h = weighted.sum(axis=1)
+        total = h.sum()
+        if not total > 0:
+            weighted, h = predicted, predicted.sum(axis=1)
+            total = h.sum()
+        # Segments ending now (residual 1) start the next states; the rest count down.
+        predicted_next = np.empty_like(weighted)
+        predicted_next[:, :-1] = weighted[:, 1:]
         predicted_next[:, -1] = 0.0
-        predicted_next += (self.transmat_T @ ends)[:, None] * self.durations
-        return alpha.sum(axis=1), self._normalised(predicted_next)
+        predicted_next += (self.transmat_T @ weighted[:, 0])[:, None] * self.durations
+        return h / total, self._normalised(predicted_next)
 
 
 class HsmmGmrPolicy:
