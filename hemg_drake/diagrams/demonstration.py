@@ -251,14 +251,17 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     seed = int(seed)
     operator_config = scenario.operator
-    plan = scenario.task_plan().perturbed(
+    task_plan = scenario.task_plan()
+    plan = task_plan.perturbed(
         seed,
         timing_std=operator_config.timing_std,
         path_std=operator_config.path_std,
         effort_std=operator_config.effort_std,
     )
     mapping = workspace_mapping(scenario)
-    p_MS_initial = mapping.slave_to_master(plan.points[0])
+    # Arm and stylus start at rest where the task is set up (the unperturbed plan's first
+    # point, e.g. the pin's ring); the operator's own plan varies from there.
+    p_MS_initial = mapping.slave_to_master(task_plan.points[0])
 
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(scenario.plant, builder)
@@ -266,7 +269,7 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
     task_scene = _add_scene(scenario, plant, arm) if scene else None
     plant.Finalize()
     plant.SetDefaultPositions(
-        arm.model_instance, solve_arm_positions(plant, arm, plan.points[0])
+        arm.model_instance, solve_arm_positions(plant, arm, task_plan.points[0])
     )
 
     def add(name, system):

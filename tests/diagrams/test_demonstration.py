@@ -1,0 +1,133 @@
+"""The teleoperated demonstration loop, simulated through Drake at small scale."""
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+
+from hemg_drake.diagrams.demonstration import (
+    build_demonstration_diagram,
+    demonstration_from_log,
+    run_demonstration,
+    workspace_mapping,
+)
+from hemg_drake.scenario import parse_scenario
+
+# Free space: from the tool's home point, 10 cm up-forward-left, then down-back-right.
+FREE_SPACE = """
+task: cotter_pin
+duration: 2.6
+plan:
+  times: [0.3, 1.3, 2.3]
+  points: [[0.64, -0.84, 0.12], [0.70, -0.78, 0.18], [0.61, -0.89, 0.09]]
+  kinds: [free, forceful]
+"""
+
+
+def distance_to_path(points, path):
+    """Distance of each point, shape (n, 3), to the polyline ``path``, shape (m, 3)."""
+    a, b = path[:-1], path[1:]
+    ab = b - a
+    t = np.einsum("nmk,mk->nm", points[:, None] - a, ab) / np.maximum((ab**2).sum(1), 1e-300)
+    closest = a + np.clip(t, 0.0, 1.0)[..., None] * ab
+    return np.linalg.norm(points[:, None] - closest, axis=2).min(axis=1)
+
+
+def simulate(scenario, seed, **kwargs):
+    built = build_demonstration_diagram(scenario, seed=seed, **kwargs)
+    simulator = Simulator(built.diagram)
+    simulator.AdvanceTo(scenario.duration)
+    root = simulator.get_context()
+    demo = demonstration_from_log(built.logger.FindLog(root), seed)
+    return built, demo, built.plant.GetMyContextFromRoot(root)
+
+
+@pytest.fixture(scope="module")
+def free_space():
+    scenario = parse_scenario(FREE_SPACE)
+    return scenario, simulate(scenario, 3, scene=False)[1]
+
+
+def test_free_space_slave_follows_the_mapped_master(free_space):
+    scenario, demo = free_space
+    assert len(demo) == 261 and demo.time[-1] == pytest.approx(2.6)
+    p_WE_desired = workspace_mapping(scenario).master_to_slave(demo.p_MS)
+    travel = np.ptp(p_WE_desired, axis=0)
+    assert np.linalg.norm(travel) > 0.1  # the operator really moved the master
+    # Reached: 5.0 mm at the same instant (the slave lags during the fastest motion, about
+    # 0.3 m/s), 2.4 mm RMS; 4.1 mm from the path itself, lag aside; 0.1 mm once at rest.
+    error = np.linalg.norm(demo.p_WE - p_WE_desired, axis=1)
+    assert error.max() < 0.006 and np.sqrt(np.mean(error**2)) < 0.003
+    assert distance_to_path(demo.p_WE, p_WE_desired).max() < 0.005
+    assert error[demo.time > 2.4].max() < 0.0005
+    # v_WE agrees with the logged positions' central differences (an independent check).
+    dt = np.diff(demo.time)[0]
+    v_numeric = (demo.p_WE[2:] - demo.p_WE[:-2]) / (2 * dt)
+    assert np.abs(v_numeric - demo.v_WE[1:-1]).max() < 0.02
+    assert np.abs(demo.v_WE).max() > 0.1
+    # Free space: nothing pushes on the tool.
+    assert not np.any(demo.f_WE)
+
+
+def test_gain_follows_the_operators_effort(free_space):
+    scenario, demo = free_space
+    plan = scenario.task_plan()
+    assert demo.gain.min() >= scenario.emg.k_min and demo.gain.max() <= scenario.emg.k_max
+    free = (demo.time > 0.3) & (demo.time < 1.3)
+    forceful = (demo.time > 1.5) & (demo.time < 2.3)
+    assert plan.kinds == ("free", "forceful")
+    assert demo.gain[forceful].mean() > 1.5 * demo.gain[free].mean()
+    assert demo.activation[forceful].mean() > demo.activation[free].mean()
+    # The envelope and the gain rise and fall together (eq. 22 is monotone).
+    assert np.corrcoef(demo.envelope, demo.gain)[0, 1] > 0.8
+
+
+def test_same_seed_same_demonstration_bitwise():
+    scenario = parse_scenario(FREE_SPACE.replace("duration: 2.6", "duration: 0.8"))
+    first = run_demonstration(scenario, 11, scene=False)
+    again = run_demonstration(scenario, 11, scene=False)
+    other = run_demonstration(scenario, 12, scene=False)
+    for name in ("time", "p_WE", "v_WE", "p_MS", "envelope", "activation", "gain", "f_WE"):
+        assert getattr(first, name).tobytes() == getattr(again, name).tobytes(), name
+    assert not np.array_equal(first.envelope, other.envelope)
+    assert not np.array_equal(first.p_MS, other.p_MS)
+
+
+def test_diagram_structure_and_bad_input():
+    scenario = parse_scenario(FREE_SPACE)
+    built = build_demonstration_diagram(scenario, seed=0, scene=False)
+    for name in (
+        "plant", "scene_graph", "operator", "master", "workspace_map", "clik", "pd",
+        "emg_source", "envelope", "variable_gain", "gain_hold", "force_feedback",
+        "tool_point", "logger",
+    ):
+        assert built.diagram.HasSubsystemNamed(name), name
+    assert built.scene is None
+    assert not np.array_equal(built.plan.points, scenario.task_plan().points)
+    with pytest.raises(ValueError, match="seed"):
+        build_demonstration_diagram(scenario, seed=-1, scene=False)
+    far = parse_scenario(FREE_SPACE.replace("[0.64, -0.84, 0.12]", "[2.5, 0.0, 0.0]"))
+    with pytest.raises(ValueError, match="out of the arm's reach"):
+        build_demonstration_diagram(far, seed=0, scene=False)
+
+
+PIN = "task: cotter_pin\nduration: 3.0\nmapping: {offset: [0.642, -0.837, 0.17]}\nfeedback: {gain: 0.2}\n"
+
+
+def test_cotter_pin_comes_out_with_the_emg_gain():
+    scenario = parse_scenario(PIN)
+    built, demo, plant_context = simulate(scenario, 1)
+    assert built.scene.pin_out(plant_context)
+    # The operator tensed up to pull: the gain peaks high, and the pin resisted (felt force).
+    assert demo.gain.max() > 100
+    assert demo.f_WE[:, 2].min() < -20
+
+
+def test_cotter_pin_stays_in_with_a_constant_low_gain():
+    # k_max barely above k_min: the gain is 10 whatever the muscles do.
+    scenario = parse_scenario(PIN + "emg: {k_min: 10.0, k_max: 10.01}\n")
+    built, demo, plant_context = simulate(scenario, 1)
+    assert np.ptp(demo.gain) <= 0.01
+    assert not built.scene.pin_out(plant_context)
+    assert built.scene.pin_displacement(plant_context) < 0.005
+    # The operator did ask for the pull: the master went up by the plan's travel.
+    assert np.ptp(workspace_mapping(scenario).master_to_slave(demo.p_MS)[:, 2]) > 0.04
