@@ -1,0 +1,360 @@
+"""The cotter-pin task (the paper's Fig. 7-8): a pin held by a detent, pulled out by the slave.
+
+Scene (``models/cotter_pin.sdf``, primitives only): a fixture block on a stand in front of
+the robot and a pin with a pull ring on a prismatic joint ``pin_slide`` along the **pull
+axis, world +z** (up). Joint position x = withdrawal: 0 = in, ``pin_length`` (0.05 m) = out
+(success), a stop 0.10 m further so the pulled pin can be lifted clear on its rail.
+
+What holds the pin (all along the joint, nothing collides):
+
+- a **detent**, :class:`PinResistance` (numpy twin :func:`detent_force`): a spring of
+  ``detent_stiffness`` towards x = 0 saturated at ``hold_force``, acting while
+  x < ``detent_length`` (3 mm); past it the pin is free of the detent. A pull below
+  ``hold_force`` only moves the pin by pull / ``detent_stiffness`` (about 1 mm); a pull above
+  it pops the pin out. A position-only force: no stiction threshold to regularise, so it is
+  deterministic and stable at a 1 ms step.
+- **sliding friction**, viscous: the joint's damping ``sliding_damping``, which Drake's
+  discrete solver integrates implicitly. (A Coulomb term would need a velocity
+  regularisation stiff enough to chatter at 1 ms on a 0.1 kg pin.)
+
+The **grasp** is a ``LinearBushingRollPitchYaw`` from the pin's ``ring`` frame (A) to the
+arm's tool frame (C), attached from the start: translational stiffness ``grasp_stiffness``
+and damping ``grasp_damping`` on all three axes, no torsional stiffness or damping (a ring
+on a hook turns freely). Why a bushing: it is Drake's own force element, needs no port of
+the plant, and its force is read back exactly (:class:`~hemg_drake.tasks.sensors.
+BushingForceSensor`); the task never releases the ring, so a switchable spring would add a
+port and a mode for nothing. The interaction force ``f_WE`` is the bushing's force on the
+tool in W: pointing down (-z) while the slave pulls on a pin that holds.
+
+Tuning with :class:`~hemg_drake.control.pd.VariableGainPd` (default per-joint scale), CLIK
+following :func:`default_cotter_pin_plan` (0.10 m of travel): measured peak pulls are 17 N
+at K = 5 and 31 N at K = 10, which leave the pin in (``hold_force`` = 50 N), while K = 20
+and above (the EMG chain gives K = 10 at rest, 100 at full contraction) pull it out;
+``docs/tasks.md`` lists the runs.
+"""
+
+import dataclasses as dc
+import functools
+
+import numpy as np
+from pydrake.math import RigidTransform
+from pydrake.multibody.tree import LinearBushingRollPitchYaw
+from pydrake.systems.framework import LeafSystem
+
+from hemg_drake.robots.baxter import MODELS_DIR, make_parser
+from hemg_drake.tasks.plan import TaskPlan
+from hemg_drake.tasks.sensors import BushingForceSensor
+from hemg_drake.teleop._validate import as_scalar, as_vector
+
+COTTER_PIN_MODEL = MODELS_DIR / "cotter_pin.sdf"
+# The pin slides out along world +z (the model's z, welded without rotation).
+PULL_AXIS_W = np.array([0.0, 0.0, 1.0])
+# The tool point p_WE at BaxterArm.home_positions, to the millimetre: where the ring waits.
+HOME_TOOL_POINT = (0.642, -0.837, 0.120)
+# Largest omega * dt of the pin on its springs (detent + grasp) at the plant's time step:
+# explicit springs on a light body are stable for omega * dt < 2; keep a wide margin.
+_MAX_OMEGA_DT = 0.8
+
+
+@dc.dataclass
+class CotterPinParams:
+    """Placement and physics of the cotter-pin scene (SI units); loadable from YAML.
+
+    Every field is checked by :meth:`check` (also called by :func:`add_cotter_pin_scene` and
+    :func:`default_cotter_pin_plan`), which raises ValueError naming the field.
+    """
+
+    # Centre of the pin's ring (the grasp point) with the pin fully in, world frame (m).
+    ring_position: np.ndarray = dc.field(default_factory=lambda: np.array(HOME_TOOL_POINT))
+    # Largest force (N) with which the detent holds the pin in.
+    hold_force: float = 50.0
+    # Withdrawal (m) over which the detent acts; beyond it only sliding friction remains.
+    detent_length: float = 0.003
+    # Stiffness (N/m) of the detent spring until it saturates at hold_force.
+    detent_stiffness: float = 3.0e4
+    # Viscous sliding friction of the pin (N s/m): the joint's damping.
+    sliding_damping: float = 20.0
+    # Grasp bushing, translational stiffness (N/m) and damping (N s/m) on each axis.
+    grasp_stiffness: float = 5000.0
+    grasp_damping: float = 40.0
+
+    def __post_init__(self):
+        self.check()
+
+    def check(self):
+        """Raise ValueError naming the first bad field; return self."""
+        name = type(self).__name__
+        self.ring_position = as_vector(f"{name}.ring_position", self.ring_position, 3)
+        for field in ("hold_force", "detent_length", "detent_stiffness", "grasp_stiffness"):
+            as_scalar(f"{name}.{field}", getattr(self, field))
+        for field in ("sliding_damping", "grasp_damping"):
+            as_scalar(f"{name}.{field}", getattr(self, field), strict=False)
+        if self.detent_length >= pin_length():
+            raise ValueError(
+                f"{name}.detent_length must be shorter than the pin ({pin_length()} m), "
+                f"got {self.detent_length}"
+            )
+        return self
+
+
+@functools.cache
+def _pin_model_geometry():
+    """(pin length, ring offset above the hole's mouth) read from the model file (m)."""
+    from pydrake.multibody.plant import MultibodyPlant
+
+    plant = MultibodyPlant(0.0)
+    (model,) = make_parser(plant).AddModels(str(COTTER_PIN_MODEL))
+    tip = plant.GetFrameByName("pin_tip", model).GetFixedPoseInBodyFrame().translation()
+    ring = plant.GetFrameByName("ring", model).GetFixedPoseInBodyFrame().translation()
+    return float(-tip[2]), ring.copy()
+
+
+def pin_length():
+    """Depth (m) the pin must rise to be out: its frame (at the hole's mouth) to ``pin_tip``."""
+    return _pin_model_geometry()[0]
+
+
+def detent_force(x, *, hold_force, detent_length, detent_stiffness):
+    """Force of the detent along the pull axis (N) at withdrawal ``x`` (m); twin of the system.
+
+    -clip(detent_stiffness * x, -hold_force, hold_force) for x < detent_length, else 0: a
+    spring back to x = 0 that gives at most ``hold_force``, and lets go past the detent.
+
+    Parameters
+    ----------
+    x : float or array, pin withdrawal (m).
+
+    Returns
+    -------
+    float or array shaped like ``x``, N (negative: pushes the pin in).
+    """
+    x = np.asarray(x, dtype=float)
+    spring = -np.clip(detent_stiffness * x, -hold_force, hold_force)
+    return np.where(x < detent_length, spring, 0.0)[()]
+
+
+class PinResistance(LeafSystem):
+    """The detent that holds the cotter pin, as a generalized force on its joint.
+
+    .. pydrake_system::
+
+        name: PinResistance
+        input_ports:
+        - pin_state
+        output_ports:
+        - generalized_force
+
+    ``pin_state`` is the pin model instance's [x; xdot] (m, m/s; connect
+    ``plant.get_state_output_port(pin_model)``). ``generalized_force`` has the size of the
+    plant's velocities (connect ``plant.get_applied_generalized_force_input_port()``): zero
+    except on the pin joint, where it is :func:`detent_force` (N along the pull axis). The
+    sliding friction is the joint's own damping, not this system's.
+
+    Timing: stateless, direct feedthrough of the state; the discrete plant samples it once
+    per step, so the detent spring is explicit (see ``CotterPinParams`` on its stability).
+    """
+
+    def __init__(self, *, plant, pin_joint, hold_force, detent_length, detent_stiffness):
+        """
+        Parameters
+        ----------
+        plant : MultibodyPlant, finalized.
+        pin_joint : PrismaticJoint, the pin's slide.
+        hold_force, detent_length, detent_stiffness : float, N, m, N/m (see
+            :class:`CotterPinParams`).
+        """
+        LeafSystem.__init__(self)
+        self._law = dict(
+            hold_force=as_scalar("hold_force", hold_force),
+            detent_length=as_scalar("detent_length", detent_length),
+            detent_stiffness=as_scalar("detent_stiffness", detent_stiffness),
+        )
+        self._num_velocities = plant.num_velocities()
+        self._index = pin_joint.velocity_start()
+        self.pin_state_input = self.DeclareVectorInputPort("pin_state", 2)
+        self.generalized_force_output = self.DeclareVectorOutputPort(
+            "generalized_force", self._num_velocities, self._calc_generalized_force
+        )
+
+    def _calc_generalized_force(self, context, output):
+        tau = np.zeros(self._num_velocities)
+        tau[self._index] = detent_force(self.pin_state_input.Eval(context)[0], **self._law)
+        output.SetFromVector(tau)
+
+
+@dc.dataclass(frozen=True, eq=False)
+class CotterPinScene:
+    """Handles to the cotter-pin scene in a plant, from :func:`add_cotter_pin_scene`.
+
+    Attributes
+    ----------
+    plant : MultibodyPlant
+    model_instance : ModelInstanceIndex, the fixture and pin.
+    pin_joint : PrismaticJoint, ``pin_slide``: position = withdrawal (m) along the pull axis.
+    ring_frame : Frame, the ring's centre on the pin (the grasp point).
+    bushing : LinearBushingRollPitchYaw, the grasp (frame A = ring, frame C = tool).
+    pull_axis_W : array, shape (3,), unit vector, world +z.
+    pin_length : float, m; the pin is out once withdrawn this far.
+    hold_force : float, N, the detent's largest holding force.
+    params : CotterPinParams
+    """
+
+    plant: object
+    model_instance: object
+    pin_joint: object
+    ring_frame: object
+    bushing: object
+    pull_axis_W: np.ndarray
+    pin_length: float
+    hold_force: float
+    params: CotterPinParams
+
+    def pin_displacement(self, plant_context):
+        """Withdrawal of the pin (m) in a context of the plant."""
+        return float(self.pin_joint.get_translation(plant_context))
+
+    def pin_out(self, plant_context):
+        """Success: the pin has been withdrawn by at least its length."""
+        return self.pin_displacement(plant_context) >= self.pin_length
+
+    def add_systems(self, builder):
+        """Add the detent and the force sensor to ``builder`` (once; later calls reuse them).
+
+        Connects :class:`PinResistance` to the plant's applied generalized force input, which
+        it then occupies (sum other generalized forces into it with an ``Adder``). Call after
+        ``plant.Finalize()``.
+
+        Returns
+        -------
+        (PinResistance, BushingForceSensor), named ``cotter_pin_detent`` and
+        ``cotter_pin_force`` in the builder.
+        """
+        names = ("cotter_pin_detent", "cotter_pin_force")
+        if builder.HasSubsystemNamed(names[0]):
+            return tuple(builder.GetSubsystemByName(name) for name in names)
+        plant = self.plant
+        detent = builder.AddNamedSystem(
+            names[0],
+            PinResistance(
+                plant=plant,
+                pin_joint=self.pin_joint,
+                hold_force=self.params.hold_force,
+                detent_length=self.params.detent_length,
+                detent_stiffness=self.params.detent_stiffness,
+            ),
+        )
+        builder.Connect(plant.get_state_output_port(self.model_instance), detent.pin_state_input)
+        builder.Connect(
+            detent.generalized_force_output, plant.get_applied_generalized_force_input_port()
+        )
+        sensor = builder.AddNamedSystem(
+            names[1], BushingForceSensor(plant=plant, bushing=self.bushing)
+        )
+        builder.Connect(plant.get_state_output_port(), sensor.state_input)
+        return detent, sensor
+
+    def force_output_port(self, builder):
+        """The interaction force ``f_WE`` (3, N, in W) on the tool; adds the systems if needed."""
+        return self.add_systems(builder)[1].f_WE_output
+
+
+def add_cotter_pin_scene(plant, arm, *, params=None):
+    """Add the fixture, the pin and the grasp of its ring by the arm's tool to ``plant``.
+
+    Call before ``plant.Finalize()``; after it, :meth:`CotterPinScene.add_systems` (or
+    :meth:`~CotterPinScene.force_output_port`) wires the detent and the force sensor.
+
+    Parameters
+    ----------
+    plant : MultibodyPlant, not finalized, discrete (the detent is checked against its step).
+    arm : BaxterArm, from ``add_baxter_arm``; its ``tool_frame`` grasps the ring.
+    params : CotterPinParams, optional (default ``CotterPinParams()``).
+
+    Returns
+    -------
+    CotterPinScene
+
+    Raises
+    ------
+    ValueError
+        Bad parameters (naming the field), a finalized or continuous plant, or springs too
+        stiff for the plant's time step.
+    """
+    params = (CotterPinParams() if params is None else params).check()
+    if plant.is_finalized():
+        raise ValueError("add_cotter_pin_scene must be called before plant.Finalize()")
+    dt = plant.time_step()
+    if not dt > 0:
+        raise ValueError("the cotter-pin scene needs a discrete plant (time_step > 0)")
+    (model,) = make_parser(plant).AddModels(str(COTTER_PIN_MODEL))
+    pin_joint = plant.GetJointByName("pin_slide", model)
+    pin_joint.set_default_damping(params.sliding_damping)
+    ring_frame = plant.GetFrameByName("ring", model)
+    pin_mass = plant.GetBodyByName("pin", model).default_mass()
+    omega_dt = np.sqrt((params.detent_stiffness + params.grasp_stiffness) / pin_mass) * dt
+    if omega_dt > _MAX_OMEGA_DT:
+        raise ValueError(
+            f"CotterPinParams.detent_stiffness + grasp_stiffness = "
+            f"{params.detent_stiffness + params.grasp_stiffness} N/m is too stiff for the "
+            f"{pin_mass} kg pin at time_step {dt} s (omega*dt = {omega_dt:.2f} > {_MAX_OMEGA_DT})"
+        )
+    # The ring's offset above the fixture frame (the hole's mouth) is the model's.
+    p_FR = _pin_model_geometry()[1]
+    plant.WeldFrames(
+        plant.world_frame(),
+        plant.GetFrameByName("fixture", model),
+        RigidTransform(params.ring_position - p_FR),
+    )
+    bushing = plant.AddForceElement(
+        LinearBushingRollPitchYaw(
+            ring_frame,
+            arm.tool_frame,
+            np.zeros(3),
+            np.zeros(3),
+            np.full(3, params.grasp_stiffness),
+            np.full(3, params.grasp_damping),
+        )
+    )
+    return CotterPinScene(
+        plant=plant,
+        model_instance=model,
+        pin_joint=pin_joint,
+        ring_frame=ring_frame,
+        bushing=bushing,
+        pull_axis_W=PULL_AXIS_W.copy(),
+        pin_length=pin_length(),
+        hold_force=params.hold_force,
+        params=params,
+    )
+
+
+def default_cotter_pin_plan(params=None, *, margin=0.015, carry=0.035):
+    """The pulling task in the paper's N = 4 phases, as timed tool-point waypoints in W.
+
+    1. hold (0-0.5 s, free): the tool waits at the ring;
+    2. pull (0.5-2.0 s, forceful): up the pull axis by ``pin_length + margin``;
+    3. carry away (2.0-3.0 s, free): a further ``carry`` along the axis, clear of the fixture;
+    4. settle (3.0-3.5 s, free): hold still.
+
+    The whole travel (0.10 m by default) stays inside the master's mapped workspace.
+
+    Parameters
+    ----------
+    params : CotterPinParams, optional; its ``ring_position`` is the first waypoint.
+    margin, carry : float, m, >= 0.
+
+    Returns
+    -------
+    TaskPlan
+    """
+    params = (CotterPinParams() if params is None else params).check()
+    margin = as_scalar("margin", margin, strict=False)
+    carry = as_scalar("carry", carry, strict=False)
+    pulled = pin_length() + margin
+    p_WR = params.ring_position
+    rises = np.array([0.0, 0.0, pulled, pulled + carry, pulled + carry])
+    return TaskPlan(
+        times=np.array([0.0, 0.5, 2.0, 3.0, 3.5]),
+        points=p_WR + rises[:, None] * PULL_AXIS_W,
+        kinds=("free", "forceful", "free", "free"),
+    )

@@ -1,0 +1,289 @@
+"""The drawing task (the paper's Fig. 9-11): a pen on the slave draws three strokes on an A4 sheet.
+
+Scene (``models/drawing.sdf``, primitives only): a table in front of the robot with an A4
+sheet (210 mm along world x, 297 mm along y) whose top surface centre is
+``DrawingParams.paper_center``. :func:`add_drawing_scene` also gives the arm a **pen**: a
+collision sphere of radius ``pen_radius`` on ``right_hand`` whose lowest point is the
+``right_tool`` point (so the tool point E, which CLIK drives, is the pen's tip P), and a
+green visual body along the hand's z axis.
+
+Contact (pen tip on paper): compliant point contact, solved by the plant's discrete SAP
+solver (1 ms, Drake's default ``lagged`` approximation, which uses Hunt-Crossley
+dissipation). The sheet is nearly rigid (1e6 N/m, in the model file); Drake combines point
+stiffnesses in series, so the contact's stiffness is close to the pen's ``pen_stiffness``
+(1e4 N/m: 1 N presses the tip 0.1 mm) and its dissipation the pen's ``pen_dissipation``
+(s/m); Coulomb friction ``pen_friction`` (0.2 on both, a felt tip on paper). The hydroelastic
+model is not used: neither geometry has hydroelastic properties, so the plant's default
+``hydroelastic_with_fallback`` falls back to point contact.
+
+:func:`default_drawing_plan` draws a line, an arc and a zig-zag with pen lifts between them,
+the six steps I-VI of Fig. 10 (see :func:`drawing_steps`); pen-down segments put the tip
+``press_depth`` below the paper so that the pen presses. The pen's contact force is
+``f_WE`` of a :class:`~hemg_drake.tasks.sensors.ContactForceSensor` on the hand.
+"""
+
+import dataclasses as dc
+
+import numpy as np
+from pydrake.geometry import AddContactMaterial, Cylinder, ProximityProperties, Sphere
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import CoulombFriction
+
+from hemg_drake.robots.baxter import MODELS_DIR, make_parser
+from hemg_drake.tasks.plan import TaskPlan
+from hemg_drake.tasks.sensors import ContactForceSensor
+from hemg_drake.teleop._validate import as_scalar, as_vector
+
+DRAWING_MODEL = MODELS_DIR / "drawing.sdf"
+# A4, as in the model file: (x, y) extent of the sheet (m).
+SHEET_SIZE = (0.210, 0.297)
+# The tool point at BaxterArm.home_positions (m), 3 cm above the default sheet: the plan
+# starts (and ends) here, so a run can start from the arm's home pose.
+HOME_TOOL_POINT = (0.642, -0.837, 0.120)
+_PEN_GREEN = (0.1, 0.6, 0.25, 1.0)
+
+
+@dc.dataclass
+class DrawingParams:
+    """Placement of the sheet, the pen and its contact (SI units); loadable from YAML.
+
+    Every field is checked by :meth:`check` (also called by :func:`add_drawing_scene` and
+    :func:`default_drawing_plan`), which raises ValueError naming the field.
+    """
+
+    # Centre of the sheet's top surface in the world (m).
+    paper_center: np.ndarray = dc.field(default_factory=lambda: np.array([0.64, -0.84, 0.09]))
+    # Radius of the pen's spherical tip (m).
+    pen_radius: float = 0.003
+    # Point-contact stiffness (N/m), Hunt-Crossley dissipation (s/m), friction of the tip.
+    pen_stiffness: float = 1.0e4
+    pen_dissipation: float = 10.0
+    pen_friction: float = 0.2
+    # Plan: depth of the planned tip below the paper while drawing (m), and height of the
+    # pen lifts above it (m).
+    press_depth: float = 0.003
+    hover_height: float = 0.03
+
+    def __post_init__(self):
+        self.check()
+
+    def check(self):
+        """Raise ValueError naming the first bad field; return self."""
+        name = type(self).__name__
+        self.paper_center = as_vector(f"{name}.paper_center", self.paper_center, 3)
+        for field in ("pen_radius", "pen_stiffness", "press_depth", "hover_height"):
+            as_scalar(f"{name}.{field}", getattr(self, field))
+        for field in ("pen_dissipation", "pen_friction"):
+            as_scalar(f"{name}.{field}", getattr(self, field), strict=False)
+        if self.press_depth >= self.hover_height:
+            raise ValueError(
+                f"{name}.press_depth ({self.press_depth}) must be less than hover_height "
+                f"({self.hover_height})"
+            )
+        return self
+
+
+@dc.dataclass(frozen=True, eq=False)
+class DrawingScene:
+    """Handles to the drawing scene in a plant, from :func:`add_drawing_scene`.
+
+    Attributes
+    ----------
+    plant : MultibodyPlant
+    model_instance : ModelInstanceIndex, the table and sheet.
+    pen_body : Body, the arm's ``right_hand``, which carries the pen.
+    pen_tip_frame : Frame, the arm's tool frame: its origin is the pen's tip P.
+    paper_center : array, shape (3,), centre of the sheet's top surface in W (m).
+    sheet_size : (float, float), the sheet's x and y extent (m).
+    params : DrawingParams
+    """
+
+    plant: object
+    model_instance: object
+    pen_body: object
+    pen_tip_frame: object
+    paper_center: np.ndarray
+    sheet_size: tuple
+    params: DrawingParams
+
+    @property
+    def paper_height(self):
+        """z of the sheet's top surface in W (m)."""
+        return float(self.paper_center[2])
+
+    def add_systems(self, builder):
+        """Add the pen's :class:`ContactForceSensor` to ``builder`` (once; later calls reuse it).
+
+        Call after ``plant.Finalize()``. Returns the sensor, named ``pen_force``.
+        """
+        if builder.HasSubsystemNamed("pen_force"):
+            return builder.GetSubsystemByName("pen_force")
+        sensor = builder.AddNamedSystem(
+            "pen_force", ContactForceSensor(plant=self.plant, body=self.pen_body)
+        )
+        builder.Connect(self.plant.get_contact_results_output_port(), sensor.contact_results_input)
+        return sensor
+
+    def force_output_port(self, builder):
+        """The paper's force ``f_WE`` on the pen (3, N, in W); adds the sensor if needed."""
+        return self.add_systems(builder).f_WE_output
+
+
+def add_drawing_scene(plant, arm, *, params=None):
+    """Add the table with its A4 sheet, and the pen on the arm's hand, to ``plant``.
+
+    Call before ``plant.Finalize()``. The plant must be discrete (the contact parameters are
+    chosen for a 1 ms SAP step) and registered with a ``SceneGraph``.
+
+    Parameters
+    ----------
+    plant : MultibodyPlant, not finalized.
+    arm : BaxterArm; the pen goes on ``hand_frame``'s body, its tip at ``tool_frame``.
+    params : DrawingParams, optional (default ``DrawingParams()``).
+
+    Returns
+    -------
+    DrawingScene
+
+    Raises
+    ------
+    ValueError
+        Bad parameters (naming the field), a finalized or continuous plant, or a plant
+        without a SceneGraph.
+    """
+    params = (DrawingParams() if params is None else params).check()
+    if plant.is_finalized():
+        raise ValueError("add_drawing_scene must be called before plant.Finalize()")
+    if not plant.time_step() > 0:
+        raise ValueError("the drawing scene needs a discrete plant (time_step > 0)")
+    if not plant.geometry_source_is_registered():
+        raise ValueError("the drawing scene needs a plant registered with a SceneGraph")
+    (model,) = make_parser(plant).AddModels(str(DRAWING_MODEL))
+    plant.WeldFrames(
+        plant.world_frame(),
+        plant.GetFrameByName("table", model),
+        RigidTransform(params.paper_center),
+    )
+    _add_pen(plant, arm, params)
+    return DrawingScene(
+        plant=plant,
+        model_instance=model,
+        pen_body=arm.hand_frame.body(),
+        pen_tip_frame=arm.tool_frame,
+        paper_center=params.paper_center.copy(),
+        sheet_size=SHEET_SIZE,
+        params=params,
+    )
+
+
+def _add_pen(plant, arm, params):
+    """Tip sphere (collision and visual) ending at the tool point, and a pen body (visual)."""
+    hand = arm.hand_frame.body()
+    radius = params.pen_radius
+    # The tool frame E's z points out of the hand: the sphere's centre sits r behind E.
+    X_BE = arm.tool_frame.GetFixedPoseInBodyFrame()
+    X_BTip = X_BE @ RigidTransform([0.0, 0.0, -radius])
+    properties = ProximityProperties()
+    AddContactMaterial(
+        dissipation=params.pen_dissipation,
+        point_stiffness=params.pen_stiffness,
+        friction=CoulombFriction(params.pen_friction, params.pen_friction),
+        properties=properties,
+    )
+    plant.RegisterCollisionGeometry(hand, X_BTip, Sphere(radius), "pen_tip", properties)
+    plant.RegisterVisualGeometry(hand, X_BTip, Sphere(radius), "pen_tip", np.array(_PEN_GREEN))
+    # The barrel, thicker than the model's stub, from 7 cm behind the tip to just above it.
+    length = 0.07
+    plant.RegisterVisualGeometry(
+        hand,
+        X_BE @ RigidTransform([0.0, 0.0, -2.0 * radius - 0.5 * length]),
+        Cylinder(0.0095, length),
+        "pen_barrel",
+        np.array(_PEN_GREEN),
+    )
+
+
+def _stroke_shapes():
+    """The three strokes as (k, 2) arrays of sheet coordinates (m) from the sheet's centre."""
+    line = np.array([[-0.05, -0.09], [0.06, -0.09]])
+    angle = np.linspace(-0.5 * np.pi, 0.5 * np.pi, 7)
+    arc = np.column_stack([0.005 + 0.045 * np.cos(angle), -0.01 + 0.045 * np.sin(angle)])
+    zigzag = np.column_stack([[-0.02, 0.02, -0.02, 0.02, -0.02], np.linspace(0.05, 0.11, 5)])
+    return line, arc, zigzag
+
+
+# Durations (s): of one pen-down chord per stroke, and of the moves around the strokes.
+_CHORD_TIME = (1.2, 0.3, 0.4)
+_PRESS_TIME = 0.3
+_LIFT_TIME = 0.4
+_TRAVEL_TIME = 0.7
+# Pen-down segments start and end this high above the paper (m): the arm's lag and
+# overshoot at the end of a free move stay clear of the paper.
+_CLEARANCE = 0.005
+
+
+def default_drawing_plan(params=None):
+    """Three strokes with pen lifts between them: the paper's six steps I-VI (Fig. 10).
+
+    I stroke 1, a 11 cm line; II lift and move; III stroke 2, a 14 cm half circle (six
+    chords); IV lift and move; V stroke 3, a 17 cm zig-zag; VI lift and back home. The plan
+    starts and ends at ``HOME_TOOL_POINT`` above the sheet. Around each stroke: descend
+    (free) to 5 mm above the paper, press (pen down) to ``press_depth`` below it, draw (pen
+    down, one segment per chord), release (pen down) to 5 mm above, lift (free) to
+    ``hover_height``. Pen-down segments are forceful; the others free. About 10.5 s.
+
+    Parameters
+    ----------
+    params : DrawingParams, optional; the sheet's placement and the plan's heights.
+
+    Returns
+    -------
+    TaskPlan
+    """
+    params = (DrawingParams() if params is None else params).check()
+    center = params.paper_center
+    hover = center[2] + params.hover_height
+    touch = center[2] + _CLEARANCE
+    press = center[2] - params.press_depth
+    points, durations, pen_down = [np.array(HOME_TOOL_POINT)], [], []
+
+    def go(point, duration, down):
+        points.append(np.asarray(point, dtype=float))
+        durations.append(duration)
+        pen_down.append(down)
+
+    for shape, chord_time in zip(_stroke_shapes(), _CHORD_TIME):
+        xy = center[:2] + shape
+        go([*xy[0], hover], _TRAVEL_TIME, False)
+        go([*xy[0], touch], _LIFT_TIME, False)
+        go([*xy[0], press], _PRESS_TIME, True)
+        for corner in xy[1:]:
+            go([*corner, press], chord_time, True)
+        go([*xy[-1], touch], _PRESS_TIME, True)
+        go([*xy[-1], hover], _LIFT_TIME, False)
+    go(HOME_TOOL_POINT, _TRAVEL_TIME, False)
+    times = np.concatenate([[0.0], np.cumsum(durations)])
+    kinds = tuple("forceful" if down else "free" for down in pen_down)
+    return TaskPlan(times=times, points=np.array(points), kinds=kinds, pen_down=tuple(pen_down))
+
+
+def drawing_steps(plan):
+    """Boundaries of the six steps I-VI of a drawing plan (s), shape (7,).
+
+    Step I runs from the plan's start to the end of the first pen-down stretch (stroke 1),
+    II from there to the start of the second stretch, and so on; VI from the end of the third
+    stroke to the plan's end. Works on perturbed plans (it reads ``pen_down``).
+
+    Raises
+    ------
+    ValueError
+        The plan does not have exactly three pen-down stretches.
+    """
+    down = np.asarray(plan.pen_down, dtype=int)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], down, [0]])))
+    if edges.size != 6:
+        raise ValueError(
+            f"a drawing plan needs exactly 3 pen-down stretches, got {edges.size // 2}"
+        )
+    starts, ends = plan.times[edges[0::2]], plan.times[edges[1::2]]
+    return np.array([plan.start_time, ends[0], starts[1], ends[1], starts[2], ends[2], plan.end_time])

@@ -1,0 +1,157 @@
+"""Ink: where the pen touched the paper, as stroke polylines and as traces in a Meshcat replay.
+
+The trace comes from a log of the pen tip P and its contact force, sampled together (the
+demonstration's logger records ``p_WE`` and ``f_WE`` every 0.01 s; in the drawing scene the
+tool point E is the pen's tip)::
+
+    touching = in_contact(f_WP)                           # |f| above a threshold
+    strokes = ink_strokes(times, p_WP, touching)          # list of (k, 3) polylines
+    add_ink_to_recording(recorder.meshcat, times, p_WP, touching, height=paper_z + 5e-4)
+
+:func:`add_ink_to_recording` must run while the visualizer's recording is still open (after
+the simulation, before ``ReplayRecorder.stop_and_export``): Meshcat cannot record
+``SetObject`` mid-animation (Drake issue 23206), so every piece of ink is created at once,
+hidden at time 0 and made visible at the time it was drawn.
+"""
+
+import numpy as np
+from pydrake.geometry import Rgba
+
+# A contact force above this (N) leaves ink: well above the solver's numerical noise, well
+# below a pen's writing force (about 1-5 N).
+CONTACT_THRESHOLD = 0.05
+INK_RGBA = Rgba(0.05, 0.45, 0.15, 1.0)
+
+
+def in_contact(f_WP, threshold=CONTACT_THRESHOLD):
+    """Whether each sample's contact force exceeds ``threshold`` (N).
+
+    Parameters
+    ----------
+    f_WP : array, shape (n, 3), N.
+
+    Returns
+    -------
+    array of bool, shape (n,).
+    """
+    f_WP = np.asarray(f_WP, dtype=float)
+    if f_WP.ndim != 2 or f_WP.shape[1] != 3:
+        raise ValueError(f"f_WP must have shape (n, 3), got {f_WP.shape}")
+    if not np.all(np.isfinite(f_WP)):
+        raise ValueError("f_WP contains NaN or inf")
+    if not (np.isfinite(threshold) and threshold >= 0):
+        raise ValueError(f"threshold must be finite and >= 0, got {threshold}")
+    return np.linalg.norm(f_WP, axis=1) > threshold
+
+
+def _checked(times, p_WP, touching):
+    times = np.asarray(times, dtype=float)
+    p_WP = np.asarray(p_WP, dtype=float)
+    touching = np.asarray(touching)
+    n = times.shape[0] if times.ndim == 1 else -1
+    if n < 0:
+        raise ValueError(f"times must have shape (n,), got {times.shape}")
+    if p_WP.shape != (n, 3):
+        raise ValueError(f"p_WP must have shape ({n}, 3) (one point per time), got {p_WP.shape}")
+    if touching.shape != (n,) or touching.dtype != bool:
+        raise ValueError(
+            f"in_contact must be {n} booleans (one per time), got {touching.dtype} "
+            f"of shape {touching.shape}"
+        )
+    if not (np.all(np.isfinite(times)) and np.all(np.isfinite(p_WP))):
+        raise ValueError("times and p_WP must be finite")
+    if np.any(np.diff(times) <= 0):
+        raise ValueError("times must be strictly increasing")
+    return times, p_WP, touching
+
+
+def _runs(touching, min_points):
+    """(start, stop) index ranges of the runs of True at least ``min_points`` long."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], touching.astype(int), [0]])))
+    return [(a, b) for a, b in zip(edges[0::2], edges[1::2]) if b - a >= min_points]
+
+
+def ink_strokes(times, p_WP, in_contact, *, min_points=2):
+    """Split a pen-tip trace into the strokes drawn while it touched the paper.
+
+    Parameters
+    ----------
+    times : array, shape (n,), s, strictly increasing.
+    p_WP : array, shape (n, 3), pen tip positions in W (m).
+    in_contact : array of bool, shape (n,).
+    min_points : int, shortest stroke kept (a single touching sample leaves no line).
+
+    Returns
+    -------
+    list of arrays, shape (k, 3): the consecutive touching samples, in time order.
+    """
+    _, p_WP, touching = _checked(times, p_WP, in_contact)
+    if int(min_points) < 1:
+        raise ValueError(f"min_points must be >= 1, got {min_points}")
+    return [p_WP[a:b].copy() for a, b in _runs(touching, int(min_points))]
+
+
+def add_ink_to_recording(
+    meshcat,
+    times,
+    p_WP,
+    in_contact,
+    *,
+    path="/ink",
+    height=None,
+    max_pieces=100,
+    line_width=3.0,
+    rgba=INK_RGBA,
+):
+    """Draw the ink into ``meshcat``'s open recording so that it appears as it was drawn.
+
+    Each stroke is cut into pieces of consecutive line segments; all pieces get about
+    ``max_pieces`` in total, shared in proportion to the strokes' sample counts, at least one
+    per stroke (Meshcat slows down with thousands of animated objects). Every piece is
+    created now with ``SetLineSegments`` at ``{path}/stroke_{i}/piece_{j}``, hidden at
+    recording time 0, and made visible at the time of its last sample.
+
+    Parameters
+    ----------
+    meshcat : Meshcat, recording (``MeshcatVisualizer.StartRecording`` called, not stopped).
+    times, p_WP, in_contact : as for :func:`ink_strokes`.
+    path : str, Meshcat folder of the ink (deleted first).
+    height : float, optional; draw the ink at this z (m), e.g. just above the paper, instead
+        of the recorded tip heights (which are slightly inside the compliant paper).
+    max_pieces : int, >= number of strokes.
+    line_width : float, pixels (WebGL may draw 1).
+    rgba : Rgba.
+
+    Returns
+    -------
+    list of (str, float): each piece's Meshcat path and the time it appears.
+    """
+    times, p_WP, touching = _checked(times, p_WP, in_contact)
+    if height is not None:
+        if not np.isfinite(height):
+            raise ValueError(f"height must be finite, got {height}")
+        p_WP = p_WP.copy()
+        p_WP[:, 2] = height
+    runs = _runs(touching, 2)
+    if int(max_pieces) < max(len(runs), 1):
+        raise ValueError(f"max_pieces must be at least the number of strokes ({len(runs)})")
+    total_segments = sum(b - a - 1 for a, b in runs)
+    meshcat.Delete(path)
+    pieces = []
+    for i, (a, b) in enumerate(runs):
+        count = max(1, int(max_pieces * (b - a - 1) / total_segments))
+        # Piece boundaries share their end sample, so the line stays unbroken.
+        bounds = np.unique(np.linspace(a, b - 1, count + 1).round().astype(int))
+        for j, (first, last) in enumerate(zip(bounds[:-1], bounds[1:])):
+            piece = f"{path}/stroke_{i}/piece_{j}"
+            meshcat.SetLineSegments(
+                piece,
+                np.asfortranarray(p_WP[first:last].T),
+                np.asfortranarray(p_WP[first + 1 : last + 1].T),
+                line_width,
+                rgba,
+            )
+            meshcat.SetProperty(piece, "visible", False, time_in_recording=0.0)
+            meshcat.SetProperty(piece, "visible", True, time_in_recording=float(times[last]))
+            pieces.append((piece, float(times[last])))
+    return pieces
