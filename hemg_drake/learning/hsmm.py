@@ -124,7 +124,7 @@ class HSMM:
         reg_covar=1e-2,
         min_duration_std=1.0,
         n_iter=100,
-        tol=1e-5,
+        tol=1e-4,
         init="kmeans",
         n_init=5,
         n_position=None,
