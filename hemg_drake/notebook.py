@@ -3,7 +3,8 @@
 The test suite executes every notebook with ``HEMG_DRAKE_NOTEBOOK_SCALE=small`` so that each
 runs in seconds; a user who opens one gets the full scale::
 
-    duration = at_scale(full=8.0, small=1.0)
+    scenario = load_scenario(scenario_file("cotter_pin"))
+    duration = at_scale(full=scenario.duration, small=2.0)
     HTML(replay_iframe("replay.html"))   # from IPython.display
 """
 
@@ -13,6 +14,8 @@ from pathlib import Path
 
 SCALE_VARIABLE = "HEMG_DRAKE_NOTEBOOK_SCALE"
 SCALES = ("full", "small")
+# The repository's scenarios (the package is installed editable from the repository).
+SCENARIOS_DIR = Path(__file__).resolve().parents[1] / "scenarios"
 
 
 def notebook_scale():
@@ -36,6 +39,21 @@ def at_scale(*, full, small):
     return small if notebook_scale() == "small" else full
 
 
+def scenario_file(name):
+    """Path of the repository's scenario ``scenarios/<name>.yaml``, wherever the notebook runs.
+
+    Raises
+    ------
+    FileNotFoundError
+        No such scenario; the message lists those there are.
+    """
+    path = SCENARIOS_DIR / f"{name}.yaml"
+    if not path.is_file():
+        known = sorted(p.stem for p in SCENARIOS_DIR.glob("*.yaml"))
+        raise FileNotFoundError(f"no scenario {name!r} in {SCENARIOS_DIR}; there are {known}")
+    return path
+
+
 def replay_iframe(replay, *, height=480):
     """An ``<iframe>`` showing an HTML replay inline, its page embedded through ``srcdoc``.
 
@@ -52,7 +70,7 @@ def replay_iframe(replay, *, height=480):
     Returns
     -------
     str
-        The ``<iframe>`` element.
+        A ``<div>`` holding the ``<iframe>``.
     """
     path = Path(replay)
     if not path.is_file():
@@ -62,7 +80,8 @@ def replay_iframe(replay, *, height=480):
     page = path.read_text(encoding="utf-8")
     if "<html" not in page[:1000].lower():
         raise ValueError(f"{path}: not an HTML page")
+    # Inside a <div>: IPython's HTML() warns about markup that starts with "<iframe".
     return (
-        f'<iframe srcdoc="{html.escape(page, quote=True)}" width="100%" height="{height}" '
-        f'style="border: none"></iframe>'
+        f'<div><iframe srcdoc="{html.escape(page, quote=True)}" width="100%" '
+        f'height="{height}" style="border: none"></iframe></div>'
     )

@@ -4,7 +4,14 @@ import html.parser
 
 import pytest
 
-from hemg_drake.notebook import SCALE_VARIABLE, at_scale, notebook_scale, replay_iframe
+from hemg_drake.notebook import (
+    SCALE_VARIABLE,
+    at_scale,
+    notebook_scale,
+    replay_iframe,
+    scenario_file,
+)
+from hemg_drake.scenario import load_scenario
 
 
 @pytest.mark.parametrize(
@@ -58,3 +65,14 @@ def test_replay_iframe_bad_input(tmp_path):
     page.write_text("<html></html>", encoding="utf-8")
     with pytest.raises(ValueError, match="height"):
         replay_iframe(page, height=0)
+
+
+def test_scenario_file_finds_the_repository_scenarios():
+    path = scenario_file("cotter_pin")
+    assert path.is_file() and path.parent.name == "scenarios"
+    assert load_scenario(path).task == "cotter_pin"
+
+
+def test_unknown_scenario_lists_the_known_ones():
+    with pytest.raises(FileNotFoundError, match="no scenario 'juggling'.*cotter_pin"):
+        scenario_file("juggling")
