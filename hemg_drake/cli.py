@@ -15,6 +15,25 @@ def _demo(args):
     print(f"wrote {replay}")
 
 
+def _demonstrate(args):
+    from hemg_drake.diagrams.demonstration import record_demonstrations
+    from hemg_drake.scenario import load_scenario
+
+    scenario = load_scenario(args.scenario)
+    changes = {}
+    if args.demos is not None:
+        changes["num_demonstrations"] = args.demos
+    if args.duration is not None:
+        changes["duration"] = args.duration
+    scenario = scenario.replaced(source="--demos/--duration", **changes)
+    print(
+        f"{scenario.task}: {scenario.num_demonstrations} demonstrations of "
+        f"{scenario.duration:g} s into {args.out}"
+    )
+    for path in record_demonstrations(scenario, args.out, progress=print):
+        print(f"wrote {path}")
+
+
 def _emg_figure(args):
     import numpy as np
 
@@ -43,6 +62,16 @@ def build_parser():
     demo.add_argument("--out", default="runs/demo", help="output folder")
     demo.add_argument("--duration", type=float, default=6.0, help="simulated seconds")
     demo.set_defaults(func=_demo)
+
+    demonstrate = commands.add_parser(
+        "demonstrate",
+        help="record teleoperated demonstrations: dataset.npz, HTML replays, a plot",
+    )
+    demonstrate.add_argument("scenario", help="scenario YAML file (see scenarios/)")
+    demonstrate.add_argument("--out", required=True, help="output folder, e.g. runs/pin/")
+    demonstrate.add_argument("--demos", type=int, help="number of demonstrations C")
+    demonstrate.add_argument("--duration", type=float, help="seconds per demonstration")
+    demonstrate.set_defaults(func=_demonstrate)
 
     emg = commands.add_parser(
         "emg-figure", help="Fig. 6: summed sEMG and its moving-RMS envelopes"

@@ -220,6 +220,13 @@ class Scenario:
         """YAML text that :func:`parse_scenario` reads back to an equal scenario."""
         return yaml_dump_typed(self)
 
+    def replaced(self, *, source="<overrides>", **changes):
+        """A checked copy with top-level fields changed, e.g. ``replaced(duration=2.0)``.
+
+        Raises ValueError (naming ``source`` and the key) as :func:`load_scenario` does.
+        """
+        return parse_scenario(dc.replace(self, **changes).to_yaml(), source=source)
+
 
 # Numbers that may be negative (all others must be >= 0), by YAML key path.
 _SIGNED = {"plan.points", "mapping.offset", "mapping.rpy_deg", "emg.A_emg"}

@@ -10,10 +10,14 @@ Signal flow (each box a LeafSystem of this package, named as in the diagram)::
 
 :func:`build_demonstration_diagram` builds it from a :class:`~hemg_drake.scenario.Scenario`
 and a seed; :func:`run_demonstration` simulates it and returns the logged
-:class:`~hemg_drake.learning.demos.Demonstration`, optionally with an HTML replay.
+:class:`~hemg_drake.learning.demos.Demonstration`, optionally with an HTML replay;
+:func:`record_demonstrations` runs the scenario's C demonstrations into a folder (what
+``hemg-drake demonstrate`` does).
 """
 
 import dataclasses as dc
+import time
+from pathlib import Path
 
 import numpy as np
 from pydrake.multibody.plant import AddMultibodyPlant
@@ -28,7 +32,7 @@ from hemg_drake.control.pd import VariableGainPd
 from hemg_drake.emg.calibration import EmgCalibration
 from hemg_drake.emg.chain import add_emg_gain_chain
 from hemg_drake.emg.sources import MYO_RATE, SyntheticEmgSource, synthesize_emg
-from hemg_drake.learning.demos import FIELD_WIDTHS, Demonstration
+from hemg_drake.learning.demos import FIELD_WIDTHS, Demonstration, save_dataset
 from hemg_drake.robots.baxter import FLOOR_Z, add_baxter_arm
 from hemg_drake.teleop.feedback import ForceFeedback
 from hemg_drake.teleop.mapping import WorkspaceMap, WorkspaceMapping
@@ -426,5 +430,65 @@ def run_demonstration(scenario, seed, *, replay_path=None, scene=True):
     context = simulator.get_context()
     demo = demonstration_from_log(built.logger.FindLog(context), seed)
     if recorder is not None:
+        if scenario.task == "drawing" and built.scene is not None:
+            # The ink is drawn into the open recording, just above the sheet.
+            from hemg_drake.viz.ink import add_ink_to_recording, in_contact
+
+            add_ink_to_recording(
+                recorder.meshcat,
+                demo.time,
+                demo.p_WE,
+                in_contact(demo.f_WE),
+                height=built.scene.paper_height + 5e-4,
+            )
         recorder.stop_and_export(replay_path)
     return demo
+
+
+def record_demonstrations(scenario, out_dir, *, replays=True, progress=None):
+    """Run the scenario's C demonstrations and write them to ``out_dir``.
+
+    Writes ``dataset.npz`` (:func:`~hemg_drake.learning.demos.save_dataset`, with the
+    scenario's YAML, task, N and log period in the metadata), ``replay_<c>.html`` for
+    c = 1 .. C when ``replays``, and ``demonstrations.png`` (Fig. 8 (a)-(b) or Fig. 10).
+    Every file is written atomically, so existing files are replaced whole or not at all.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    out_dir : path-like, created if missing.
+    replays : bool
+    progress : callable, optional
+        Called with one line of text per finished demonstration.
+
+    Returns
+    -------
+    list of Path, the files written (dataset first).
+    """
+    from hemg_drake.viz.figures import plot_demonstrations, save_figure
+
+    out_dir = Path(out_dir)
+    demos, written = [], []
+    for c, seed in enumerate(scenario.seeds(), start=1):
+        replay = out_dir / f"replay_{c}.html" if replays else None
+        start = time.perf_counter()
+        demos.append(run_demonstration(scenario, seed, replay_path=replay))
+        if replay is not None:
+            written.append(replay)
+        if progress is not None:
+            progress(
+                f"demonstration {c}/{scenario.num_demonstrations} (seed {seed}): "
+                f"{scenario.duration:g} s simulated in {time.perf_counter() - start:.1f} s"
+                + (f", replay {replay}" if replay else "")
+            )
+    dataset = out_dir / "dataset.npz"
+    metadata = dict(
+        scenario=scenario.to_yaml(),
+        task=scenario.task,
+        num_states=scenario.num_states,
+        log_period=scenario.log_period,
+    )
+    save_dataset(dataset, demos, metadata)
+    figure = out_dir / "demonstrations.png"
+    save_figure(plot_demonstrations(demos, task=scenario.task), figure)
+    return [dataset, *written, figure]

@@ -151,3 +151,51 @@ def plot_time_series(time, series, *, title=None):
     if title:
         figure.suptitle(title)
     return figure
+
+
+def plot_demonstrations(demos, *, task):
+    """The recorded demonstrations: Fig. 8 (a)-(b) for the cotter pin, Fig. 10 for drawing.
+
+    Parameters
+    ----------
+    demos : sequence of Demonstration
+        Each with ``time`` (T,), ``p_WE`` and ``v_WE`` (T, 3), ``gain`` (T,); one line each.
+    task : {"cotter_pin", "drawing"}
+        ``"cotter_pin"``: positions (top row) and velocities (bottom row) of the tool point
+        along x, y, z (Fig. 8 (a)-(b)). ``"drawing"``: x, y, z and the stiffness K, one axis
+        each (Fig. 10).
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure
+    """
+    demos = list(demos)
+    if not demos:
+        raise ValueError("plot_demonstrations needs at least one demonstration")
+    if task not in ("cotter_pin", "drawing"):
+        raise ValueError(f"task must be 'cotter_pin' or 'drawing', got {task!r}")
+    if task == "cotter_pin":
+        figure = Figure(figsize=(10, 5), layout="constrained")
+        grid = figure.subplots(2, 3, sharex=True)
+        panels = [(grid[0, i], "p_WE", i, f"{axis} (m)") for i, axis in enumerate("xyz")]
+        panels += [(grid[1, i], "v_WE", i, f"d{axis}/dt (m/s)") for i, axis in enumerate("xyz")]
+        bottom = grid[1]
+        title = "Demonstrations of pulling the cotter pin (Fig. 8 (a)-(b))"
+    else:
+        figure = Figure(figsize=(8, 7), layout="constrained")
+        grid = figure.subplots(4, 1, sharex=True)
+        panels = [(grid[i], "p_WE", i, f"{axis} (m)") for i, axis in enumerate("xyz")]
+        panels.append((grid[3], "gain", None, "stiffness K"))
+        bottom = grid[3:]
+        title = "Demonstrations of drawing (Fig. 10): position and stiffness"
+    for axes, field, column, label in panels:
+        for c, demo in enumerate(demos, start=1):
+            values = getattr(demo, field)
+            axes.plot(demo.time, values if column is None else values[:, column],
+                      linewidth=1.0, label=f"demo {c}")
+        axes.set_ylabel(label)
+    for axes in bottom:
+        axes.set_xlabel("time (s)")
+    panels[0][0].legend(loc="best", fontsize="small")
+    figure.suptitle(title)
+    return figure
