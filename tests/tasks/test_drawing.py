@@ -1,0 +1,219 @@
+"""Drawing through Drake: the pen follows the plan at a high gain and inks three strokes."""
+
+import numpy as np
+import pytest
+from pydrake.geometry import Box, Role, Sphere
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import LogVectorOutput
+
+from hemg_drake.robots.baxter import add_baxter_arm
+from hemg_drake.tasks.drawing import (
+    HOME_TOOL_POINT,
+    SHEET_SIZE,
+    DrawingParams,
+    add_drawing_scene,
+    default_drawing_plan,
+    drawing_steps,
+)
+from hemg_drake.tasks.follow import add_plan_follower
+from hemg_drake.tasks.plan import TaskPlan
+from hemg_drake.viz.ink import in_contact, ink_strokes
+
+GAIN = 100.0
+LOG_PERIOD = 0.01
+
+
+def _scene(params=None):
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
+    arm = add_baxter_arm(plant)
+    scene = add_drawing_scene(plant, arm, params=params)
+    plant.Finalize()
+    plant.SetDefaultPositions(arm.model_instance, arm.home_positions)
+    return builder, plant, scene_graph, arm, scene
+
+
+@pytest.fixture(scope="module")
+def run():
+    """The default plan at K = 100: logged tip pose, contact force, planned pen state."""
+    builder, plant, _, arm, scene = _scene()
+    plan = default_drawing_plan()
+    add_plan_follower(builder, plant=plant, arm=arm, plan=plan, gain=GAIN)
+    state_log = LogVectorOutput(plant.get_state_output_port(arm.model_instance), builder, LOG_PERIOD)
+    force_log = LogVectorOutput(scene.force_output_port(builder), builder, LOG_PERIOD)
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(plan.end_time)
+    context = simulator.get_context()
+    states = state_log.FindLog(context)
+    # Pen tip P = tool point E, by forward kinematics of the logged joint positions.
+    fk_context = plant.CreateDefaultContext()
+    poses = []
+    for q in states.data()[:7].T:
+        plant.SetPositions(fk_context, arm.model_instance, q)
+        poses.append(arm.tool_frame.CalcPoseInWorld(fk_context))
+    t = states.sample_times()
+    return dict(
+        scene=scene,
+        plan=plan,
+        t=t,
+        p_WP=np.array([X.translation() for X in poses]),
+        Pz_W=np.array([X.rotation().matrix()[:, 2] for X in poses]),
+        f_WP=force_log.FindLog(context).data().T,
+        pen_down=np.array([plan.segment(ti).pen_down for ti in t]),
+    )
+
+
+def _distance_to_polyline(points, polyline):
+    """Distance (m) from each point, shape (n, d), to a polyline, shape (k, d)."""
+    a, b = polyline[:-1][None], polyline[1:][None]
+    p = points[:, None]
+    ab = b - a
+    w = np.clip(((p - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-18), 0.0, 1.0)
+    return np.linalg.norm(p - (a + w[..., None] * ab), axis=-1).min(axis=1)
+
+
+def test_ink_traces_the_three_planned_strokes(run):
+    plan = run["plan"]
+    strokes = ink_strokes(run["t"], run["p_WP"], in_contact(run["f_WP"]))
+    assert len(strokes) == 3
+    # The planned pen-down paths, sampled at 5 ms, one per stroke.
+    t = np.arange(plan.start_time, plan.end_time, 0.005)
+    down = np.array([plan.segment(ti).pen_down for ti in t])
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], down.astype(int), [0]])))
+    for ink, (a, b) in zip(strokes, zip(edges[0::2], edges[1::2])):
+        planned = plan.position(t[a:b])[:, :2]
+        # Shapes on the paper (x, y): plan to ink and ink to plan, both within 5 mm.
+        assert _distance_to_polyline(planned, ink[:, :2]).max() < 0.005
+        assert _distance_to_polyline(ink[:, :2], planned).max() < 0.005
+        # The ink lies on the paper: the compliant tip sinks f / k, about 1 mm at 10 N.
+        np.testing.assert_allclose(ink[:, 2], run["scene"].paper_height, atol=0.0015)
+
+
+def test_contact_only_while_the_pen_is_down(run):
+    touching = in_contact(run["f_WP"])
+    force = np.linalg.norm(run["f_WP"], axis=1)
+    # No ink and no force at all during the lifts and moves.
+    assert not np.any(touching & ~run["pen_down"])
+    assert np.all(force[~run["pen_down"]] == 0.0)
+    # While drawing (chords, not press and release), the pen always touches.
+    plan = run["plan"]
+    chords = np.array([
+        plan.pen_down[i] and np.allclose(plan.points[i, 2], plan.points[i + 1, 2])
+        for i in range(len(plan.kinds))
+    ])
+    drawing = np.array([chords[plan.segment(ti).index] for ti in run["t"]])
+    assert np.all(touching[drawing])
+
+
+def test_contact_force_is_the_pen_spring(run):
+    """While drawing, the normal force is k * depth of the tip sphere (series stiffness)."""
+    scene = run["scene"]
+    params = scene.params
+    k = params.pen_stiffness * 1e6 / (params.pen_stiffness + 1e6)  # the sheet's 1e6 N/m
+    r = params.pen_radius
+    lowest_z = (run["p_WP"] - r * run["Pz_W"])[:, 2] - r
+    depth = scene.paper_height - lowest_z
+    touching = in_contact(run["f_WP"])
+    steady = touching & (np.abs(np.gradient(depth, run["t"])) < 0.002)
+    assert steady.sum() > 200
+    np.testing.assert_allclose(run["f_WP"][steady, 2], k * depth[steady], rtol=0.1, atol=0.05)
+    # The pen is pressed with a few newtons, up, opposite to the paper's normal push on it.
+    assert 1.0 < np.median(run["f_WP"][steady, 2]) < 15.0
+
+
+def test_sheet_is_a4_at_the_paper_center_and_the_pen_tip_is_the_tool_point():
+    _, plant, scene_graph, arm, scene = _scene()
+    inspector = scene_graph.model_inspector()
+    table = plant.GetBodyByName("table", scene.model_instance)
+    (sheet,) = plant.GetCollisionGeometriesForBody(table)
+    box = inspector.GetShape(sheet)
+    assert isinstance(box, Box)
+    assert (box.width(), box.depth()) == pytest.approx(SHEET_SIZE)
+    context = plant.CreateDefaultContext()
+    X_WT = plant.EvalBodyPoseInWorld(context, table)
+    top = X_WT @ inspector.GetPoseInFrame(sheet) @ np.array([0, 0, box.height() / 2])
+    np.testing.assert_allclose(top, scene.paper_center, atol=1e-12)
+    (tip,) = [
+        g for g in plant.GetCollisionGeometriesForBody(scene.pen_body)
+        if isinstance(inspector.GetShape(g), Sphere)
+    ]
+    radius = inspector.GetShape(tip).radius()
+    X_WH = plant.EvalBodyPoseInWorld(context, scene.pen_body)
+    X_WTip = X_WH @ inspector.GetPoseInFrame(tip)
+    # The sphere's point furthest along the tool's z is the tool point E.
+    p_WE = arm.tool_frame.CalcPoseInWorld(context)
+    far = X_WTip.translation() + radius * p_WE.rotation().matrix()[:, 2]
+    np.testing.assert_allclose(far, p_WE.translation(), atol=1e-12)
+    assert inspector.GetProperties(tip, Role.kProximity) is not None
+
+
+def test_plan_has_three_strokes_and_six_steps_on_the_sheet():
+    params = DrawingParams()
+    plan = default_drawing_plan(params)
+    steps = drawing_steps(plan)
+    assert steps.shape == (7,) and np.all(np.diff(steps) > 0)
+    np.testing.assert_allclose(plan.points[[0, -1]], [HOME_TOOL_POINT, HOME_TOOL_POINT])
+    down = np.array(plan.pen_down)
+    assert all(k == ("forceful" if d else "free") for k, d in zip(plan.kinds, down))
+    # Pen-down waypoints lie over the sheet; the drawing ones press press_depth into it.
+    for i in np.flatnonzero(down):
+        for p in plan.points[i : i + 2]:
+            assert np.all(np.abs(p[:2] - params.paper_center[:2]) < np.array(SHEET_SIZE) / 2)
+    lengths = []
+    for start, end in zip(steps[[0, 2, 4]], steps[[1, 3, 5]]):
+        t = np.linspace(start, end, 2000)
+        path = plan.position(t)
+        pressing = path[:, 2] < params.paper_center[2] - 0.999 * params.press_depth
+        lengths.append(np.linalg.norm(np.diff(path[pressing, :2], axis=0), axis=1).sum())
+    # A line, a half circle and a zig-zag, a few centimetres to about 15 cm each.
+    np.testing.assert_allclose(lengths, [0.11, np.pi * 0.045, 4 * np.hypot(0.04, 0.015)], rtol=0.02)
+    # Between the strokes the pen is up above the paper, at the hover height.
+    for start, end in zip(steps[[1, 3, 5]], steps[[2, 4, 6]]):
+        t = np.linspace(start, end, 200)
+        assert np.all(plan.position(t)[:, 2] > params.paper_center[2])
+
+
+def test_drawing_steps_needs_three_strokes():
+    plan = TaskPlan(
+        times=[0, 1, 2, 3], points=np.zeros((4, 3)), kinds=["free"] * 3, pen_down=[True, False, True]
+    )
+    with pytest.raises(ValueError, match="exactly 3 pen-down stretches, got 2"):
+        drawing_steps(plan)
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (dict(pen_radius=-0.001), "DrawingParams.pen_radius"),
+        (dict(paper_center=[0.6, np.nan, 0.1]), "DrawingParams.paper_center"),
+        (dict(pen_stiffness=0.0), "DrawingParams.pen_stiffness"),
+        (dict(pen_friction=-0.1), "DrawingParams.pen_friction"),
+        (dict(hover_height=-0.03), "DrawingParams.hover_height"),
+        (dict(press_depth=0.05), "DrawingParams.press_depth"),
+    ],
+)
+def test_bad_parameters_name_the_field(change, message):
+    with pytest.raises(ValueError, match=message):
+        DrawingParams(**change)
+    params = DrawingParams()
+    for name, value in change.items():
+        setattr(params, name, value)
+    with pytest.raises(ValueError, match=message):
+        default_drawing_plan(params)
+
+
+def test_scene_refuses_bad_plants():
+    continuous = MultibodyPlant(0.0)
+    with pytest.raises(ValueError, match="discrete plant"):
+        add_drawing_scene(continuous, add_baxter_arm(continuous))
+    no_geometry = MultibodyPlant(1e-3)
+    with pytest.raises(ValueError, match="SceneGraph"):
+        add_drawing_scene(no_geometry, add_baxter_arm(no_geometry))
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
+    arm = add_baxter_arm(plant)
+    plant.Finalize()
+    with pytest.raises(ValueError, match="before plant.Finalize"):
+        add_drawing_scene(plant, arm)
