@@ -147,3 +147,47 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
                     duration_counts[i, d] += weight * scale
             log_beta_in[s, i] = top + np.log(total)
     return log_beta, log_beta_in, transition_counts, duration_counts
+
+
+@numba.njit(cache=True)
+def residual_step(predicted, log_emission, transmat_T, durations):
+    """One step of the residual-duration forward recursion (normalised).
+
+    Parameters
+    ----------
+    predicted : array, shape (N, n_durations)
+        p(state i, d steps left including this one | past), summing to 1.
+    log_emission : array, shape (N,)
+        log-likelihood of this step's observation per state (zeros: none).
+    transmat_T : array, shape (N, N)
+        Transposed transition matrix, a_ji at [i, j].
+    durations : array, shape (N, n_durations)
+        p_i(d).
+
+    Returns
+    -------
+    h : array, shape (N,)
+        p(state i active now | observations), summing to 1. If the
+        observation is impossible under every state, the prediction alone.
+    predicted_next : array, shape (N, n_durations)
+    """
+    n_states, n_durations = predicted.shape
+    top = log_emission.max()
+    weight = np.exp(log_emission - top)
+    h = np.empty(n_states)
+    for i in range(n_states):
+        h[i] = weight[i] * predicted[i].sum()
+    total = h.sum()
+    if not total > 0:
+        weight[:] = 1.0
+        for i in range(n_states):
+            h[i] = predicted[i].sum()
+        total = h.sum()
+    # Segments ending now (one step left) start the next states; the rest count down.
+    starts = transmat_T @ (weight * predicted[:, 0])
+    predicted_next = np.empty_like(predicted)
+    for i in range(n_states):
+        for d in range(n_durations - 1):
+            predicted_next[i, d] = weight[i] * predicted[i, d + 1] + starts[i] * durations[i, d]
+        predicted_next[i, n_durations - 1] = starts[i] * durations[i, n_durations - 1]
+    return h / total, predicted_next / predicted_next.sum()

@@ -84,12 +84,10 @@ class HSMM:
     tol : float
         Stop when the log-likelihood gains less than ``tol * |log-likelihood|``.
     init : {"kmeans", "time"}
-        "kmeans": seeded k-means++ on all samples (best of ``n_init`` runs),
-        durations and transitions from its runs; "time": each demonstration
+        "kmeans": seeded k-means++ on the positions x of all samples (best of
+        ``n_init`` runs), durations and transitions from its runs; "time": each demonstration
         cut into N equal segments, a left-to-right model (zeros in A stay
-        zero under EM). Prefer "time" for left-to-right tasks whose parts look
-        alike (several similar strokes): k-means then shares states between
-        the parts and the timing of the task is lost.
+        zero under EM).
     n_init : int
         k-means restarts.
     n_position : int, optional
@@ -189,8 +187,8 @@ class HSMM:
         """Indices of k (possibly empty)."""
         return np.arange(2 * self._n_position(), self.n_dims_)
 
-    def _n_position(self):
-        n_dims = self.n_dims_
+    def _n_position(self, n_dims=None):
+        n_dims = self.n_dims_ if n_dims is None else n_dims
         p = n_dims // 2 if self.n_position is None else self.n_position
         if 2 * p > n_dims:
             raise ValueError(
@@ -252,7 +250,11 @@ class HSMM:
         if self.init == "time":
             labels = [np.minimum(np.arange(len(d)) * n // len(d), n - 1) for d in demos]
         else:
-            labels = self._kmeans_labels(demos, samples / scale)
+            # Cluster positions only: states are then regions of the GMR input
+            # space (what eq. 14 weighs), and strokes that look alike in
+            # velocity or stiffness do not share states.
+            positions = samples[:, : self._n_position(samples.shape[1])]
+            labels = self._kmeans_labels(demos, positions / scale[: positions.shape[1]])
         flat = np.concatenate(labels)
         global_cov = np.cov(samples, rowvar=False, bias=True).reshape(samples.shape[1], -1)
         self.means_ = np.empty((n, samples.shape[1]))

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hemg_drake.learning import _kernels
 from hemg_drake.learning.gmr import Gmr, softmax
 
 WEIGHTINGS = ("temporal", "spatial", "forward")
@@ -46,15 +47,12 @@ class ResidualForward:
         transmat = model.transmat_.copy()
         final = transmat.sum(axis=1) == 0
         transmat[final, final] = 1.0
-        self.transmat_T = transmat.T
+        self.transmat_T = np.ascontiguousarray(transmat.T)
         self.startprob = model.startprob_
 
     def initial(self):
         """Predicted alpha before the first step, shape (N, d_max)."""
-        return self._normalised(self.startprob[:, None] * self.durations)
-
-    @staticmethod
-    def _normalised(alpha):
+        alpha = self.startprob[:, None] * self.durations
         return alpha / alpha.sum()
 
     def step(self, predicted, log_emission):
@@ -72,18 +70,7 @@ class ResidualForward:
         h : array, shape (N,)
         predicted_next : array, shape (N, d_max)
         """
-        weighted = predicted * np.exp(log_emission - log_emission.max())[:, None]
-        h = weighted.sum(axis=1)
-        total = h.sum()
-        if not total > 0:
-            weighted, h = predicted, predicted.sum(axis=1)
-            total = h.sum()
-        # Segments ending now (residual 1) start the next states; the rest count down.
-        predicted_next = np.empty_like(weighted)
-        predicted_next[:, :-1] = weighted[:, 1:]
-        predicted_next[:, -1] = 0.0
-        predicted_next += (self.transmat_T @ weighted[:, 0])[:, None] * self.durations
-        return h / total, self._normalised(predicted_next)
+        return _kernels.residual_step(predicted, log_emission, self.transmat_T, self.durations)
 
 
 class HsmmGmrPolicy:
