@@ -1,5 +1,7 @@
 """The teleoperated demonstration loop, simulated through Drake at small scale."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
@@ -10,7 +12,9 @@ from hemg_drake.diagrams.demonstration import (
     run_demonstration,
     workspace_mapping,
 )
-from hemg_drake.scenario import parse_scenario
+from hemg_drake.scenario import load_scenario, parse_scenario
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 
 # Free space: from the tool's home point, 10 cm up-forward-left, then down-back-right.
 FREE_SPACE = """
@@ -131,3 +135,30 @@ def test_cotter_pin_stays_in_with_a_constant_low_gain():
     assert built.scene.pin_displacement(plant_context) < 0.005
     # The operator did ask for the pull: the master went up by the plan's travel.
     assert np.ptp(workspace_mapping(scenario).master_to_slave(demo.p_MS)[:, 2]) > 0.04
+
+
+def test_drawing_inks_three_strokes_with_high_stiffness_on_the_paper():
+    from hemg_drake.tasks.drawing import drawing_steps
+    from hemg_drake.viz.ink import in_contact, ink_strokes
+
+    scenario = load_scenario(SCENARIOS / "drawing.yaml")
+    built = build_demonstration_diagram(scenario, seed=scenario.seed)
+    scenario = scenario.replaced(duration=built.plan.end_time)
+    built, demo, _ = simulate(scenario, scenario.seed)
+    plan = built.plan  # what this seeded operator meant to draw
+    touching = in_contact(demo.f_WE)
+    strokes = ink_strokes(demo.time, demo.p_WE, touching)
+    assert len(strokes) == 3
+    down = np.flatnonzero(np.diff(np.concatenate([[0], np.array(plan.pen_down, int), [0]])))
+    for ink, first, stop in zip(strokes, down[0::2], down[1::2]):
+        planned = plan.points[first : stop + 1, :2]  # the stroke's corners on the sheet
+        assert distance_to_path(ink[:, :2], planned).max() < 0.005
+        # ... and the ink covers the whole stroke: every corner is within 5 mm of the ink.
+        assert distance_to_path(planned, ink[:, :2]).max() < 0.005
+    steps = drawing_steps(plan)
+    lifts = [(demo.time > steps[i]) & (demo.time < steps[i + 1]) for i in (1, 3)]
+    drawn = [demo.gain[touching & (demo.time > steps[i]) & (demo.time < steps[i + 1])]
+             for i in (0, 2, 4)]
+    low = max(demo.gain[lift].mean() for lift in lifts)
+    high = min(gain.mean() for gain in drawn)
+    assert high > 1.5 * low
