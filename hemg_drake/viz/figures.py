@@ -199,3 +199,155 @@ def plot_demonstrations(demos, *, task):
     panels[0][0].legend(loc="best", fontsize="small")
     figure.suptitle(title)
     return figure
+
+
+def plot_reproductions(demos, reproductions):
+    """Demonstrations against reproductions per axis: Fig. 8 (d)-(e) and the stiffness.
+
+    Parameters
+    ----------
+    demos : sequence of Demonstration
+        Drawn in thin grey: ``p_WE``, ``v_WE`` (T, 3) and ``gain`` (T,) against ``time``.
+    reproductions : dict of str to Reproduction
+        Label (e.g. the weighting) -> ``reproduce(...)`` result with 3-D positions; one
+        coloured line each (its stiffness only when ``k`` is not None).
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure
+        Rows: position, velocity (x, y, z columns), then the stiffness across the width.
+    """
+    demos = list(demos)
+    if not demos or not reproductions:
+        raise ValueError("plot_reproductions needs demonstrations and at least one reproduction")
+    for label, reproduction in reproductions.items():
+        if np.shape(reproduction.x)[1:] != (3,):
+            raise ValueError(f"reproduction {label!r} must have 3-D positions, got "
+                             f"{np.shape(reproduction.x)}")
+    figure = Figure(figsize=(10, 7), layout="constrained")
+    grid = figure.subplot_mosaic([["x", "y", "z"], ["vx", "vy", "vz"], ["k", "k", "k"]])
+    for c, demo in enumerate(demos):
+        label = "demonstrations" if c == 0 else None
+        for i, axis in enumerate("xyz"):
+            grid[axis].plot(demo.time, demo.p_WE[:, i], color="0.7", linewidth=0.8, label=label)
+            grid[f"v{axis}"].plot(demo.time, demo.v_WE[:, i], color="0.7", linewidth=0.8)
+        grid["k"].plot(demo.time, demo.gain, color="0.7", linewidth=0.8, label=label)
+    for label, reproduction in reproductions.items():
+        for i, axis in enumerate("xyz"):
+            grid[axis].plot(reproduction.t, reproduction.x[:, i], linewidth=1.3, label=label)
+            grid[f"v{axis}"].plot(reproduction.t, reproduction.xdot[:, i], linewidth=1.3)
+        if reproduction.k is not None:
+            grid["k"].plot(reproduction.t, reproduction.k[:, 0], linewidth=1.3, label=label)
+        else:
+            grid["k"].plot([], [])  # keep the colours of the rows in step
+    for axis in "xyz":
+        grid[axis].set_ylabel(f"{axis} (m)")
+        grid[f"v{axis}"].set_ylabel(f"d{axis}/dt (m/s)")
+        grid[f"v{axis}"].set_xlabel("time (s)")
+    grid["k"].set_ylabel("stiffness K")
+    grid["k"].set_xlabel("time (s)")
+    grid["x"].legend(loc="best", fontsize="small")
+    figure.suptitle("Demonstrations (grey) and HSMM-GMR reproductions")
+    return figure
+
+
+def plot_state_activations(time, h, *, title="HSMM state activations h (eq. 12)"):
+    """State weights over time, one line per state: Fig. 8 (c).
+
+    Parameters
+    ----------
+    time : array-like, shape (T,)
+        Seconds.
+    h : array-like, shape (T, N)
+        Weights in [0, 1], each row summing to 1 (``Reproduction.h``, ``forward_variable``).
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure
+    """
+    time, h = np.asarray(time, dtype=float), np.asarray(h, dtype=float)
+    if time.ndim != 1 or h.ndim != 2 or len(h) != len(time):
+        raise ValueError(f"need time (T,) and h (T, N), got {time.shape} and {h.shape}")
+    figure = Figure(figsize=(8, 2.8), layout="constrained")
+    axes = figure.subplots()
+    for i, weights in enumerate(h.T, start=1):
+        axes.plot(time, weights, linewidth=1.2, label=f"state {i}")
+    if h.shape[1] <= 10:
+        axes.legend(loc="center right", fontsize="small")
+    axes.set_ylim(-0.05, 1.05)
+    axes.set_xlabel("time (s)")
+    axes.set_ylabel("h_i")
+    axes.set_title(title)
+    return figure
+
+
+def plot_gmr_field(model, demos=(), *, plane=(0, 2), grid=15):
+    """The GMR velocity field of a fitted HSMM on a plane of positions (eqs. 14-17).
+
+    At each grid point x the arrow is xdot*(x) = sum_i h_i(x) [mu_i^xdot + S_i^{xdot x}
+    (S_i^xx)^-1 (x - mu_i^x)] with the spatial weights h_i of eq. 14; the position
+    coordinates off the plane are held at the data's mean. Each state's position Gaussian
+    is drawn as its one-standard-deviation ellipse, with the demonstrations' paths.
+
+    Parameters
+    ----------
+    model : HSMM
+        Fitted, with 3-D positions.
+    demos : sequence of Demonstration
+        Paths ``p_WE`` drawn over the field.
+    plane : (int, int)
+        The two position coordinates spanning the plane (0 x, 1 y, 2 z).
+    grid : int
+        Arrows per side, >= 2.
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure
+    """
+    from matplotlib.patches import Ellipse
+
+    from hemg_drake.learning.reproduce import HsmmGmrPolicy
+
+    policy = HsmmGmrPolicy(model, weighting="spatial")
+    if policy.n_position != 3:
+        raise ValueError(f"plot_gmr_field needs a model of 3-D positions, got {policy.n_position}")
+    a, b = plane
+    if sorted({a, b}) != sorted((a, b)) or not {a, b} <= {0, 1, 2}:
+        raise ValueError(f"plane must name two different coordinates among 0, 1, 2, got {plane!r}")
+    if isinstance(grid, bool) or not isinstance(grid, int) or grid < 2:
+        raise ValueError(f"grid must be an integer >= 2, got {grid!r}")
+    position = model.position_dims_
+    means = model.means_[:, position]
+    covariances = model.covariances_[:, position][:, :, position]
+    centre = model.occupancy_ @ means
+    # The plotted region: the states' 2-sigma boxes and the demonstrations' paths.
+    spread = 2 * np.sqrt(np.diagonal(covariances, axis1=1, axis2=2))
+    points = [means - spread, means + spread] + [demo.p_WE for demo in demos]
+    low = np.min([p.min(axis=0) for p in points], axis=0)
+    high = np.max([p.max(axis=0) for p in points], axis=0)
+    margin = 0.05 * np.maximum(high - low, 1e-6)
+    u = np.linspace(low[a] - margin[a], high[a] + margin[a], grid)
+    v = np.linspace(low[b] - margin[b], high[b] + margin[b], grid)
+    U, V = np.meshgrid(u, v)
+    queries = np.tile(centre, (U.size, 1))
+    queries[:, a], queries[:, b] = U.ravel(), V.ravel()
+    velocity = policy.gmr.predict(queries)[0][:, : policy.n_position]
+
+    labels = "xyz"
+    figure = Figure(figsize=(6.5, 5.5), layout="constrained")
+    axes = figure.subplots()
+    axes.quiver(U.ravel(), V.ravel(), velocity[:, a], velocity[:, b], color="tab:blue",
+                alpha=0.7, label="GMR velocity xdot*(x)")
+    for demo in demos:
+        axes.plot(demo.p_WE[:, a], demo.p_WE[:, b], color="0.4", linewidth=0.8)
+    for i, (mean, covariance) in enumerate(zip(means, covariances, strict=True), start=1):
+        values, vectors = np.linalg.eigh(covariance[np.ix_([a, b], [a, b])])
+        angle = np.degrees(np.arctan2(vectors[1, -1], vectors[0, -1]))
+        width, height = 2 * np.sqrt(np.maximum(values[::-1], 0.0))
+        axes.add_patch(Ellipse((mean[a], mean[b]), width, height, angle=angle, fill=False,
+                               color="tab:red", linewidth=1.2))
+        axes.annotate(str(i), (mean[a], mean[b]), color="tab:red", ha="center", va="center")
+    axes.set_xlabel(f"{labels[a]} (m)")
+    axes.set_ylabel(f"{labels[b]} (m)")
+    axes.set_title("GMR field (arrows), states (red, 1 std), demonstrations (grey)")
+    return figure

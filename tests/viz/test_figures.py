@@ -2,12 +2,19 @@
 
 import numpy as np
 import pytest
+from scipy.stats import multivariate_normal
 
 from hemg_drake.emg.envelope import moving_rms
 from hemg_drake.emg.sources import synthesize_emg
+from hemg_drake.learning.demos import Demonstration
+from hemg_drake.learning.hsmm import HSMM
+from hemg_drake.learning.reproduce import Reproduction
 from hemg_drake.viz.figures import (
     plot_emg_envelopes,
     plot_gain_law,
+    plot_gmr_field,
+    plot_reproductions,
+    plot_state_activations,
     plot_time_series,
     save_figure,
 )
@@ -95,3 +102,88 @@ def test_time_series_bad_input(time, series, message):
 def test_gain_law_needs_a_shape_factor():
     with pytest.raises(ValueError, match="at least one"):
         plot_gain_law(())
+
+
+def _demo(seed, n=40):
+    """A Demonstration moving up along z at 0.1 m/s with a stiffness ramp."""
+    time = np.arange(n) * 0.01
+    p_WE = np.column_stack([np.full(n, 0.6 + 0.001 * seed), np.full(n, -0.8), 0.1 + 0.1 * time])
+    v_WE = np.tile([0.0, 0.0, 0.1], (n, 1))
+    zeros = np.zeros(n)
+    return Demonstration(seed=seed, time=time, p_WE=p_WE, v_WE=v_WE, p_MS=np.zeros((n, 3)),
+                         envelope=zeros, activation=zeros, gain=50 + 100 * time, f_WE=v_WE)
+
+
+def _two_state_model():
+    """A hand-set 7-D HSMM (x, xdot, k) with velocity coupled to x (non-zero GMR gains)."""
+    rng = np.random.default_rng(4)
+    model = HSMM(2)
+    model.means_ = np.array([[0.6, -0.8, 0.12, 0.0, 0.0, 0.1, 60.0],
+                             [0.6, -0.8, 0.14, 0.01, 0.0, 0.05, 90.0]])
+    factors = 0.01 * rng.standard_normal((2, 7, 7))
+    model.covariances_ = factors @ factors.transpose(0, 2, 1) + 1e-4 * np.eye(7)
+    model.startprob_ = np.array([1.0, 0.0])
+    model.transmat_ = np.array([[0.0, 1.0], [1.0, 0.0]])
+    model.duration_means_ = np.array([20.0, 20.0])
+    model.duration_stds_ = np.array([2.0, 2.0])
+    model.occupancy_ = np.array([0.4, 0.6])
+    model.max_duration_ = 40
+    model.log_likelihood_history_ = []
+    return model
+
+
+def test_reproductions_plot_demos_in_grey_and_each_reproduction():
+    demos = [_demo(0), _demo(1)]
+    t = np.arange(30) * 0.01
+    reproduction = Reproduction(t=t, x=np.outer(t, [1, 2, 3]), xdot=np.tile([1, 2, 3], (30, 1)),
+                                k=np.full((30, 1), 70.0), h=np.ones((30, 1)))
+    figure = plot_reproductions(demos, {"forward": reproduction})
+    z_axes, vz_axes, k_axes = figure.axes[2], figure.axes[5], figure.axes[6]
+    demo_line, _, reproduced = z_axes.get_lines()
+    np.testing.assert_array_equal(demo_line.get_ydata(), demos[0].p_WE[:, 2])
+    np.testing.assert_array_equal(reproduced.get_ydata(), 3 * t)
+    np.testing.assert_array_equal(vz_axes.get_lines()[-1].get_ydata(), np.full(30, 3.0))
+    np.testing.assert_array_equal(k_axes.get_lines()[-1].get_ydata(), np.full(30, 70.0))
+    assert reproduced.get_label() == "forward"
+
+
+def test_state_activations_one_line_per_state():
+    h = np.column_stack([np.linspace(1, 0, 5), np.linspace(0, 1, 5)])
+    figure = plot_state_activations(np.arange(5) * 0.1, h)
+    lines = figure.axes[0].get_lines()
+    assert [line.get_label() for line in lines] == ["state 1", "state 2"]
+    np.testing.assert_array_equal(lines[1].get_ydata(), h[:, 1])
+
+
+def test_gmr_field_arrows_follow_eqs_14_to_17():
+    model = _two_state_model()
+    figure = plot_gmr_field(model, [_demo(0)], plane=(0, 2), grid=4)
+    quiver = figure.axes[0].collections[0]
+    x_axis, z_axis = quiver.get_offsets()[5]
+    # Independent reference: eq. 14 weights and eq. 16 conditional means, by hand.
+    centre = model.occupancy_ @ model.means_[:, :3]
+    x = np.array([x_axis, centre[1], z_axis])
+    weights, velocities = [], []
+    for prior, mean, covariance in zip(model.occupancy_, model.means_, model.covariances_):
+        S_xx, S_vx = covariance[:3, :3], covariance[3:6, :3]
+        weights.append(prior * multivariate_normal(mean[:3], S_xx).pdf(x))
+        velocities.append(mean[3:6] + S_vx @ np.linalg.solve(S_xx, x - mean[:3]))
+    expected = np.average(velocities, axis=0, weights=weights)
+    np.testing.assert_allclose([quiver.U[5], quiver.V[5]], expected[[0, 2]], rtol=1e-6)
+    assert len(figure.axes[0].patches) == 2  # one ellipse per state
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [({"plane": (0, 0)}, "plane"), ({"plane": (0, 3)}, "plane"), ({"grid": 1}, "grid")],
+)
+def test_gmr_field_bad_input(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        plot_gmr_field(_two_state_model(), **kwargs)
+
+
+def test_learning_plots_bad_input():
+    with pytest.raises(ValueError, match="at least one reproduction"):
+        plot_reproductions([_demo(0)], {})
+    with pytest.raises(ValueError, match=r"h \(T, N\)"):
+        plot_state_activations(np.zeros(3), np.zeros((4, 2)))
