@@ -52,7 +52,8 @@ def compile_times():
     code = (
         "import time; t = time.perf_counter(); import numpy as np;"
         "from hemg_drake.learning import _kernels as k;"
-        "e = np.zeros((5, 2)); lp = np.log(np.full(2, .5)); la = np.log(np.array([[1e-300, 1], [1, 1e-300]]));"
+        "e = np.zeros((5, 2)); lp = np.log(np.full(2, .5));"
+        "la = np.log(np.array([[1e-300, 1], [1, 1e-300]]));"
         "ld = np.zeros((2, 3)); a, ai = k.forward(e, lp, la, ld);"
         "k.backward(e, la, ld, a, ai, np.logaddexp.reduce(a[-1])); print(time.perf_counter() - t)"
     )
@@ -66,7 +67,7 @@ def compile_times():
 
 
 def numpy_forward(log_emission, log_startprob, log_transmat, log_duration):
-    """The forward recursion of _kernels.forward, vectorised with numpy per time step (for timing)."""
+    """_kernels.forward's recursion, vectorised with numpy per time step (for timing)."""
     n_steps, n_states = log_emission.shape
     n_durations = log_duration.shape[1]
     cumulative = np.vstack([np.zeros(n_states), np.cumsum(log_emission, axis=0)])
@@ -125,7 +126,8 @@ def main():
         print("hmmlearn not installed: no yardstick")
         return
     samples = np.concatenate(demos)
-    samples = (samples - samples.mean(axis=0)) / samples.std(axis=0)  # hmmlearn's min_covar is absolute
+    # hmmlearn's min_covar is absolute: standardise so that it fits every column.
+    samples = (samples - samples.mean(axis=0)) / samples.std(axis=0)
     lengths = [len(d) for d in demos]
     hmm = GaussianHMM(N_STATES, covariance_type="full", n_iter=N_ITER, tol=0.0, random_state=0)
     seconds, _ = timed(lambda: hmm.fit(samples, lengths), repeat=1)

@@ -162,7 +162,8 @@ class Gmr:
         queries, single = self._as_queries(x)
         if weights is None:
             weights = self.responsibilities(queries)
-        weights = np.broadcast_to(np.asarray(weights, dtype=float), (len(queries), len(self.priors)))
+        shape = (len(queries), len(self.priors))
+        weights = np.broadcast_to(np.asarray(weights, dtype=float), shape)
         means = self._component_means(queries)  # (T, N, O)
         mean = np.einsum("tn,tno->to", weights, means)
         spread = means - mean[:, None, :]

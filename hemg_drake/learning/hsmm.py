@@ -277,7 +277,8 @@ class HSMM:
                 self.means_[i] = members.mean(axis=0)
                 self.covariances_[i] = np.cov(members, rowvar=False, bias=True)
             else:  # an empty cluster: a random sample, the data's spread
-                self.means_[i] = samples[np.random.default_rng(self.seed + i).integers(len(samples))]
+                pick = np.random.default_rng(self.seed + i).integers(len(samples))
+                self.means_[i] = samples[pick]
                 self.covariances_[i] = global_cov
             d = np.array(durations[i] or [np.mean([len(x) for x in demos]) / n], dtype=float)
             self.duration_means_[i] = d.mean()
@@ -575,6 +576,8 @@ class HSMM:
         try:
             np.linalg.cholesky(self.covariances_)
         except np.linalg.LinAlgError:
-            raise ValueError(f"{path}: damaged HSMM model file, covariances_ not positive definite") from None
+            raise ValueError(
+                f"{path}: damaged HSMM model file, covariances_ not positive definite"
+            ) from None
         if np.any(self.duration_stds_ <= 0) or self.max_duration_ < 1:
             raise ValueError(f"{path}: damaged HSMM model file, bad duration parameters")

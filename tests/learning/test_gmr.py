@@ -73,10 +73,14 @@ def test_gaussian_log_pdf_matches_scipy():
     mixture = random_mixture(rng, 3, 4)
     x = rng.standard_normal((7, 4))
     expected = np.stack(
-        [multivariate_normal(m, c).logpdf(x) for m, c in zip(mixture["means"], mixture["covariances"])],
+        [
+            multivariate_normal(m, c).logpdf(x)
+            for m, c in zip(mixture["means"], mixture["covariances"])
+        ],
         axis=1,
     )
-    np.testing.assert_allclose(gaussian_log_pdf(x, mixture["means"], mixture["covariances"]), expected, rtol=1e-12)
+    log_pdf = gaussian_log_pdf(x, mixture["means"], mixture["covariances"])
+    np.testing.assert_allclose(log_pdf, expected, rtol=1e-12)
 
 
 def test_bad_input_is_rejected():

@@ -73,7 +73,9 @@ def test_forward_variable_equals_brute_force(models, n_states, n_steps, max_dura
 def seeded_truth():
     """A 3-state HSMM over [x, y, xdot, ydot]; states differ in position."""
     transmat = np.array([[0.0, 0.8, 0.2], [0.3, 0.0, 0.7], [0.6, 0.4, 0.0]])
-    position_cov = np.array([[[0.3, 0.1], [0.1, 0.2]], 0.2 * np.eye(2), [[0.2, -0.05], [-0.05, 0.3]]])
+    position_cov = np.array(
+        [[[0.3, 0.1], [0.1, 0.2]], 0.2 * np.eye(2), [[0.2, -0.05], [-0.05, 0.3]]]
+    )
     covariances = np.zeros((3, 4, 4))
     covariances[:, :2, :2] = position_cov
     covariances[:, 2:, 2:] = 0.5 * np.eye(2)

@@ -19,11 +19,13 @@ def run(diagram, systems, n_steps):
     rows = []
     for k in range(n_steps):
         simulator.AdvanceTo((k + 0.5) * DT)
-        rows.append({
-            (name, port): system.GetOutputPort(port).Eval(system.GetMyContextFromRoot(root)).copy()
-            for name, system in systems.items()
-            for port in [system.get_output_port(i).get_name() for i in range(system.num_output_ports())]
-        })  # fmt: skip
+        row = {}
+        for name, system in systems.items():
+            context = system.GetMyContextFromRoot(root)
+            for i in range(system.num_output_ports()):
+                port = system.get_output_port(i)
+                row[name, port.get_name()] = port.Eval(context).copy()
+        rows.append(row)
     return {key: np.array([row[key] for row in rows]) for key in rows[0]}
 
 
@@ -72,7 +74,10 @@ def test_ports_and_initial_outputs(path_task):
     start = path_task.mean[0, :3]
     reproducer = HsmmGmrReproducer(model=model, start=start)
     context = reproducer.CreateDefaultContext()
-    sizes = {name: reproducer.GetOutputPort(name).size() for name in ("x_star", "xdot_star", "k_star", "h")}
+    sizes = {
+        name: reproducer.GetOutputPort(name).size()
+        for name in ("x_star", "xdot_star", "k_star", "h")
+    }
     assert sizes == {"x_star": 3, "xdot_star": 3, "k_star": 1, "h": model.n_states}
     assert reproducer.GetInputPort("p_WE").size() == 3
     np.testing.assert_array_equal(reproducer.GetOutputPort("x_star").Eval(context), start)
