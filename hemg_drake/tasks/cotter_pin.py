@@ -38,6 +38,7 @@ import functools
 
 import numpy as np
 from pydrake.math import RigidTransform
+from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import LinearBushingRollPitchYaw
 from pydrake.systems.framework import LeafSystem
 
@@ -100,8 +101,6 @@ class CotterPinParams:
 @functools.cache
 def _pin_model_geometry():
     """(pin length, ring offset above the hole's mouth) read from the model file (m)."""
-    from pydrake.multibody.plant import MultibodyPlant
-
     plant = MultibodyPlant(0.0)
     (model,) = make_parser(plant).AddModels(str(COTTER_PIN_MODEL))
     tip = plant.GetFrameByName("pin_tip", model).GetFixedPoseInBodyFrame().translation()

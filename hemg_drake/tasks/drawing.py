@@ -37,9 +37,6 @@ from hemg_drake.teleop._validate import as_scalar, as_vector
 DRAWING_MODEL = MODELS_DIR / "drawing.sdf"
 # A4, as in the model file: (x, y) extent of the sheet (m).
 SHEET_SIZE = (0.210, 0.297)
-# The tool point at BaxterArm.home_positions (m), 3 cm above the default sheet: the plan
-# starts (and ends) here, so a run can start from the arm's home pose.
-HOME_TOOL_POINT = (0.642, -0.837, 0.120)
 _PEN_GREEN = (0.1, 0.6, 0.25, 1.0)
 
 
@@ -51,7 +48,8 @@ class DrawingParams:
     :func:`default_drawing_plan`), which raises ValueError naming the field.
     """
 
-    # Centre of the sheet's top surface in the world (m).
+    # Centre of the sheet's top surface in the world (m). The default puts it 3 cm under the
+    # tool point at BaxterArm.home_positions (0.642, -0.837, 0.120), to 3 mm.
     paper_center: np.ndarray = dc.field(default_factory=lambda: np.array([0.64, -0.84, 0.09]))
     # Radius of the pen's spherical tip (m).
     pen_radius: float = 0.003
@@ -226,8 +224,9 @@ def default_drawing_plan(params=None):
     """Three strokes with pen lifts between them: the paper's six steps I-VI (Fig. 10).
 
     I stroke 1, a 11 cm line; II lift and move; III stroke 2, a 14 cm half circle (six
-    chords); IV lift and move; V stroke 3, a 17 cm zig-zag; VI lift and back home. The plan
-    starts and ends at ``HOME_TOOL_POINT`` above the sheet. Around each stroke: descend
+    chords); IV lift and move; V stroke 3, a 17 cm zig-zag; VI lift and back. The plan
+    starts and ends ``hover_height`` above the sheet's centre (by default where the tool
+    point is at the arm's home pose). Around each stroke: descend
     (free) to 5 mm above the paper, press (pen down) to ``press_depth`` below it, draw (pen
     down, one segment per chord), release (pen down) to 5 mm above, lift (free) to
     ``hover_height``. Pen-down segments are forceful; the others free. About 10.5 s.
@@ -245,7 +244,8 @@ def default_drawing_plan(params=None):
     hover = center[2] + params.hover_height
     touch = center[2] + _CLEARANCE
     press = center[2] - params.press_depth
-    points, durations, pen_down = [np.array(HOME_TOOL_POINT)], [], []
+    above_center = np.array([*center[:2], hover])
+    points, durations, pen_down = [above_center], [], []
 
     def go(point, duration, down):
         points.append(np.asarray(point, dtype=float))
@@ -261,7 +261,7 @@ def default_drawing_plan(params=None):
             go([*corner, press], chord_time, True)
         go([*xy[-1], touch], _PRESS_TIME, True)
         go([*xy[-1], hover], _LIFT_TIME, False)
-    go(HOME_TOOL_POINT, _TRAVEL_TIME, False)
+    go(above_center, _TRAVEL_TIME, False)
     times = np.concatenate([[0.0], np.cumsum(durations)])
     kinds = tuple("forceful" if down else "free" for down in pen_down)
     return TaskPlan(times=times, points=np.array(points), kinds=kinds, pen_down=tuple(pen_down))
@@ -286,4 +286,6 @@ def drawing_steps(plan):
             f"a drawing plan needs exactly 3 pen-down stretches, got {edges.size // 2}"
         )
     starts, ends = plan.times[edges[0::2]], plan.times[edges[1::2]]
-    return np.array([plan.start_time, ends[0], starts[1], ends[1], starts[2], ends[2], plan.end_time])
+    return np.array(
+        [plan.start_time, ends[0], starts[1], ends[1], starts[2], ends[2], plan.end_time]
+    )

@@ -10,7 +10,6 @@ from pydrake.systems.primitives import LogVectorOutput
 
 from hemg_drake.robots.baxter import add_baxter_arm
 from hemg_drake.tasks.drawing import (
-    HOME_TOOL_POINT,
     SHEET_SIZE,
     DrawingParams,
     add_drawing_scene,
@@ -41,7 +40,8 @@ def run():
     builder, plant, _, arm, scene = _scene()
     plan = default_drawing_plan()
     add_plan_follower(builder, plant=plant, arm=arm, plan=plan, gain=GAIN)
-    state_log = LogVectorOutput(plant.get_state_output_port(arm.model_instance), builder, LOG_PERIOD)
+    arm_state = plant.get_state_output_port(arm.model_instance)
+    state_log = LogVectorOutput(arm_state, builder, LOG_PERIOD)
     force_log = LogVectorOutput(scene.force_output_port(builder), builder, LOG_PERIOD)
     simulator = Simulator(builder.Build())
     simulator.AdvanceTo(plan.end_time)
@@ -147,6 +147,8 @@ def test_sheet_is_a4_at_the_paper_center_and_the_pen_tip_is_the_tool_point():
     far = X_WTip.translation() + radius * p_WE.rotation().matrix()[:, 2]
     np.testing.assert_allclose(far, p_WE.translation(), atol=1e-12)
     assert inspector.GetProperties(tip, Role.kProximity) is not None
+    # The plan starts where the pen is at the arm's home pose (so a run can start there).
+    assert np.linalg.norm(default_drawing_plan().points[0] - p_WE.translation()) < 0.005
 
 
 def test_plan_has_three_strokes_and_six_steps_on_the_sheet():
@@ -154,7 +156,8 @@ def test_plan_has_three_strokes_and_six_steps_on_the_sheet():
     plan = default_drawing_plan(params)
     steps = drawing_steps(plan)
     assert steps.shape == (7,) and np.all(np.diff(steps) > 0)
-    np.testing.assert_allclose(plan.points[[0, -1]], [HOME_TOOL_POINT, HOME_TOOL_POINT])
+    above_center = params.paper_center + [0, 0, params.hover_height]
+    np.testing.assert_allclose(plan.points[[0, -1]], [above_center, above_center])
     down = np.array(plan.pen_down)
     assert all(k == ("forceful" if d else "free") for k, d in zip(plan.kinds, down))
     # Pen-down waypoints lie over the sheet; the drawing ones press press_depth into it.
@@ -168,7 +171,8 @@ def test_plan_has_three_strokes_and_six_steps_on_the_sheet():
         pressing = path[:, 2] < params.paper_center[2] - 0.999 * params.press_depth
         lengths.append(np.linalg.norm(np.diff(path[pressing, :2], axis=0), axis=1).sum())
     # A line, a half circle and a zig-zag, a few centimetres to about 15 cm each.
-    np.testing.assert_allclose(lengths, [0.11, np.pi * 0.045, 4 * np.hypot(0.04, 0.015)], rtol=0.02)
+    expected = [0.11, np.pi * 0.045, 4 * np.hypot(0.04, 0.015)]
+    np.testing.assert_allclose(lengths, expected, rtol=0.02)
     # Between the strokes the pen is up above the paper, at the hover height.
     for start, end in zip(steps[[1, 3, 5]], steps[[2, 4, 6]]):
         t = np.linspace(start, end, 200)
@@ -177,7 +181,10 @@ def test_plan_has_three_strokes_and_six_steps_on_the_sheet():
 
 def test_drawing_steps_needs_three_strokes():
     plan = TaskPlan(
-        times=[0, 1, 2, 3], points=np.zeros((4, 3)), kinds=["free"] * 3, pen_down=[True, False, True]
+        times=[0, 1, 2, 3],
+        points=np.zeros((4, 3)),
+        kinds=["free"] * 3,
+        pen_down=[True, False, True],
     )
     with pytest.raises(ValueError, match="exactly 3 pen-down stretches, got 2"):
         drawing_steps(plan)
