@@ -1,5 +1,7 @@
 """The teleoperated demonstration loop, simulated through Drake at small scale."""
 
+import base64
+import re
 from pathlib import Path
 
 import numpy as np
@@ -162,3 +164,52 @@ def test_drawing_inks_three_strokes_with_high_stiffness_on_the_paper():
     low = max(demo.gain[lift].mean() for lift in lifts)
     high = min(gain.mean() for gain in drawn)
     assert high > 1.5 * low
+
+
+def _replay_payload(path):
+    """The binary Meshcat messages embedded (base64) in an HTML replay."""
+    html = Path(path).read_text()
+    return b"".join(base64.b64decode(chunk) for chunk in re.findall(r"base64,([A-Za-z0-9+/=]+)", html))
+
+
+def test_drawing_replay_shows_the_ink(tmp_path):
+    from hemg_drake.viz.ink import in_contact
+
+    # The first stroke starts at about 1.4 s: 1.8 s leave a short line of ink.
+    scenario = load_scenario(SCENARIOS / "drawing.yaml").replaced(duration=1.8)
+    demo = run_demonstration(scenario, scenario.seed, replay_path=tmp_path / "replay.html")
+    assert in_contact(demo.f_WE).sum() > 10
+    payload = _replay_payload(tmp_path / "replay.html")
+    assert b"/ink/stroke_0/piece_0" in payload and b"/ink/stroke_1" not in payload
+
+
+def test_demonstrate_command_end_to_end(tmp_path, capsys):
+    from hemg_drake.cli import main
+    from hemg_drake.learning.demos import load_dataset
+
+    out = tmp_path / "run"
+    argv = ["demonstrate", str(SCENARIOS / "cotter_pin.yaml"), "--out", str(out)]
+    assert main([*argv, "--demos", "2", "--duration", "0.5"]) == 0
+    printed = capsys.readouterr().out
+    assert "demonstration 2/2 (seed 2)" in printed and "wrote" in printed
+    names = ["dataset.npz", "demonstrations.png", "replay_1.html", "replay_2.html"]
+    assert sorted(p.name for p in out.iterdir()) == names
+    demos, metadata = load_dataset(out / "dataset.npz")
+    assert [d.seed for d in demos] == [1, 2] and len(demos[0]) == 51
+    again = parse_scenario(metadata["scenario"])
+    assert (again.task, again.num_demonstrations, again.duration) == ("cotter_pin", 2, 0.5)
+    assert metadata["num_states"] == 4
+    assert (out / "demonstrations.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert b"<html" in (out / "replay_1.html").read_bytes()[:1000].lower()
+
+    # A second run replaces its files whole (no temporaries left; replay_2.html of the first
+    # run stays: nothing is deleted), and the same seed gives the same data.
+    assert main([*argv, "--demos", "1", "--duration", "0.5"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == names
+    demos_again, _ = load_dataset(out / "dataset.npz")
+    assert len(demos_again) == 1 and demos_again[0].p_WE.tobytes() == demos[0].p_WE.tobytes()
+
+    assert main([*argv, "--demos", "0"]) == 2
+    assert "num_demonstrations" in capsys.readouterr().err
+    assert main(["demonstrate", str(tmp_path / "none.yaml"), "--out", str(out)]) == 2
+    assert "not found" in capsys.readouterr().err
