@@ -253,7 +253,7 @@ class HSMM:
             # Cluster positions only: states are then regions of the GMR input
             # space (what eq. 14 weighs), and strokes that look alike in
             # velocity or stiffness do not share states.
-            positions = samples[:, : self._n_position(samples.shape[1])]
+            positions = samples[:, : max(self._n_position(samples.shape[1]), 1)]
             labels = self._kmeans_labels(demos, positions / scale[: positions.shape[1]])
         flat = np.concatenate(labels)
         global_cov = np.cov(samples, rowvar=False, bias=True).reshape(samples.shape[1], -1)
