@@ -115,7 +115,8 @@ def plot_time_series(time, series, *, title=None):
     time : array-like, shape (T,)
         Seconds.
     series : dict of str to array-like, shape (T,) or (T, k)
-        Axis label -> signal; a (T, k) signal draws k lines labelled by column.
+        Axis label -> signal; a (T, k) signal with k > 1 draws k lines labelled by column
+        (x, y, z when k = 3).
     title : str, optional
 
     Returns
@@ -135,7 +136,7 @@ def plot_time_series(time, series, *, title=None):
                 f"signal {label!r} must have shape ({len(time)},) or ({len(time)}, k), "
                 f"got {values.shape}"
             )
-        arrays[label] = values
+        arrays[label] = values[:, 0] if values.ndim == 2 and values.shape[1] == 1 else values
     figure = Figure(figsize=(8, 1.8 * len(arrays) + 0.6), layout="constrained")
     axes_list = np.atleast_1d(figure.subplots(len(arrays), 1, sharex=True))
     for axes, (label, values) in zip(axes_list, arrays.items(), strict=True):
@@ -350,4 +351,122 @@ def plot_gmr_field(model, demos=(), *, plane=(0, 2), grid=15):
     axes.set_xlabel(f"{labels[a]} (m)")
     axes.set_ylabel(f"{labels[b]} (m)")
     axes.set_title("GMR field (arrows), states (red, 1 std), demonstrations (grey)")
+    return figure
+
+
+def plot_state_activations(time, h, *, title="HSMM state activations (Fig. 8 (c))"):
+    """State weights h_i(t) of an HSMM over time, one line per state (Fig. 8 (c)).
+
+    Parameters
+    ----------
+    time : array, shape (T,), s.
+    h : array, shape (T, N), rows summing to 1.
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure
+    """
+    time, h = np.asarray(time, dtype=float), np.asarray(h, dtype=float)
+    if h.ndim != 2 or time.shape != (len(h),):
+        raise ValueError(f"time (T,) and h (T, N) must match, got {time.shape} and {h.shape}")
+    figure = Figure(figsize=(8, 3), layout="constrained")
+    axes = figure.subplots()
+    for i, column in enumerate(h.T, start=1):
+        axes.plot(time, column, linewidth=1.2, label=f"state {i}")
+    axes.set_xlabel("time (s)")
+    axes.set_ylabel("activation h_i")
+    axes.set_ylim(-0.05, 1.05)
+    if h.shape[1] <= 6:
+        axes.legend(loc="upper right", fontsize="small")
+    axes.set_title(title)
+    return figure
+
+
+def _demos_and_reproduction(axes, demos, log, demo_values, log_values):
+    """Demonstrations in grey, the reproduction in red, on one axis."""
+    for c, demo in enumerate(demos):
+        axes.plot(demo.time, demo_values(demo), color="0.6", linewidth=1.0,
+                  label="demonstrations" if c == 0 else None)
+    axes.plot(log.time, log_values(log), color="tab:red", linewidth=1.4, label="reproduction")
+
+
+def plot_pin_reproduction(demos, log):
+    """Fig. 8 (d)-(f): reproduced position, velocity and tracking force of the cotter pin.
+
+    Parameters
+    ----------
+    demos : sequence of Demonstration (grey).
+    log : ReproductionLog (red): ``p_WE``, ``v_WE``, ``F_tr`` against ``time``.
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure, 3 x 3 axes: position, velocity, force along x, y, z.
+    """
+    figure = Figure(figsize=(10, 7), layout="constrained")
+    grid = figure.subplots(3, 3, sharex=True)
+    for i, axis in enumerate("xyz"):
+        _demos_and_reproduction(grid[0, i], demos, log, lambda d, i=i: d.p_WE[:, i],
+                                lambda r, i=i: r.p_WE[:, i])
+        _demos_and_reproduction(grid[1, i], demos, log, lambda d, i=i: d.v_WE[:, i],
+                                lambda r, i=i: r.v_WE[:, i])
+        grid[2, i].plot(log.time, log.F_tr[:, i], color="tab:red", linewidth=1.4)
+        grid[0, i].set_ylabel(f"{axis} (m)")
+        grid[1, i].set_ylabel(f"d{axis}/dt (m/s)")
+        grid[2, i].set_ylabel(f"F_tr,{axis} (N)")
+        grid[2, i].set_xlabel("time (s)")
+    grid[0, 0].legend(loc="best", fontsize="small")
+    figure.suptitle("Cotter pin: reproduced position (d), velocity (e), tracking force (f)")
+    return figure
+
+
+def plot_drawing_reproduction(demos, log):
+    """Fig. 10: x, y, z and stiffness of the drawing demonstrations (grey) and reproduction (red).
+
+    Parameters
+    ----------
+    demos : sequence of Demonstration: ``p_WE``, ``gain``.
+    log : ReproductionLog: ``p_WE``, ``k_star``.
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure, four axes sharing time.
+    """
+    figure = Figure(figsize=(8, 8), layout="constrained")
+    grid = figure.subplots(4, 1, sharex=True)
+    for i, axis in enumerate("xyz"):
+        _demos_and_reproduction(grid[i], demos, log, lambda d, i=i: d.p_WE[:, i],
+                                lambda r, i=i: r.p_WE[:, i])
+        grid[i].set_ylabel(f"{axis} (m)")
+    _demos_and_reproduction(grid[3], demos, log, lambda d: d.gain, lambda r: r.k_star)
+    grid[3].set_ylabel("stiffness K")
+    grid[3].set_xlabel("time (s)")
+    grid[0].legend(loc="best", fontsize="small")
+    figure.suptitle("Drawing: demonstrations and reproduction (Fig. 10)")
+    return figure
+
+
+def plot_strokes(strokes, *, title="Strokes drawn by the reproduction, seen from above (Fig. 11)"):
+    """Fig. 11: the ink strokes in the paper's plane (x, y of the world), equal axes.
+
+    Parameters
+    ----------
+    strokes : sequence of arrays, shape (k, >= 2), m; one line each.
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure
+    """
+    figure = Figure(figsize=(5, 6), layout="constrained")
+    axes = figure.subplots()
+    for i, stroke in enumerate(strokes, start=1):
+        stroke = np.asarray(stroke, dtype=float)
+        if stroke.ndim != 2 or stroke.shape[1] < 2:
+            raise ValueError(f"stroke {i} must have shape (k, 2 or 3), got {stroke.shape}")
+        axes.plot(stroke[:, 0], stroke[:, 1], linewidth=2.0, label=f"stroke {i}")
+    axes.set_aspect("equal")
+    axes.set_xlabel("x (m)")
+    axes.set_ylabel("y (m)")
+    if strokes:
+        axes.legend(loc="best", fontsize="small")
+    axes.set_title(title)
     return figure

@@ -77,9 +77,13 @@ def test_gain_law_plots_eq_22_per_shape_factor():
 
 def test_time_series_draws_one_axis_per_signal_and_a_line_per_column():
     time = np.linspace(0.0, 1.0, 11)
-    figure = plot_time_series(time, {"gain": 2 * time, "p_WE (m)": np.outer(time, [1, 2, 3])})
-    gain_axes, position_axes = figure.axes
+    figure = plot_time_series(time, {"gain": 2 * time, "p_WE (m)": np.outer(time, [1, 2, 3]),
+                                     "k*": 4 * time[:, None]})
+    gain_axes, position_axes, k_axes = figure.axes
     np.testing.assert_array_equal(gain_axes.get_lines()[0].get_ydata(), 2 * time)
+    (k_line,) = k_axes.get_lines()  # a one-column signal is one unlabelled line
+    np.testing.assert_array_equal(k_line.get_ydata(), 4 * time)
+    assert k_axes.get_legend() is None
     lines = position_axes.get_lines()
     assert [line.get_label() for line in lines] == ["x", "y", "z"]
     np.testing.assert_array_equal(lines[2].get_ydata(), 3 * time)
