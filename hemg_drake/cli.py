@@ -5,14 +5,30 @@ Sub-commands import their modules lazily so that ``hemg-drake --help`` is instan
 
 import argparse
 import sys
-from pathlib import Path
 
 
 def _demo(args):
-    from hemg_drake.diagrams.arm_demo import run_arm_demo
+    from hemg_drake.pipeline import run_demo
 
-    replay = run_arm_demo(out_dir=Path(args.out), duration=args.duration)
-    print(f"wrote {replay}")
+    run_demo(args.out, tasks=args.tasks, replays=not args.no_replay)
+
+
+def _learn(args):
+    from hemg_drake.pipeline import learn
+
+    learn(args.run, n_iter=args.iterations)
+
+
+def _reproduce(args):
+    from hemg_drake.pipeline import reproduce
+
+    reproduce(
+        args.run,
+        start_offset=args.start_offset,
+        weighting=args.weighting,
+        out_dir=args.out,
+        replay=not args.no_replay,
+    )
 
 
 def _demonstrate(args):
@@ -58,10 +74,36 @@ def build_parser():
     parser = argparse.ArgumentParser(prog="hemg-drake", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True)
 
-    demo = commands.add_parser("demo", help="run the main job (make demo)")
-    demo.add_argument("--out", default="runs/demo", help="output folder")
-    demo.add_argument("--duration", type=float, default=6.0, help="simulated seconds")
+    demo = commands.add_parser(
+        "demo", help="the main job (make demo): demonstrate, learn, reproduce both tasks"
+    )
+    demo.add_argument("--out", default="runs", help="output folder (one sub-folder per task)")
+    demo.add_argument(
+        "--tasks", nargs="+", default=["cotter_pin", "drawing"], help="tasks to run"
+    )
+    demo.add_argument("--no-replay", action="store_true", help="write no HTML replays")
     demo.set_defaults(func=_demo)
+
+    learn = commands.add_parser("learn", help="fit the HSMM of a run folder's dataset")
+    learn.add_argument("run", help="run folder holding dataset.npz, e.g. runs/cotter_pin/")
+    learn.add_argument("--iterations", type=int, default=100, help="EM iterations at most")
+    learn.set_defaults(func=_learn)
+
+    reproduce = commands.add_parser(
+        "reproduce", help="simulate the learnt task; write replay, figures, metrics"
+    )
+    reproduce.add_argument("run", help="run folder holding dataset.npz and model.npz")
+    reproduce.add_argument(
+        "--start-offset", type=float, nargs=3, default=[0.0, 0.0, 0.0],
+        metavar=("DX", "DY", "DZ"), help="start this far from the demonstrations' start (m)",
+    )  # fmt: skip
+    reproduce.add_argument(
+        "--weighting", choices=["temporal", "spatial", "forward"],
+        help="HSMM state weighting (default per task)",
+    )  # fmt: skip
+    reproduce.add_argument("--out", help="output folder (default: the run folder)")
+    reproduce.add_argument("--no-replay", action="store_true", help="write no HTML replay")
+    reproduce.set_defaults(func=_reproduce)
 
     demonstrate = commands.add_parser(
         "demonstrate",

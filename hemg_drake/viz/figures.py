@@ -354,34 +354,6 @@ def plot_gmr_field(model, demos=(), *, plane=(0, 2), grid=15):
     return figure
 
 
-def plot_state_activations(time, h, *, title="HSMM state activations (Fig. 8 (c))"):
-    """State weights h_i(t) of an HSMM over time, one line per state (Fig. 8 (c)).
-
-    Parameters
-    ----------
-    time : array, shape (T,), s.
-    h : array, shape (T, N), rows summing to 1.
-
-    Returns
-    -------
-    figure : matplotlib.figure.Figure
-    """
-    time, h = np.asarray(time, dtype=float), np.asarray(h, dtype=float)
-    if h.ndim != 2 or time.shape != (len(h),):
-        raise ValueError(f"time (T,) and h (T, N) must match, got {time.shape} and {h.shape}")
-    figure = Figure(figsize=(8, 3), layout="constrained")
-    axes = figure.subplots()
-    for i, column in enumerate(h.T, start=1):
-        axes.plot(time, column, linewidth=1.2, label=f"state {i}")
-    axes.set_xlabel("time (s)")
-    axes.set_ylabel("activation h_i")
-    axes.set_ylim(-0.05, 1.05)
-    if h.shape[1] <= 6:
-        axes.legend(loc="upper right", fontsize="small")
-    axes.set_title(title)
-    return figure
-
-
 def _demos_and_reproduction(axes, demos, log, demo_values, log_values):
     """Demonstrations in grey, the reproduction in red, on one axis."""
     for c, demo in enumerate(demos):

@@ -1,0 +1,388 @@
+"""The autonomous reproduction diagram (the paper's Sec. III-C): HSMM-GMR drives the slave alone.
+
+Signal flow (each box a system of this package or Drake, named as in the diagram)::
+
+    reproducer --x_star--> clik --q_desired, v_desired--> pd --> plant
+    x_star (default) or tool_point's p_WE --> reproducer (the position it observes)
+    reproducer --k_star--> stiffness_limits --gain--> pd
+    reproducer --x_star, xdot_star--> tracking_force (goal x_g) --F_tr--> exported port
+    logger (every log_period): x*, xdot*, k*, h, p_WE, v_WE, f_WE, F_tr
+
+No operator, master or sEMG: the reproducer (eqs. 12-18) generates the reference x*
+(eq. 18) that CLIK (eq. 21) turns into a joint reference, and the stiffness k* that sets the
+variable-gain PD's K (eq. 20). The tracking force of
+eq. 23 is computed from x*, xdot* and the task's goal (the last waypoint of the scenario's
+plan) and exported as the diagram's output port ``tracking_force``, to display on a master
+when one is connected.
+
+Modelling choices. The position x_t that the reproducer observes (input of its weights and
+of GMR) is by default its own reference x*_t (``observe="reference"``): the learnt
+dynamical system then runs on its own state, exactly as the numpy
+:func:`~hemg_drake.learning.reproduce.reproduce`, and the slave tracks it with the learnt
+stiffness. ``observe="tool"`` feeds the slave's actual tool point instead (the paper's
+wording); then any tracking error the task imposes (the detent holding the pin while K is
+low) is integrated into x* by eq. 18, and x* runs away from a slave that cannot follow
+(measured on the cotter pin). k* is clipped to the scenario's [k_min, k_max] (Drake's ``Saturation``):
+GMR may extrapolate beyond the demonstrated gains, and the PD is only checked inside its
+range. The arm starts at rest with its tool point on ``start`` (default: the demonstrations'
+start, the task plan's first point), placed there by the damped-Newton inverse kinematics
+of the demonstration diagram.
+
+:func:`build_reproduction_diagram` builds it; :func:`run_reproduction` simulates it and
+returns a :class:`ReproductionLog` and the task's outcome.
+"""
+
+import dataclasses as dc
+
+import numpy as np
+from pydrake.geometry import MeshcatVisualizer
+from pydrake.multibody.plant import AddMultibodyPlant
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import (
+    ConstantVectorSource,
+    LogVectorOutput,
+    Multiplexer,
+    Saturation,
+)
+
+from hemg_drake.control.clik import Clik
+from hemg_drake.control.pd import VariableGainPd
+from hemg_drake.diagrams.demonstration import (
+    ToolPointKinematics,
+    _add_scene,
+    solve_arm_positions,
+)
+from hemg_drake.learning.systems import HsmmGmrReproducer, TrackingForce
+from hemg_drake.robots.baxter import FLOOR_Z, add_baxter_arm
+
+# Table I's K_pm = K_dm = 50, for eq. 23's K_ptr (N/m) and K_dtr (N s/m).
+TRACKING_GAINS = (50.0, 50.0)
+# What the reproducer observes as the current position (see the module notes).
+OBSERVED = ("reference", "tool")
+# Size of the model's position x (a point in space) and of its stiffness k.
+POSITION_SIZE = 3
+# A model is learnt over xi = [x, xdot, k]: D = 3 + 3 + 1.
+MODEL_DIMENSION = 7
+
+
+@dc.dataclass(frozen=True, eq=False)
+class ReproductionLog:
+    """One reproduction as logged every ``log_period``; T samples, N HSMM states.
+
+    Attributes
+    ----------
+    time : array, shape (T,), s.
+    x_star, xdot_star : arrays, shape (T, 3), the reference (m, m/s; eqs. 15-18).
+    k_star : array, shape (T,), the stiffness K fed to the PD (clipped to [k_min, k_max]).
+    h : array, shape (T, N), the HSMM state weights (eq. 12).
+    p_WE, v_WE : arrays, shape (T, 3), the slave's actual tool point (m, m/s).
+    f_WE : array, shape (T, 3), force of the task on the tool point (N, W).
+    F_tr : array, shape (T, 3), the tracking force of eq. 23 (N).
+    """
+
+    time: np.ndarray
+    x_star: np.ndarray
+    xdot_star: np.ndarray
+    k_star: np.ndarray
+    h: np.ndarray
+    p_WE: np.ndarray
+    v_WE: np.ndarray
+    f_WE: np.ndarray
+    F_tr: np.ndarray
+
+    def observations(self):
+        """[x, xdot, k] of the *actual* slave, shape (T, 7): what Table II compares."""
+        return np.column_stack([self.p_WE, self.v_WE, self.k_star])
+
+    def save(self, path):
+        """Write the log to an NPZ file, atomically."""
+        from hemg_drake.fileio import save_npz_atomic
+
+        save_npz_atomic(path, **dc.asdict(self))
+
+
+@dc.dataclass(frozen=True, eq=False)
+class ReproductionDiagram:
+    """A built reproduction diagram and handles into it.
+
+    Attributes
+    ----------
+    diagram : Diagram
+        Subsystems by name: ``plant``, ``scene_graph``, ``reproducer``, ``clik``, ``pd``,
+        ``stiffness_limits``, ``tool_point``, ``tracking_force``, ``goal``, ``logger``;
+        exported output port ``tracking_force`` (3, N).
+    plant : MultibodyPlant
+    arm : BaxterArm
+    scene : object or None
+        What the task's scene builder returned; None in free space.
+    logger : VectorLogSink
+    start : array, shape (3,), x*_0 and the arm's initial tool point (m).
+    goal : array, shape (3,), x_g of eq. 23 (m).
+    n_states : int, N.
+    """
+
+    diagram: object
+    plant: object
+    arm: object
+    scene: object
+    logger: object
+    start: np.ndarray
+    goal: np.ndarray
+    n_states: int
+
+    def log(self, context):
+        """The :class:`ReproductionLog` recorded so far in the diagram's ``context``."""
+        log = self.logger.FindLog(context)
+        data, fields, row = log.data(), {}, 0
+        for name, width in _log_widths(self.n_states).items():
+            block = data[row : row + width].T
+            fields[name] = block[:, 0] if name == "k_star" else block
+            row += width
+        return ReproductionLog(time=log.sample_times(), **fields)
+
+
+def _log_widths(n_states):
+    return {
+        "x_star": 3, "xdot_star": 3, "k_star": 1, "h": n_states,
+        "p_WE": 3, "v_WE": 3, "f_WE": 3, "F_tr": 3,
+    }  # fmt: skip
+
+
+def check_model(model):
+    """Raise ValueError unless ``model`` is a fitted HSMM over [x, xdot, k] (D = 7)."""
+    n_dims = model.n_dims_  # raises a ValueError if not fitted
+    if n_dims != MODEL_DIMENSION or len(model.position_dims_) != POSITION_SIZE:
+        raise ValueError(
+            f"the model has D = {n_dims} dimensions with a {len(model.position_dims_)}-D "
+            f"position; reproduction needs D = {MODEL_DIMENSION}: [x (3), xdot (3), k (1)]"
+        )
+
+
+def build_reproduction_diagram(
+    scenario,
+    model,
+    *,
+    start=None,
+    weighting="forward",
+    observe="reference",
+    tracking_gains=TRACKING_GAINS,
+    meshcat=None,
+    recorder=None,
+    scene=True,
+):
+    """Build the reproduction diagram of a learnt task.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The task (scene, plan, goal), the plant, CLIK settings and the gain range.
+    model : HSMM
+        Fitted over [x, xdot, k] (D = 7).
+    start : array, shape (3,), optional
+        Where the tool point starts (m); default the task plan's first point, where the
+        demonstrations start.
+    weighting : {"temporal", "spatial", "forward"}
+        State weighting of the reproducer (:mod:`hemg_drake.learning.reproduce`).
+    observe : {"reference", "tool"}
+        The position the reproducer observes: its own x* or the slave's tool point.
+    tracking_gains : (float, float)
+        K_ptr (N/m) and K_dtr (N s/m) of eq. 23.
+    meshcat : Meshcat, optional
+        Live view: a ``MeshcatVisualizer`` is added.
+    recorder : ReplayRecorder, optional
+        Attached to the scene graph, to record an HTML replay.
+    scene : bool
+        False leaves out the task's scene (free space, no force).
+
+    Returns
+    -------
+    ReproductionDiagram
+
+    Raises
+    ------
+    ValueError
+        A model of another dimension or not fitted, a start of the wrong shape, NaN or out
+        of the arm's reach, a bad weighting or gains.
+    """
+    check_model(model)
+    if observe not in OBSERVED:
+        raise ValueError(f"observe must be one of {OBSERVED}, got {observe!r}")
+    plan = scenario.task_plan()
+    start = plan.points[0] if start is None else np.asarray(start, dtype=float)
+    if start.shape != (3,) or not np.all(np.isfinite(start)):
+        raise ValueError(f"start must be 3 finite numbers (m), got {start!r}")
+    goal = np.array(plan.points[-1], dtype=float)
+
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(scenario.plant, builder)
+    arm = add_baxter_arm(plant)
+    task_scene = _add_scene(scenario, plant, arm) if scene else None
+    plant.Finalize()
+    plant.SetDefaultPositions(arm.model_instance, solve_arm_positions(plant, arm, start))
+
+    def add(name, system):
+        return builder.AddNamedSystem(name, system)
+
+    reproducer = add(
+        "reproducer",
+        HsmmGmrReproducer(model=model, start=start, dt=scenario.log_period, weighting=weighting),
+    )
+    clik_config = scenario.clik
+    clik = add(
+        "clik",
+        Clik(
+            plant=plant,
+            model_instance=arm.model_instance,
+            frame_E=arm.tool_frame,
+            gain=clik_config.gain,
+            method=clik_config.method,
+            damping=clik_config.damping,
+            period=clik_config.period,
+        ),
+    )
+    pd = add("pd", VariableGainPd(plant=plant, arm=arm))
+    limits = add("stiffness_limits", Saturation([scenario.emg.k_min], [scenario.emg.k_max]))
+    tool_point = add("tool_point", ToolPointKinematics(plant=plant, arm=arm))
+    kp, kd = tracking_gains
+    tracking = add("tracking_force", TrackingForce(kp=kp, kd=kd))
+    goal_source = add("goal", ConstantVectorSource(goal))
+
+    arm_state = plant.get_state_output_port(arm.model_instance)
+    connect = builder.Connect
+    connect(arm_state, tool_point.state_input)
+    connect(arm_state, clik.GetInputPort("state"))
+    connect(arm_state, pd.state_input)
+    observed = tool_point.p_WE_output if observe == "tool" else reproducer.GetOutputPort("x_star")
+    connect(observed, reproducer.GetInputPort("p_WE"))
+    connect(reproducer.GetOutputPort("x_star"), clik.GetInputPort("p_WE_desired"))
+    connect(clik.GetOutputPort("q_desired"), pd.q_desired_input)
+    connect(clik.GetOutputPort("v_desired"), pd.v_desired_input)
+    connect(reproducer.GetOutputPort("k_star"), limits.get_input_port())
+    connect(limits.get_output_port(), pd.gain_input)
+    connect(pd.torque_output, plant.get_actuation_input_port(arm.model_instance))
+    connect(reproducer.GetOutputPort("x_star"), tracking.GetInputPort("x_star"))
+    connect(reproducer.GetOutputPort("xdot_star"), tracking.GetInputPort("xdot_star"))
+    connect(goal_source.get_output_port(), tracking.GetInputPort("x_goal"))
+    builder.ExportOutput(tracking.GetOutputPort("F_tr"), "tracking_force")
+
+    f_WE = (
+        task_scene.force_output_port(builder)
+        if task_scene is not None
+        else add("no_contact", ConstantVectorSource(np.zeros(3))).get_output_port()
+    )
+    sources = {
+        "x_star": reproducer.GetOutputPort("x_star"),
+        "xdot_star": reproducer.GetOutputPort("xdot_star"),
+        "k_star": limits.get_output_port(),
+        "h": reproducer.GetOutputPort("h"),
+        "p_WE": tool_point.p_WE_output,
+        "v_WE": tool_point.v_WE_output,
+        "f_WE": f_WE,
+        "F_tr": tracking.GetOutputPort("F_tr"),
+    }
+    widths = _log_widths(model.n_states)
+    mux = add("log_mux", Multiplexer(list(widths.values())))
+    for i, name in enumerate(widths):
+        connect(sources[name], mux.get_input_port(i))
+    logger = LogVectorOutput(mux.get_output_port(), builder, scenario.log_period)
+    logger.set_name("logger")
+
+    if meshcat is not None:
+        MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
+    if recorder is not None:
+        recorder.add_to_builder(builder, scene_graph)
+    diagram = builder.Build()
+    diagram.set_name("reproduction")
+    return ReproductionDiagram(
+        diagram, plant, arm, task_scene, logger, start.copy(), goal, model.n_states
+    )
+
+
+@dc.dataclass(frozen=True, eq=False)
+class ReproductionResult:
+    """What :func:`run_reproduction` returns.
+
+    Attributes
+    ----------
+    log : ReproductionLog
+    pin_displacement : float or None
+        Cotter pin: the pin's withdrawal at the end (m); None for other tasks.
+    pin_out : bool or None
+        Cotter pin: withdrawn by at least its length.
+    """
+
+    log: ReproductionLog
+    pin_displacement: float = None
+    pin_out: bool = None
+
+
+def run_reproduction(
+    scenario,
+    model,
+    *,
+    duration=None,
+    start=None,
+    weighting="forward",
+    observe="reference",
+    replay_path=None,
+    scene=True,
+):
+    """Simulate a reproduction.
+
+    Parameters
+    ----------
+    scenario, model, start, weighting, observe, scene
+        As :func:`build_reproduction_diagram`.
+    duration : float, optional
+        Simulated seconds; default ``scenario.duration`` (a demonstration's length).
+    replay_path : path-like, optional
+        Write a self-contained HTML replay there.
+
+    Returns
+    -------
+    ReproductionResult
+    """
+    duration = scenario.duration if duration is None else float(duration)
+    if not (np.isfinite(duration) and duration > 0):
+        raise ValueError(f"duration must be a positive number of seconds, got {duration}")
+    recorder = None
+    if replay_path is not None:
+        from hemg_drake.viz.recording import ReplayRecorder
+
+        recorder = ReplayRecorder(floor_z=FLOOR_Z)
+    built = build_reproduction_diagram(
+        scenario,
+        model,
+        start=start,
+        weighting=weighting,
+        observe=observe,
+        recorder=recorder,
+        scene=scene,
+    )
+    simulator = Simulator(built.diagram)
+    simulator.Initialize()
+    if recorder is not None:
+        recorder.start()
+    # The logger samples at multiples of log_period; reach the last one.
+    simulator.AdvanceTo(duration + 1e-9)
+    context = simulator.get_context()
+    log = built.log(context)
+    if recorder is not None:
+        if scene and scenario.task == "drawing":
+            from hemg_drake.viz.ink import add_ink_to_recording, in_contact
+
+            # Just above the sheet: the tip's own heights are inside the compliant paper.
+            height = built.scene.paper_height + 5e-4
+            touching = in_contact(log.f_WE)
+            add_ink_to_recording(recorder.meshcat, log.time, log.p_WE, touching, height=height)
+        recorder.stop_and_export(replay_path)
+    result = ReproductionResult(log=log)
+    if scene and scenario.task == "cotter_pin":
+        plant_context = built.plant.GetMyContextFromRoot(context)
+        result = ReproductionResult(
+            log=log,
+            pin_displacement=built.scene.pin_displacement(plant_context),
+            pin_out=bool(built.scene.pin_out(plant_context)),
+        )
+    return result

@@ -1,0 +1,269 @@
+"""How well a reproduction does its task: the paper's Table II and the task checks.
+
+**Alignment (Table II).** Demonstrations differ in timing (each operator segment runs
+longer or shorter), so a sample-by-sample comparison would mostly measure timing. The
+reference is the *mean demonstration after DTW*: every demonstration is aligned to the
+first one by dynamic time warping on the positions, the samples matched to each sample of
+the first are averaged, then over the demonstrations (:func:`mean_demonstration`). The
+reproduction is aligned to that mean by DTW on the positions, and both RMSEs are taken over
+the pairs of the warping path (:func:`aligned_rmse`)::
+
+    RMSE_x    = sqrt( mean over pairs (k, l) of |x*_k - xbar_l|^2 )      (m)
+    RMSE_xdot = sqrt( mean over pairs (k, l) of |xdot*_k - xbardot_l|^2 )  (m/s)
+
+with |.| the Euclidean norm over the three axes. :func:`time_normalised_rmse` gives the
+plain alternative (every signal resampled to a common length over its own duration), kept
+for comparison. The velocities follow the position path: DTW never aligns on them.
+
+**Tasks.** Drawing: the strokes are cut from a log by
+:func:`hemg_drake.viz.ink.ink_strokes`; :func:`stroke_shape_error` compares a stroke with the demonstrations' mean stroke after
+resampling both by arc length. Forces: :func:`force_statistics`. Stiffness:
+:func:`stiffness_correlation` (Pearson, along the same warping path).
+"""
+
+import numba
+import numpy as np
+
+ALIGNMENT = (
+    "DTW on position against the mean demonstration (each demonstration DTW-aligned to the "
+    "first and averaged); RMSE of the Euclidean error over the warping path"
+)
+
+
+def _as_trajectory(name, values, width=None):
+    values = np.asarray(values, dtype=float)
+    if values.ndim == 1:
+        values = values[:, None]
+    if values.ndim != 2 or len(values) < 2:
+        raise ValueError(f"{name} must have shape (T >= 2, D), got {np.shape(values)}")
+    if width is not None and values.shape[1] != width:
+        raise ValueError(f"{name} must have {width} columns, got shape {values.shape}")
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"{name} contains NaN or inf")
+    return values
+
+
+@numba.njit(cache=True)
+def _dtw_path(a, b):
+    """Warping path minimising the summed Euclidean distances; indices from (0, 0)."""
+    n, m = a.shape[0], b.shape[0]
+    cost = np.full((n + 1, m + 1), np.inf)
+    cost[0, 0] = 0.0
+    for i in range(1, n + 1):
+        for j in range(1, m + 1):
+            distance = 0.0
+            for d in range(a.shape[1]):
+                distance += (a[i - 1, d] - b[j - 1, d]) ** 2
+            cost[i, j] = np.sqrt(distance) + min(cost[i - 1, j - 1], cost[i - 1, j], cost[i, j - 1])
+    path_a = np.empty(n + m, dtype=np.int64)
+    path_b = np.empty(n + m, dtype=np.int64)
+    i, j, k = n, m, 0
+    while i > 0 and j > 0:
+        path_a[k], path_b[k] = i - 1, j - 1
+        k += 1
+        diagonal, up, left = cost[i - 1, j - 1], cost[i - 1, j], cost[i, j - 1]
+        if diagonal <= up and diagonal <= left:
+            i, j = i - 1, j - 1
+        elif up <= left:
+            i -= 1
+        else:
+            j -= 1
+    return path_a[:k][::-1].copy(), path_b[:k][::-1].copy()
+
+
+def dtw_path(a, b):
+    """Dynamic time warping of two trajectories (Euclidean local distance).
+
+    Parameters
+    ----------
+    a : array, shape (Ta, D)
+    b : array, shape (Tb, D)
+
+    Returns
+    -------
+    index_a, index_b : arrays of int, shape (L,)
+        Matched samples, from (0, 0) to (Ta - 1, Tb - 1), each step advancing one or both.
+    """
+    a = _as_trajectory("a", a)
+    b = _as_trajectory("b", b, a.shape[1])
+    return _dtw_path(np.ascontiguousarray(a), np.ascontiguousarray(b))
+
+
+def mean_demonstration(demos, position_columns=slice(0, 3)):
+    """The demonstrations averaged on the time axis of the first, after DTW.
+
+    Parameters
+    ----------
+    demos : list of arrays, shape (T_c, D)
+        Columns ``position_columns`` are aligned on; all columns are averaged.
+    position_columns : slice or sequence of int
+
+    Returns
+    -------
+    array, shape (T_0, D)
+    """
+    demos = [_as_trajectory(f"demo {c}", demo) for c, demo in enumerate(demos)]
+    if not demos:
+        raise ValueError("mean_demonstration needs at least one demonstration")
+    reference = demos[0]
+    total = np.zeros_like(reference)
+    for c, demo in enumerate(demos):
+        if demo.shape[1] != reference.shape[1]:
+            raise ValueError(f"demo {c} has {demo.shape[1]} columns, demo 0 has {reference.shape[1]}")
+        index_ref, index_demo = dtw_path(reference[:, position_columns], demo[:, position_columns])
+        # Average the samples matched to each reference sample (each is matched at least once).
+        counts = np.bincount(index_ref, minlength=len(reference))[:, None]
+        sums = np.zeros_like(reference)
+        np.add.at(sums, index_ref, demo[index_demo])
+        total += sums / counts
+    return total / len(demos)
+
+
+def aligned_rmse(reproduced, reference, position_columns=slice(0, 3), velocity_columns=slice(3, 6)):
+    """Table II's RMSEs of a reproduction against a reference, along their DTW path.
+
+    Parameters
+    ----------
+    reproduced, reference : arrays, shape (T, D) and (T_ref, D)
+        Same columns, e.g. [x, xdot, k].
+
+    Returns
+    -------
+    dict
+        ``position_rmse`` (m), ``velocity_rmse`` (m/s), and ``path``: the matched indices.
+    """
+    reproduced = _as_trajectory("reproduced", reproduced)
+    reference = _as_trajectory("reference", reference, reproduced.shape[1])
+    path = dtw_path(reproduced[:, position_columns], reference[:, position_columns])
+    return {
+        "position_rmse": _rmse(reproduced[path[0], position_columns], reference[path[1], position_columns]),
+        "velocity_rmse": _rmse(reproduced[path[0], velocity_columns], reference[path[1], velocity_columns]),
+        "path": path,
+    }
+
+
+def _rmse(a, b):
+    return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))))
+
+
+def time_normalise(trajectory, n_samples):
+    """Resample a trajectory to ``n_samples`` at equal fractions of its duration (linear).
+
+    Parameters
+    ----------
+    trajectory : array, shape (T, D)
+    n_samples : int >= 2
+
+    Returns
+    -------
+    array, shape (n_samples, D)
+    """
+    trajectory = _as_trajectory("trajectory", trajectory)
+    if not isinstance(n_samples, (int, np.integer)) or n_samples < 2:
+        raise ValueError(f"n_samples must be an integer >= 2, got {n_samples!r}")
+    old = np.linspace(0.0, 1.0, len(trajectory))
+    new = np.linspace(0.0, 1.0, n_samples)
+    return np.column_stack([np.interp(new, old, column) for column in trajectory.T])
+
+
+def time_normalised_rmse(reproduced, demos, position_columns=slice(0, 3), velocity_columns=slice(3, 6)):
+    """RMSEs against the mean of the demonstrations, all resampled to the mean length.
+
+    Returns
+    -------
+    dict with ``position_rmse`` (m) and ``velocity_rmse`` (m/s).
+    """
+    demos = [_as_trajectory(f"demo {c}", demo) for c, demo in enumerate(demos)]
+    if not demos:
+        raise ValueError("time_normalised_rmse needs at least one demonstration")
+    n_samples = int(round(np.mean([len(demo) for demo in demos])))
+    mean = np.mean([time_normalise(demo, n_samples) for demo in demos], axis=0)
+    reproduced = time_normalise(reproduced, n_samples)
+    return {
+        "position_rmse": _rmse(reproduced[:, position_columns], mean[:, position_columns]),
+        "velocity_rmse": _rmse(reproduced[:, velocity_columns], mean[:, velocity_columns]),
+    }
+
+
+def stiffness_correlation(k_reproduced, k_reference, path=None):
+    """Pearson correlation of two stiffness profiles, along a warping path if given.
+
+    Parameters
+    ----------
+    k_reproduced : array, shape (T,)
+    k_reference : array, shape (T_ref,)
+        Same length as ``k_reproduced`` unless ``path`` is given.
+    path : (index_reproduced, index_reference), optional
+        E.g. ``aligned_rmse(...)["path"]``.
+
+    Returns
+    -------
+    float in [-1, 1], or None when either profile is constant (undefined).
+    """
+    k_reproduced = _as_trajectory("k_reproduced", k_reproduced, 1)[:, 0]
+    k_reference = _as_trajectory("k_reference", k_reference, 1)[:, 0]
+    if path is not None:
+        k_reproduced, k_reference = k_reproduced[path[0]], k_reference[path[1]]
+    elif len(k_reproduced) != len(k_reference):
+        raise ValueError(
+            f"k_reproduced and k_reference differ in length ({len(k_reproduced)}, "
+            f"{len(k_reference)}); give the warping path"
+        )
+    if np.ptp(k_reproduced) == 0 or np.ptp(k_reference) == 0:
+        return None
+    return float(np.corrcoef(k_reproduced, k_reference)[0, 1])
+
+
+def force_statistics(force):
+    """Peak and mean of the norm of a force over time.
+
+    Parameters
+    ----------
+    force : array, shape (T, 3), N.
+
+    Returns
+    -------
+    dict with ``peak`` and ``mean`` (N).
+    """
+    norm = np.linalg.norm(_as_trajectory("force", force, 3), axis=1)
+    return {"peak": float(norm.max()), "mean": float(norm.mean())}
+
+
+def resample_by_arc_length(points, n_samples=50):
+    """``n_samples`` points equally spaced along a polyline (the first and last kept).
+
+    Parameters
+    ----------
+    points : array, shape (T, D), T >= 2, not all equal.
+
+    Returns
+    -------
+    array, shape (n_samples, D)
+    """
+    points = _as_trajectory("points", points)
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    if arc[-1] == 0:
+        raise ValueError("a stroke of zero length cannot be resampled by arc length")
+    new = np.linspace(0.0, arc[-1], n_samples)
+    return np.column_stack([np.interp(new, arc, column) for column in points.T])
+
+
+def stroke_shape_error(stroke, demo_strokes, n_samples=50):
+    """RMS distance between a stroke and the mean of the demonstrations' same stroke.
+
+    Every stroke is resampled by arc length to ``n_samples`` points; the mean stroke is
+    their point-wise mean.
+
+    Parameters
+    ----------
+    stroke : array, shape (T, D), positions (e.g. x, y on the paper), m.
+    demo_strokes : list of arrays, shape (T_c, D)
+
+    Returns
+    -------
+    float, m.
+    """
+    if not demo_strokes:
+        raise ValueError("stroke_shape_error needs at least one demonstrated stroke")
+    mean = np.mean([resample_by_arc_length(s, n_samples) for s in demo_strokes], axis=0)
+    return _rmse(resample_by_arc_length(stroke, n_samples), mean)

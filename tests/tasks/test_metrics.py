@@ -1,0 +1,108 @@
+"""Reproduction metrics on synthetic data with known answers."""
+
+import numpy as np
+import pytest
+
+from hemg_drake.tasks import metrics
+
+
+def ramp(n, *, speed=1.0, offset=0.0):
+    """[x, xdot, k] of a point moving along x at ``speed`` over n samples of 0.01 s."""
+    t = 0.01 * np.arange(n)
+    x = np.column_stack([offset + speed * t, np.zeros(n), np.zeros(n)])
+    v = np.column_stack([np.full(n, speed), np.zeros(n), np.zeros(n)])
+    return np.column_stack([x, v, 50.0 + 10.0 * t])
+
+
+def test_dtw_path_undoes_a_time_warp():
+    t = np.linspace(0.0, 1.0, 200)
+    a = np.column_stack([np.sin(3 * t), t])
+    warped = t**2  # the same path, traversed slowly then quickly
+    b = np.column_stack([np.sin(3 * warped), warped])
+    index_a, index_b = metrics.dtw_path(a, b)
+    assert (index_a[0], index_b[0]) == (0, 0) and (index_a[-1], index_b[-1]) == (199, 199)
+    assert np.all(np.diff(index_a) >= 0) and np.all(np.diff(index_b) >= 0)
+    # Matched samples sit at the same place on the path, to the sampling resolution.
+    assert np.max(np.abs(t[index_a] - warped[index_b])) < 0.02
+
+
+def test_rmse_of_a_constant_offset_is_the_offset():
+    reference = ramp(300)
+    shifted = reference.copy()
+    shifted[:, 1] += 0.002  # 2 mm beside the path, same velocity
+    result = metrics.aligned_rmse(shifted, reference)
+    assert result["position_rmse"] == pytest.approx(0.002, rel=1e-9)
+    assert result["velocity_rmse"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_rmse_ignores_timing_but_not_speed_errors():
+    reference = ramp(300)
+    # Same path, 1.5x slower but on the same samples' positions: DTW aligns it.
+    slow = ramp(450, speed=1.0 / 1.5)
+    result = metrics.aligned_rmse(slow, reference)
+    assert result["position_rmse"] < 0.01 / 1.5  # within one sample's travel
+    # The velocity error is the speed difference.
+    assert result["velocity_rmse"] == pytest.approx(1.0 - 1.0 / 1.5, rel=1e-6)
+    # Time normalisation compares the same fractions of time: the same path again (the two
+    # end 3.3 mm apart, less than one reference sample's travel).
+    plain = metrics.time_normalised_rmse(slow, [reference])
+    assert plain["position_rmse"] < 0.004
+
+
+def test_mean_demonstration_averages_aligned_demos():
+    # Two demonstrations 2 mm either side of the path, one of them slower: the mean is the path.
+    a, b = ramp(300), ramp(600, speed=0.5)
+    a[:, 2] += 0.002
+    b[:, 2] -= 0.002
+    mean = metrics.mean_demonstration([a, b])
+    assert mean.shape == a.shape
+    np.testing.assert_allclose(mean[:, 2], 0.0, atol=1e-12)
+    np.testing.assert_allclose(mean[:, 0], a[:, 0], atol=0.006)
+
+
+def test_stiffness_correlation():
+    k = np.sin(np.linspace(0, 6, 100))
+    assert metrics.stiffness_correlation(3 * k + 1, k) == pytest.approx(1.0)
+    assert metrics.stiffness_correlation(-k, k) == pytest.approx(-1.0)
+    assert metrics.stiffness_correlation(np.ones(100), k) is None
+    # Along a path: the reproduction's samples are compared with their matched references.
+    path = (np.arange(100), np.arange(100)[::-1])
+    assert metrics.stiffness_correlation(k, k, path) == pytest.approx(
+        np.corrcoef(k, k[::-1])[0, 1]
+    )
+    with pytest.raises(ValueError, match="differ in length"):
+        metrics.stiffness_correlation(k, k[:50])
+
+
+def test_force_statistics():
+    force = np.array([[3.0, 4.0, 0.0], [0.0, 0.0, 1.0]])
+    assert metrics.force_statistics(force) == {"peak": 5.0, "mean": 3.0}
+
+
+def test_stroke_shape_error_is_the_distance_to_the_mean_stroke():
+    line = np.column_stack([np.linspace(0, 0.1, 20), np.zeros(20)])
+    # The demonstrations' mean is the line itself; the stroke lies 3 mm beside it, sampled
+    # more densely (the resampling by arc length makes the sampling irrelevant).
+    demos = [line + [0.0, 0.001], line - [0.0, 0.001]]
+    stroke = np.column_stack([np.linspace(0, 0.1, 57), np.full(57, 0.003)])
+    assert metrics.stroke_shape_error(stroke, demos) == pytest.approx(0.003, rel=1e-9)
+    resampled = metrics.resample_by_arc_length(np.array([[0, 0], [1, 0], [1, 1]]), 5)
+    np.testing.assert_allclose(resampled, [[0, 0], [0.5, 0], [1, 0], [1, 0.5], [1, 1]])
+
+
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (lambda: metrics.dtw_path(np.zeros((5, 2)), np.zeros((5, 3))), "2 columns"),
+        (lambda: metrics.aligned_rmse(np.full((5, 7), np.nan), np.zeros((5, 7))), "NaN"),
+        (lambda: metrics.mean_demonstration([]), "at least one"),
+        (lambda: metrics.time_normalise(np.zeros((5, 2)), 1), "n_samples"),
+        (lambda: metrics.force_statistics(np.zeros((5, 2))), "3 columns"),
+        (lambda: metrics.resample_by_arc_length(np.zeros((5, 2))), "zero length"),
+        (lambda: metrics.stroke_shape_error(np.eye(2), []), "at least one"),
+        (lambda: metrics.aligned_rmse(np.zeros((1, 7)), np.zeros((5, 7))), "T >= 2"),
+    ],
+)
+def test_bad_input_is_a_value_error(call, message):
+    with pytest.raises(ValueError, match=message):
+        call()
