@@ -27,10 +27,10 @@ port and a mode for nothing. The interaction force ``f_WE`` is the bushing's for
 tool in W: pointing down (-z) while the slave pulls on a pin that holds.
 
 Tuning with :class:`~hemg_drake.control.pd.VariableGainPd` (default per-joint scale), CLIK
-following :func:`default_cotter_pin_plan` (0.10 m of travel): measured peak pulls are 17 N
-at K = 5 and 31 N at K = 10, which leave the pin in (``hold_force`` = 50 N), while K = 20
-and above (the EMG chain gives K = 10 at rest, 100 at full contraction) pull it out;
-``docs/tasks.md`` lists the runs.
+following :func:`default_cotter_pin_plan` (0.10 m of travel): the measured peak pulls on
+the tool, 18 N at K = 5, 34 N at K = 10 and 48 N at K = 15, leave the pin in
+(``hold_force`` = 50 N), while K = 20 and above pull it out (the EMG chain's defaults give
+K = 10 at rest and 100 at full contraction); ``docs/tasks.md`` lists the runs.
 """
 
 import dataclasses as dc
