@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from pydrake.common.yaml import yaml_load_typed
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
@@ -185,3 +186,15 @@ def test_scene_refuses_bad_plants_and_stiff_springs():
         add_cotter_pin_scene(plant, arm)
     with pytest.raises(ValueError, match="margin"):
         default_cotter_pin_plan(margin=-0.01)
+
+
+def test_params_load_from_yaml():
+    params = yaml_load_typed(
+        schema=CotterPinParams, data="ring_position: [0.6, -0.8, 0.1]\nhold_force: 60.0\n"
+    )
+    assert params.hold_force == 60.0
+    np.testing.assert_allclose(default_cotter_pin_plan(params).points[0], [0.6, -0.8, 0.1])
+    # yaml_load_typed sets fields after construction: the consumers check them.
+    bad = yaml_load_typed(schema=CotterPinParams, data="hold_force: .nan\n")
+    with pytest.raises(ValueError, match="CotterPinParams.hold_force"):
+        default_cotter_pin_plan(bad)

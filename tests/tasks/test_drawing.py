@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from pydrake.common.yaml import yaml_load_typed
 from pydrake.geometry import Box, Role, Sphere
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.systems.analysis import Simulator
@@ -224,3 +225,13 @@ def test_scene_refuses_bad_plants():
     plant.Finalize()
     with pytest.raises(ValueError, match="before plant.Finalize"):
         add_drawing_scene(plant, arm)
+
+
+def test_params_load_from_yaml():
+    params = yaml_load_typed(
+        schema=DrawingParams, data="paper_center: [0.6, -0.8, 0.05]\nhover_height: 0.04\n"
+    )
+    np.testing.assert_allclose(default_drawing_plan(params).points[0], [0.6, -0.8, 0.09])
+    bad = yaml_load_typed(schema=DrawingParams, data="pen_radius: -0.002\n")
+    with pytest.raises(ValueError, match="DrawingParams.pen_radius"):
+        add_drawing_scene(MultibodyPlant(1e-3), None, params=bad)
