@@ -1,0 +1,98 @@
+"""The reproduction diagram in free space: reference, tracking, stiffness, tracking force."""
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+
+from hemg_drake.diagrams.reproduction import build_reproduction_diagram, run_reproduction
+from hemg_drake.learning.hsmm import HSMM
+from hemg_drake.learning.reproduce import reproduce
+from hemg_drake.learning.systems import tracking_force
+from hemg_drake.scenario import Scenario
+from hemg_drake.tasks.cotter_pin import HOME_TOOL_POINT
+
+DT = 0.01
+START = np.array(HOME_TOOL_POINT)
+
+
+@pytest.fixture(scope="module")
+def model():
+    """An HSMM over [x, xdot, k] of three noisy 5 cm lifts with a stiffness that rises."""
+    rng = np.random.default_rng(0)
+    demos = []
+    for _ in range(3):
+        t = np.linspace(0.0, 1.0, 101)
+        s = t**3 * (10 - 15 * t + 6 * t**2)
+        x = START + np.outer(0.05 * s, [0.0, 0.0, 1.0]) + rng.normal(0, 5e-4, (101, 3))
+        v = np.gradient(x, DT, axis=0)
+        k = 20.0 + 130.0 * s + rng.normal(0, 2.0, 101)
+        demos.append(np.column_stack([x, v, k]))
+    return HSMM(3, init="time", reg_covar=0.1, n_iter=10, seed=0).fit(demos)
+
+
+@pytest.fixture(scope="module")
+def scenario():
+    return Scenario(task="cotter_pin", duration=1.0)
+
+
+@pytest.fixture(scope="module")
+def free_run(scenario, model):
+    return run_reproduction(scenario, model, scene=False, weighting="temporal")
+
+
+def test_reference_is_the_numpy_rollout_and_the_arm_tracks_it(free_run, model):
+    log = free_run.log
+    assert free_run.pin_out is None  # no scene, no pin
+    expected = reproduce(model, START, len(log.time), dt=DT, weighting="temporal")
+    np.testing.assert_allclose(log.time, expected.t, atol=1e-9)
+    np.testing.assert_allclose(log.x_star, expected.x, atol=1e-9)
+    # The arm follows the reference through CLIK and the PD (a few mm of lag while moving).
+    lift = log.x_star[-1, 2] - log.x_star[0, 2]
+    assert lift > 0.03
+    assert np.max(np.linalg.norm(log.p_WE - log.x_star, axis=1)) < 0.1 * lift
+    # The learnt stiffness rises with the lift, as demonstrated, inside the scenario's range.
+    assert log.k_star[-1] > log.k_star[0] + 50.0
+    assert np.all((log.k_star >= 10.0) & (log.k_star <= 200.0))
+    np.testing.assert_allclose(log.h.sum(axis=1), 1.0, atol=1e-9)
+
+
+def test_tracking_force_is_eq_23_and_exported(scenario, model, free_run):
+    log = free_run.log
+    goal = scenario.task_plan().points[-1]
+    np.testing.assert_allclose(
+        log.F_tr, tracking_force(log.x_star, log.xdot_star, goal, kp=50.0, kd=50.0), atol=1e-9
+    )
+    built = build_reproduction_diagram(scenario, model, scene=False, tracking_gains=(10.0, 2.0))
+    context = built.diagram.CreateDefaultContext()
+    reproducer = built.diagram.GetSubsystemByName("reproducer")
+    sub = reproducer.GetMyContextFromRoot(context)
+    x_star = reproducer.GetOutputPort("x_star").Eval(sub)
+    xdot_star = reproducer.GetOutputPort("xdot_star").Eval(sub)
+    F_tr = built.diagram.GetOutputPort("tracking_force").Eval(context)
+    np.testing.assert_allclose(F_tr, 10.0 * (goal - x_star) + 2.0 * xdot_star, atol=1e-12)
+
+
+def test_the_arm_starts_at_an_offset_start(scenario, model):
+    start = START + [0.0, 0.03, 0.0]
+    built = build_reproduction_diagram(scenario, model, start=start, scene=False)
+    simulator = Simulator(built.diagram)
+    simulator.AdvanceTo(0.0)
+    log = built.log(simulator.get_context())
+    np.testing.assert_allclose(log.p_WE[0], start, atol=1e-3)
+    np.testing.assert_allclose(log.x_star[0], start, atol=1e-12)
+
+
+def test_bad_input(scenario, model):
+    wrong = HSMM(2, n_iter=2, n_position=2).fit([np.random.default_rng(1).normal(size=(40, 4))])
+    with pytest.raises(ValueError, match="D = 7"):
+        build_reproduction_diagram(scenario, wrong, scene=False)
+    with pytest.raises(ValueError, match="not fitted"):
+        build_reproduction_diagram(scenario, HSMM(3), scene=False)
+    with pytest.raises(ValueError, match="start"):
+        build_reproduction_diagram(scenario, model, start=[0.6, np.nan, 0.1], scene=False)
+    with pytest.raises(ValueError, match="observe"):
+        build_reproduction_diagram(scenario, model, observe="camera", scene=False)
+    with pytest.raises(ValueError, match="out of the arm's reach"):
+        build_reproduction_diagram(scenario, model, start=[3.0, 0.0, 0.0], scene=False)
+    with pytest.raises(ValueError, match="duration"):
+        run_reproduction(scenario, model, duration=-1.0, scene=False)
