@@ -23,9 +23,15 @@ from pydrake.common.yaml import yaml_dump_typed, yaml_load, yaml_load_typed
 from pydrake.math import RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlantConfig
 
+from hemg_drake.control.clik import CLIK_METHODS
+from hemg_drake.tasks.cotter_pin import default_cotter_pin_plan
+from hemg_drake.tasks.drawing import default_drawing_plan
 from hemg_drake.tasks.plan import TaskPlan
+from hemg_drake.teleop.feedback import MODES as FEEDBACK_MODES
 
-TASKS = ("cotter_pin", "drawing")
+# Each task's default plan, used when a scenario gives none.
+DEFAULT_PLANS = {"cotter_pin": default_cotter_pin_plan, "drawing": default_drawing_plan}
+TASKS = tuple(DEFAULT_PLANS)
 
 
 @dc.dataclass
@@ -204,13 +210,7 @@ class Scenario:
                 if not data[name]:
                     del data[name]
             return TaskPlan.from_dict(data)
-        if self.task == "cotter_pin":
-            from hemg_drake.tasks.cotter_pin import default_cotter_pin_plan
-
-            return default_cotter_pin_plan()
-        from hemg_drake.tasks.drawing import default_drawing_plan
-
-        return default_drawing_plan()
+        return DEFAULT_PLANS[self.task]()
 
     def R_WM(self):
         """The mapping's rotation as a ``RotationMatrix``."""
@@ -234,8 +234,8 @@ _SIGNED = {"plan.points", "mapping.offset", "mapping.rpy_deg", "emg.A_emg"}
 _POSITIVE = {
     "plant.time_step", "duration", "log_period", "num_demonstrations", "num_states",
     "mapping.scale", "master.mass", "master.workspace_size", "operator.hand_stiffness",
-    "operator.activation_time_constant", "operator.period", "emg.window", "emg.calibration_duration",
-    "clik.gain", "clik.period",
+    "operator.activation_time_constant", "operator.period", "emg.window",
+    "emg.calibration_duration", "clik.gain", "clik.period",
 }
 # Vectors of fixed length.
 _SIZES = {
@@ -248,8 +248,8 @@ _FRACTIONS = {
 }
 _CHOICES = {
     "task": TASKS,
-    "clik.method": ("transpose", "dls"),
-    "feedback.mode": ("force", "position_error"),
+    "clik.method": CLIK_METHODS,
+    "feedback.mode": FEEDBACK_MODES,
 }
 
 
@@ -336,7 +336,9 @@ def _check_types(value, schema, key):
             raise ValueError(f"{where} must be {_TYPE_NAMES[schema]}, got {value!r}")
     else:
         if not isinstance(value, dict):
-            raise ValueError(f"{where} must be a mapping of {schema.__name__}'s fields, got {value!r}")
+            raise ValueError(
+                f"{where} must be a mapping of {schema.__name__}'s fields, got {value!r}"
+            )
         fields = _fields(schema)
         unknown = sorted(set(value) - set(fields))
         if unknown:

@@ -4,7 +4,8 @@ Signal flow (each box a LeafSystem of this package, named as in the diagram)::
 
     operator --hand_force--> master --p_MS, v_MS--> workspace_map --p_WE_desired--> clik
     clik --q_desired, v_desired--> pd --torque--> plant (arm + task scene)
-    operator --activation--> emg_source --emg--> envelope --> variable_gain --gain--> pd
+    operator --activation--> emg_source --emg--> envelope --> variable_gain --gain-->
+        gain_hold --> pd
     scene's interaction force f_WE --> force_feedback --motor_force--> master, operator
     logger (every log_period): p_WE, v_WE, p_MS, envelope, activation, gain, f_WE
 
@@ -20,9 +21,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+from pydrake.geometry import MeshcatVisualizer
 from pydrake.multibody.plant import AddMultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
-from pydrake.geometry import MeshcatVisualizer
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, Multiplexer
@@ -34,11 +35,18 @@ from hemg_drake.emg.chain import add_emg_gain_chain
 from hemg_drake.emg.sources import MYO_RATE, SyntheticEmgSource, synthesize_emg
 from hemg_drake.learning.demos import FIELD_WIDTHS, Demonstration, save_dataset
 from hemg_drake.robots.baxter import FLOOR_Z, add_baxter_arm
+from hemg_drake.tasks.cotter_pin import add_cotter_pin_scene
+from hemg_drake.tasks.drawing import add_drawing_scene
 from hemg_drake.teleop.feedback import ForceFeedback
 from hemg_drake.teleop.mapping import WorkspaceMap, WorkspaceMapping
 from hemg_drake.teleop.master import HapticMaster
 from hemg_drake.teleop.operator import SimulatedOperator
+from hemg_drake.viz.figures import plot_demonstrations, save_figure
+from hemg_drake.viz.ink import add_ink_to_recording, in_contact
+from hemg_drake.viz.recording import ReplayRecorder
 
+# Each task's scene: added to the plant before Finalize, its handle has force_output_port.
+SCENE_BUILDERS = {"cotter_pin": add_cotter_pin_scene, "drawing": add_drawing_scene}
 # Logged signals after time, in the order of the logger's input vector.
 LOGGED_FIELDS = tuple(name for name in FIELD_WIDTHS if name != "time")
 
@@ -138,7 +146,9 @@ class DemonstrationDiagram:
     diagram : Diagram
         Subsystems by name: ``plant``, ``scene_graph``, ``operator``, ``master``,
         ``workspace_map``, ``clik``, ``pd``, ``emg_source``, ``envelope``,
-        ``variable_gain``, ``force_feedback``, ``tool_point``, ``logger``.
+        ``variable_gain``, ``gain_hold``, ``force_feedback``, ``tool_point``,
+        ``log_mux``, ``logger``, and the scene's own systems (its force sensor gives
+        ``f_WE``) or ``no_contact`` (zero force) in free space.
     plant : MultibodyPlant
     arm : BaxterArm
     plan : TaskPlan
@@ -169,8 +179,9 @@ def workspace_mapping(scenario):
 def emg_calibration(scenario):
     """Calibration of the synthetic armband: rest and maximum-contraction recordings.
 
-    Both recordings last ``scenario.emg.calibration_duration`` and use ``scenario.seed``
-    (one calibration per session, as a person would do once before demonstrating).
+    Both recordings last ``scenario.emg.calibration_duration`` and are seeded from
+    ``scenario.seed`` (rest: seed, MVC: seed + 1), not per demonstration: one calibration
+    per session, as a person would do once before demonstrating.
     """
     samples = int(round(scenario.emg.calibration_duration * MYO_RATE))
     if samples < scenario.emg.window:
@@ -221,17 +232,6 @@ def solve_arm_positions(plant, arm, p_WE, *, iterations=200, damping=0.01):
     return q
 
 
-def _add_scene(scenario, plant, arm):
-    """Add the task's scene to the plant (before Finalize); returns the scene's handle."""
-    if scenario.task == "cotter_pin":
-        from hemg_drake.tasks.cotter_pin import add_cotter_pin_scene
-
-        return add_cotter_pin_scene(plant, arm)
-    from hemg_drake.tasks.drawing import add_drawing_scene
-
-    return add_drawing_scene(plant, arm)
-
-
 def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, scene=True):
     """Build the teleoperated demonstration diagram for one seeded demonstration.
 
@@ -270,7 +270,7 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(scenario.plant, builder)
     arm = add_baxter_arm(plant)
-    task_scene = _add_scene(scenario, plant, arm) if scene else None
+    task_scene = SCENE_BUILDERS[scenario.task](plant, arm) if scene else None
     plant.Finalize()
     plant.SetDefaultPositions(
         arm.model_instance, solve_arm_positions(plant, arm, task_plan.points[0])
@@ -416,11 +416,7 @@ def run_demonstration(scenario, seed, *, replay_path=None, scene=True):
     -------
     Demonstration
     """
-    recorder = None
-    if replay_path is not None:
-        from hemg_drake.viz.recording import ReplayRecorder
-
-        recorder = ReplayRecorder(floor_z=FLOOR_Z)
+    recorder = None if replay_path is None else ReplayRecorder(floor_z=FLOOR_Z)
     built = build_demonstration_diagram(scenario, seed=seed, recorder=recorder, scene=scene)
     simulator = Simulator(built.diagram)
     simulator.Initialize()
@@ -432,8 +428,6 @@ def run_demonstration(scenario, seed, *, replay_path=None, scene=True):
     if recorder is not None:
         if scenario.task == "drawing" and built.scene is not None:
             # The ink is drawn into the open recording, just above the sheet.
-            from hemg_drake.viz.ink import add_ink_to_recording, in_contact
-
             add_ink_to_recording(
                 recorder.meshcat,
                 demo.time,
@@ -465,8 +459,6 @@ def record_demonstrations(scenario, out_dir, *, replays=True, progress=None):
     -------
     list of Path, the files written (dataset first).
     """
-    from hemg_drake.viz.figures import plot_demonstrations, save_figure
-
     out_dir = Path(out_dir)
     demos, written = [], []
     for c, seed in enumerate(scenario.seeds(), start=1):

@@ -168,7 +168,8 @@ def load_dataset(path):
             f"{path}: dataset format version {found!r}, this hemg_drake reads {FORMAT_VERSION}"
         )
     count, seeds = metadata.get("num_demonstrations"), metadata.get("seeds")
-    if not isinstance(count, int) or count < 1 or not isinstance(seeds, list) or len(seeds) != count:
+    valid = isinstance(count, int) and count >= 1 and isinstance(seeds, list)
+    if not valid or len(seeds) != count:
         raise ValueError(f"{path}: metadata needs num_demonstrations >= 1 and one seed each")
     demos = []
     for c in range(count):

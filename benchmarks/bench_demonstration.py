@@ -1,0 +1,92 @@
+"""Real-time factor of the teleoperated demonstration diagram at a 1 ms plant step.
+
+For each shipped scenario (cotter pin, drawing), simulates one whole demonstration
+(``scenario.duration``) and prints the real-time factor, simulated seconds per second, by the
+wall clock and by this process's CPU time (the machine is shared: CPU time is what the
+diagram costs, wall time what a user waits), first without visualisation, then with the
+Meshcat replay recorder (plus the HTML export). Then, from a profile of the cotter-pin run,
+the CPU time per 1 ms step of each system's callbacks (cProfile inflates Python calls, so
+read the shares, not the absolute numbers).
+
+    .venv/bin/python benchmarks/bench_demonstration.py
+"""
+
+import cProfile
+import gc
+import pstats
+import tempfile
+import time
+from pathlib import Path
+
+from pydrake.systems.analysis import Simulator
+
+from hemg_drake.diagrams.demonstration import build_demonstration_diagram
+from hemg_drake.robots.baxter import FLOOR_Z
+from hemg_drake.scenario import load_scenario
+from hemg_drake.viz.recording import ReplayRecorder
+
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+
+
+def run(scenario, *, record):
+    """Simulate one demonstration; returns (wall s, CPU s, export s or None, HTML bytes)."""
+    recorder = ReplayRecorder(floor_z=FLOOR_Z) if record else None
+    built = build_demonstration_diagram(scenario, seed=scenario.seed, recorder=recorder)
+    simulator = Simulator(built.diagram)
+    simulator.Initialize()
+    if recorder is not None:
+        recorder.start()
+    wall, cpu = time.perf_counter(), time.process_time()
+    simulator.AdvanceTo(scenario.duration)
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    export, size = None, 0
+    if recorder is not None:
+        with tempfile.TemporaryDirectory() as folder:
+            start = time.perf_counter()
+            path = recorder.stop_and_export(Path(folder) / "replay.html")
+            export, size = time.perf_counter() - start, path.stat().st_size
+    del built, simulator
+    gc.collect()  # releases the Meshcat server
+    return wall, cpu, export, size
+
+
+def profile_by_system(scenario):
+    """CPU seconds per simulated second spent in each system's callbacks (profiled run)."""
+    built = build_demonstration_diagram(scenario, seed=scenario.seed)
+    simulator = Simulator(built.diagram)
+    simulator.Initialize()
+    profile = cProfile.Profile()
+    profile.runcall(simulator.AdvanceTo, scenario.duration)
+    shares = {}
+    for (filename, _, name), row in pstats.Stats(profile).stats.items():
+        if name.startswith(("_calc", "_update")) and "hemg_drake" in filename:
+            module = Path(filename).stem
+            shares[f"{module}.{name}"] = row[3] / scenario.duration  # cumulative time
+    total = sum(pstats.Stats(profile).stats[key][2] for key in pstats.Stats(profile).stats)
+    return shares, total / scenario.duration
+
+
+def main():
+    print("demonstration diagram, 1 ms plant step, one whole demonstration per row")
+    for name in ("cotter_pin", "drawing"):
+        scenario = load_scenario(SCENARIOS / f"{name}.yaml")
+        for record in (False, True):
+            wall, cpu, export, size = run(scenario, record=record)
+            line = (
+                f"{name:10s} recorder={'on ' if record else 'off'} {scenario.duration:4.1f} s: "
+                f"real-time factor {scenario.duration / wall:4.2f}x wall, "
+                f"{scenario.duration / cpu:4.2f}x CPU"
+            )
+            if record:
+                line += f"  (HTML export {export:.2f} s, {size / 1e6:.1f} MB)"
+            print(line)
+    scenario = load_scenario(SCENARIOS / "cotter_pin.yaml")
+    shares, total = profile_by_system(scenario)
+    print(f"\ncotter pin, profiled: {total * 1e3:.0f} ms of CPU per simulated second in all")
+    print("cumulative CPU per simulated second by callback (nested calls counted in each):")
+    for key, value in sorted(shares.items(), key=lambda item: -item[1])[:12]:
+        print(f"  {key:40s} {value * 1e3:6.0f} ms")
+
+
+if __name__ == "__main__":
+    main()
