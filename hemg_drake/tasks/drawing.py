@@ -226,10 +226,10 @@ def default_drawing_plan(params=None):
     I stroke 1, a 11 cm line; II lift and move; III stroke 2, a 14 cm half circle (six
     chords); IV lift and move; V stroke 3, a 17 cm zig-zag; VI lift and back. The plan
     starts and ends ``hover_height`` above the sheet's centre (by default where the tool
-    point is at the arm's home pose). Around each stroke: descend
-    (free) to 5 mm above the paper, press (pen down) to ``press_depth`` below it, draw (pen
-    down, one segment per chord), release (pen down) to 5 mm above, lift (free) to
-    ``hover_height``. Pen-down segments are forceful; the others free. About 10.5 s.
+    point is at the arm's home pose). Around each stroke: descend (free) to 5 mm above the
+    paper, press (pen down) to ``press_depth`` below it, draw (pen down, one segment per
+    chord), release (pen down) to 5 mm above, lift (free) to ``hover_height``. Pen-down
+    segments are forceful, the others free. 11.6 s in all.
 
     Parameters
     ----------
