@@ -12,6 +12,8 @@ import html
 import os
 from pathlib import Path
 
+from hemg_drake.fileio import write_text_atomic
+
 SCALE_VARIABLE = "HEMG_DRAKE_NOTEBOOK_SCALE"
 SCALES = ("full", "small")
 # The repository's scenarios (the package is installed editable from the repository).
@@ -85,3 +87,29 @@ def replay_iframe(replay, *, height=480):
         f'<div><iframe srcdoc="{html.escape(page, quote=True)}" width="100%" '
         f'height="{height}" style="border: none"></iframe></div>'
     )
+
+
+def strip_outputs(*paths):
+    """Clear the outputs and execution counts of notebooks in place (atomically).
+
+    Notebooks are committed without outputs; run this before committing an edited one.
+    Needs ``nbformat`` (in the ``dev`` extra).
+
+    Parameters
+    ----------
+    *paths : str or Path
+        ``.ipynb`` files.
+    """
+    import nbformat
+
+    for path in map(Path, paths):
+        if not path.is_file():
+            raise FileNotFoundError(f"notebook not found: {path}")
+        try:
+            notebook = nbformat.read(path, as_version=4)
+        except Exception as error:  # nbformat raises several unrelated types
+            raise ValueError(f"{path}: not a readable notebook ({error})") from None
+        for cell in notebook.cells:
+            if cell.cell_type == "code":
+                cell.outputs, cell.execution_count = [], None
+        write_text_atomic(path, nbformat.writes(notebook) + "\n")

@@ -10,6 +10,7 @@ from hemg_drake.notebook import (
     notebook_scale,
     replay_iframe,
     scenario_file,
+    strip_outputs,
 )
 from hemg_drake.scenario import load_scenario
 
@@ -76,3 +77,28 @@ def test_scenario_file_finds_the_repository_scenarios():
 def test_unknown_scenario_lists_the_known_ones():
     with pytest.raises(FileNotFoundError, match="no scenario 'juggling'.*cotter_pin"):
         scenario_file("juggling")
+
+
+def test_strip_outputs_clears_outputs_and_counts_only(tmp_path):
+    nbformat = pytest.importorskip("nbformat")
+    notebook = nbformat.v4.new_notebook(cells=[
+        nbformat.v4.new_markdown_cell("# title"),
+        nbformat.v4.new_code_cell("1 + 1", execution_count=3, outputs=[
+            nbformat.v4.new_output("execute_result", {"text/plain": "2"}, execution_count=3)
+        ]),
+    ])
+    path = tmp_path / "n.ipynb"
+    nbformat.write(notebook, path)
+    strip_outputs(path)
+    stripped = nbformat.read(path, as_version=4)
+    assert stripped.cells[1].outputs == [] and stripped.cells[1].execution_count is None
+    assert [c.source for c in stripped.cells] == ["# title", "1 + 1"]
+
+
+def test_strip_outputs_bad_files(tmp_path):
+    with pytest.raises(FileNotFoundError, match="notebook not found"):
+        strip_outputs(tmp_path / "missing.ipynb")
+    broken = tmp_path / "broken.ipynb"
+    broken.write_text("{not json", encoding="utf-8")
+    with pytest.raises(ValueError, match="broken.ipynb: not a readable notebook"):
+        strip_outputs(broken)
