@@ -235,3 +235,19 @@ def test_params_load_from_yaml():
     bad = yaml_load_typed(schema=DrawingParams, data="pen_radius: -0.002\n")
     with pytest.raises(ValueError, match="DrawingParams.pen_radius"):
         add_drawing_scene(MultibodyPlant(1e-3), None, params=bad)
+
+
+def test_plan_follower_feeds_the_plan_to_clik():
+    builder, plant, _, arm, _ = _scene()
+    plan = default_drawing_plan()
+    with pytest.raises(ValueError, match="sample_period"):
+        add_plan_follower(builder, plant=plant, arm=arm, plan=plan, gain=GAIN, sample_period=0)
+    add_plan_follower(builder, plant=plant, arm=arm, plan=plan, gain=GAIN)
+    diagram = builder.Build()
+    source = diagram.GetSubsystemByName("plan")
+    context = source.CreateDefaultContext()
+    # The 5 ms linear interpolation of the minimum-jerk plan, and the end point held after it.
+    for t in np.linspace(0.0, plan.end_time + 1.0, 157):
+        context.SetTime(t)
+        p = source.get_output_port().Eval(context)
+        np.testing.assert_allclose(p, plan.position(min(t, plan.end_time)), atol=2e-5)
