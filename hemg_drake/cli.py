@@ -98,8 +98,8 @@ def build_parser():
         metavar=("DX", "DY", "DZ"), help="start this far from the demonstrations' start (m)",
     )  # fmt: skip
     reproduce.add_argument(
-        "--weighting", choices=["temporal", "spatial", "forward"],
-        help="HSMM state weighting (default per task)",
+        "--weighting", choices=["temporal", "spatial", "forward"], default="temporal",
+        help="HSMM state weighting",
     )  # fmt: skip
     reproduce.add_argument("--out", help="output folder (default: the run folder)")
     reproduce.add_argument("--no-replay", action="store_true", help="write no HTML replay")

@@ -49,8 +49,8 @@ from pydrake.systems.primitives import (
 from hemg_drake.control.clik import Clik
 from hemg_drake.control.pd import VariableGainPd
 from hemg_drake.diagrams.demonstration import (
+    SCENE_BUILDERS,
     ToolPointKinematics,
-    _add_scene,
     solve_arm_positions,
 )
 from hemg_drake.learning.systems import HsmmGmrReproducer, TrackingForce
@@ -217,7 +217,7 @@ def build_reproduction_diagram(
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(scenario.plant, builder)
     arm = add_baxter_arm(plant)
-    task_scene = _add_scene(scenario, plant, arm) if scene else None
+    task_scene = SCENE_BUILDERS[scenario.task](plant, arm) if scene else None
     plant.Finalize()
     plant.SetDefaultPositions(arm.model_instance, solve_arm_positions(plant, arm, start))
 
