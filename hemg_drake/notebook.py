@@ -13,11 +13,10 @@ import os
 from pathlib import Path
 
 from hemg_drake.fileio import write_text_atomic
+from hemg_drake.pipeline import SCENARIOS_DIR
 
 SCALE_VARIABLE = "HEMG_DRAKE_NOTEBOOK_SCALE"
 SCALES = ("full", "small")
-# The repository's scenarios (the package is installed editable from the repository).
-SCENARIOS_DIR = Path(__file__).resolve().parents[1] / "scenarios"
 
 
 def notebook_scale():
