@@ -247,23 +247,26 @@ def _strokes(time, p_WE, f_WE):
 
 
 def _drawing_metrics(demos, log):
-    """Strokes, their shape error (seen from above) and the stiffness on and off the paper."""
-    from hemg_drake.tasks.metrics import stroke_shape_error
+    """Strokes, their shape and placement errors (seen from above), stiffness on and off paper."""
+    from hemg_drake.tasks.metrics import stroke_errors
     from hemg_drake.viz.ink import in_contact
 
     strokes = _strokes(log.time, log.p_WE, log.f_WE)
     demo_strokes = [_strokes(d.time, d.p_WE, d.f_WE) for d in demos]
-    errors = []
+    shape, placement = [], []
     for k, stroke in enumerate(strokes):
         same = [s[k][:, :2] for s in demo_strokes if len(s) > k]
-        errors.append(stroke_shape_error(stroke[:, :2], same) if same else None)
+        errors = stroke_errors(stroke[:, :2], same) if same else None
+        shape.append(errors and errors["shape"])
+        placement.append(errors and errors["placement"])
     touching = in_contact(log.f_WE)
     on_paper = float(log.k_star[touching].mean()) if touching.any() else None
     in_air = float(log.k_star[~touching].mean()) if (~touching).any() else None
     return {
         "strokes": len(strokes),
         "demonstrated_strokes": [len(s) for s in demo_strokes],
-        "stroke_shape_error_m": errors,
+        "stroke_shape_error_m": shape,
+        "stroke_placement_error_m": placement,
         "success": len(strokes) == 3,
         "stiffness_on_paper": on_paper,
         "stiffness_in_air": in_air,
@@ -278,8 +281,11 @@ def _write_figures(task, demos, log, out_dir):
         figures.save_figure(figure, out_dir / "fig8_reproduction.png")
     else:
         strokes = _strokes(log.time, log.p_WE, log.f_WE)
-        figures.save_figure(figures.plot_drawing_reproduction(demos, log), out_dir / "fig10_reproduction.png")
-        figures.save_figure(figures.plot_strokes(strokes), out_dir / "fig11_strokes.png")
+        demonstrated = [s for d in demos for s in _strokes(d.time, d.p_WE, d.f_WE)]
+        figure = figures.plot_drawing_reproduction(demos, log)
+        figures.save_figure(figure, out_dir / "fig10_reproduction.png")
+        figure = figures.plot_strokes(strokes, demonstrated=demonstrated)
+        figures.save_figure(figure, out_dir / "fig11_strokes.png")
 
 
 def format_metrics(results):

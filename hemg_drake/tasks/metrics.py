@@ -248,11 +248,13 @@ def resample_by_arc_length(points, n_samples=50):
     return np.column_stack([np.interp(new, arc, column) for column in points.T])
 
 
-def stroke_shape_error(stroke, demo_strokes, n_samples=50):
-    """RMS distance between a stroke and the mean of the demonstrations' same stroke.
+def stroke_errors(stroke, demo_strokes, n_samples=50):
+    """How a stroke differs from the mean of the demonstrations' same stroke: shape and place.
 
     Every stroke is resampled by arc length to ``n_samples`` points; the mean stroke is
-    their point-wise mean.
+    their point-wise mean. The RMS distance between the stroke and the mean splits exactly
+    into ``placement`` (the distance between their centroids) and ``shape`` (the RMS distance
+    once both are centred): rms^2 = shape^2 + placement^2.
 
     Parameters
     ----------
@@ -261,9 +263,17 @@ def stroke_shape_error(stroke, demo_strokes, n_samples=50):
 
     Returns
     -------
-    float, m.
+    dict with ``shape``, ``placement`` and ``rms`` (m).
     """
     if not demo_strokes:
-        raise ValueError("stroke_shape_error needs at least one demonstrated stroke")
+        raise ValueError("stroke_errors needs at least one demonstrated stroke")
     mean = np.mean([resample_by_arc_length(s, n_samples) for s in demo_strokes], axis=0)
-    return _rmse(resample_by_arc_length(stroke, n_samples), mean)
+    points = resample_by_arc_length(stroke, n_samples)
+    if points.shape[1] != mean.shape[1]:
+        raise ValueError(f"stroke has {points.shape[1]} columns, the demonstrated strokes {mean.shape[1]}")
+    offset = points.mean(axis=0) - mean.mean(axis=0)
+    return {
+        "shape": _rmse(points - offset, mean),
+        "placement": float(np.linalg.norm(offset)),
+        "rms": _rmse(points, mean),
+    }

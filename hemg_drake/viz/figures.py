@@ -417,12 +417,13 @@ def plot_drawing_reproduction(demos, log):
     return figure
 
 
-def plot_strokes(strokes, *, title="Strokes drawn by the reproduction, seen from above (Fig. 11)"):
+def plot_strokes(strokes, *, demonstrated=(), title="Drawn strokes seen from above (Fig. 11)"):
     """Fig. 11: the ink strokes in the paper's plane (x, y of the world), equal axes.
 
     Parameters
     ----------
-    strokes : sequence of arrays, shape (k, >= 2), m; one line each.
+    strokes : sequence of arrays, shape (k, >= 2), m; one coloured line each.
+    demonstrated : sequence of arrays, shape (k, >= 2), m; thin grey lines underneath.
 
     Returns
     -------
@@ -430,15 +431,17 @@ def plot_strokes(strokes, *, title="Strokes drawn by the reproduction, seen from
     """
     figure = Figure(figsize=(5, 6), layout="constrained")
     axes = figure.subplots()
-    for i, stroke in enumerate(strokes, start=1):
+    lines = [(s, "0.7", 1.0, "demonstrations" if i == 0 else None) for i, s in enumerate(demonstrated)]
+    lines += [(s, None, 2.0, f"stroke {i}") for i, s in enumerate(strokes, start=1)]
+    for stroke, color, width, label in lines:
         stroke = np.asarray(stroke, dtype=float)
         if stroke.ndim != 2 or stroke.shape[1] < 2:
-            raise ValueError(f"stroke {i} must have shape (k, 2 or 3), got {stroke.shape}")
-        axes.plot(stroke[:, 0], stroke[:, 1], linewidth=2.0, label=f"stroke {i}")
+            raise ValueError(f"a stroke must have shape (k, 2 or 3), got {stroke.shape}")
+        axes.plot(stroke[:, 0], stroke[:, 1], color=color, linewidth=width, label=label)
     axes.set_aspect("equal")
     axes.set_xlabel("x (m)")
     axes.set_ylabel("y (m)")
-    if strokes:
+    if lines:
         axes.legend(loc="best", fontsize="small")
     axes.set_title(title)
     return figure

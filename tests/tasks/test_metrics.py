@@ -79,13 +79,21 @@ def test_force_statistics():
     assert metrics.force_statistics(force) == {"peak": 5.0, "mean": 3.0}
 
 
-def test_stroke_shape_error_is_the_distance_to_the_mean_stroke():
+def test_stroke_errors_split_into_shape_and_placement():
     line = np.column_stack([np.linspace(0, 0.1, 20), np.zeros(20)])
     # The demonstrations' mean is the line itself; the stroke lies 3 mm beside it, sampled
     # more densely (the resampling by arc length makes the sampling irrelevant).
     demos = [line + [0.0, 0.001], line - [0.0, 0.001]]
     stroke = np.column_stack([np.linspace(0, 0.1, 57), np.full(57, 0.003)])
-    assert metrics.stroke_shape_error(stroke, demos) == pytest.approx(0.003, rel=1e-9)
+    errors = metrics.stroke_errors(stroke, demos)
+    assert errors["placement"] == pytest.approx(0.003, rel=1e-9)
+    assert errors["rms"] == pytest.approx(0.003, rel=1e-9)
+    assert errors["shape"] == pytest.approx(0.0, abs=1e-12)
+    # A bent stroke: a shape error, and rms^2 = shape^2 + placement^2.
+    bent = np.column_stack([np.linspace(0, 0.1, 57), 0.02 * np.sin(np.linspace(0, np.pi, 57))])
+    errors = metrics.stroke_errors(bent, demos)
+    assert errors["shape"] > 0.005
+    assert errors["rms"] ** 2 == pytest.approx(errors["shape"] ** 2 + errors["placement"] ** 2)
     resampled = metrics.resample_by_arc_length(np.array([[0, 0], [1, 0], [1, 1]]), 5)
     np.testing.assert_allclose(resampled, [[0, 0], [0.5, 0], [1, 0], [1, 0.5], [1, 1]])
 
@@ -99,7 +107,8 @@ def test_stroke_shape_error_is_the_distance_to_the_mean_stroke():
         (lambda: metrics.time_normalise(np.zeros((5, 2)), 1), "n_samples"),
         (lambda: metrics.force_statistics(np.zeros((5, 2))), "3 columns"),
         (lambda: metrics.resample_by_arc_length(np.zeros((5, 2))), "zero length"),
-        (lambda: metrics.stroke_shape_error(np.eye(2), []), "at least one"),
+        (lambda: metrics.stroke_errors(np.eye(2), []), "at least one"),
+        (lambda: metrics.stroke_errors(np.eye(2), [np.eye(3)]), "columns"),
         (lambda: metrics.aligned_rmse(np.zeros((1, 7)), np.zeros((5, 7))), "T >= 2"),
     ],
 )
