@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pydrake.geometry import Meshcat, MeshcatParams, MeshcatVisualizer
 from pydrake.systems.analysis import Simulator
 
 from hemg_drake.diagrams.demonstration import (
@@ -109,6 +110,11 @@ def test_diagram_structure_and_bad_input():
         assert built.diagram.HasSubsystemNamed(name), name
     assert built.scene is None
     assert not np.array_equal(built.plan.points, scenario.task_plan().points)
+    assert not any(isinstance(s, MeshcatVisualizer) for s in built.diagram.GetSystems())
+    live = build_demonstration_diagram(
+        scenario, seed=0, scene=False, meshcat=Meshcat(MeshcatParams(host="localhost", port=0))
+    )
+    assert any(isinstance(s, MeshcatVisualizer) for s in live.diagram.GetSystems())
     with pytest.raises(ValueError, match="seed"):
         build_demonstration_diagram(scenario, seed=-1, scene=False)
     far = parse_scenario(FREE_SPACE.replace("[0.64, -0.84, 0.12]", "[2.5, 0.0, 0.0]"))
