@@ -82,6 +82,8 @@ class MasterConfig:
     # Soft walls beyond the box: spring (N/m) and damper (N s/m).
     wall_stiffness: float = 5000.0
     wall_damping: float = 20.0
+    # Sample period of the haptic loop (s): the device's servo rate, 1 kHz.
+    period: float = 1e-3
 
 
 @dc.dataclass
@@ -233,7 +235,8 @@ _SIGNED = {"plan.points", "mapping.offset", "mapping.rpy_deg", "emg.A_emg"}
 # Numbers that must be strictly positive.
 _POSITIVE = {
     "plant.time_step", "duration", "log_period", "num_demonstrations", "num_states",
-    "mapping.scale", "master.mass", "master.workspace_size", "operator.hand_stiffness",
+    "mapping.scale", "master.mass", "master.workspace_size", "master.period",
+    "operator.hand_stiffness",
     "operator.activation_time_constant", "operator.period", "emg.window",
     "emg.calibration_duration", "clik.gain", "clik.period",
 }
