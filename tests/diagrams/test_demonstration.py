@@ -219,3 +219,19 @@ def test_demonstrate_command_end_to_end(tmp_path, capsys):
     assert "num_demonstrations" in capsys.readouterr().err
     assert main(["demonstrate", str(tmp_path / "none.yaml"), "--out", str(out)]) == 2
     assert "not found" in capsys.readouterr().err
+
+
+def test_plot_demonstrations_layouts(free_space):
+    from hemg_drake.viz.figures import plot_demonstrations
+
+    _, demo = free_space
+    pin = plot_demonstrations([demo, demo], task="cotter_pin")
+    assert len(pin.axes) == 6 and all(len(axes.lines) == 2 for axes in pin.axes)
+    np.testing.assert_array_equal(pin.axes[5].lines[0].get_ydata(), demo.v_WE[:, 2])
+    drawing = plot_demonstrations([demo], task="drawing")
+    assert [axes.get_ylabel() for axes in drawing.axes][-1] == "stiffness K"
+    np.testing.assert_array_equal(drawing.axes[3].lines[0].get_ydata(), demo.gain)
+    with pytest.raises(ValueError, match="task"):
+        plot_demonstrations([demo], task="welding")
+    with pytest.raises(ValueError, match="at least one"):
+        plot_demonstrations([], task="drawing")
