@@ -40,36 +40,56 @@ def test_committed_without_outputs(path):
             assert cell.execution_count is None, f"{path.name}: cell {index} has a count"
 
 
-@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda path: path.name)
-def test_notebook_runs_top_to_bottom(path, tmp_path, monkeypatch):
-    monkeypatch.setenv("MPLBACKEND", "Agg")
-    monkeypatch.setenv(SCALE_VARIABLE, "small")
-    notebook = nbformat.read(path, as_version=4)
+def _execute(notebook, name, workdir):
+    """Run ``notebook`` in a fresh kernel in ``workdir``; fail the test on a cell's error.
+
+    Returns the executed notebook's probe output: the kernel's sys.prefix, scale and cwd.
+    """
     notebook.cells.append(nbformat.v4.new_code_cell(PROBE.format(SCALE_VARIABLE)))
-    before = sorted(NOTEBOOKS_DIR.iterdir())
     manager = KernelManager(kernel_name="python3")
     client = NotebookClient(
         notebook,
         km=manager,
         timeout=CELL_TIMEOUT,
-        resources={"metadata": {"path": str(tmp_path)}},
+        resources={"metadata": {"path": str(workdir)}},
     )
-    kernel_pid = None
     try:
         with client.setup_kernel():
             kernel_pid = manager.provisioner.pid
             client.execute()
     except CellExecutionError as error:
-        pytest.fail(f"{path.name}: a cell failed:\n{error}", pytrace=False)
+        pytest.fail(f"{name}: a cell failed:\n{error}", pytrace=False)
     finally:
         if client.kc is not None:
             client.kc.stop_channels()
         if manager.has_kernel:
             manager.shutdown_kernel(now=True)
-    assert not manager.is_alive()
-    if kernel_pid is not None:
-        with pytest.raises(ProcessLookupError):
-            os.kill(kernel_pid, 0)  # the kernel process, and any server in it, is gone
-    probe = "".join(output.get("text", "") for output in notebook.cells[-1].outputs).split("\n")
-    assert probe[:3] == [sys.prefix, "small", str(tmp_path)]
+        assert not manager.is_alive()
+    with pytest.raises(ProcessLookupError):
+        os.kill(kernel_pid, 0)  # the kernel process, and any Meshcat server in it, is gone
+    outputs = notebook.cells[-1].outputs
+    return "".join(output.get("text", "") for output in outputs).split("\n")[:3]
+
+
+@pytest.fixture
+def small_scale(monkeypatch):
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    monkeypatch.setenv(SCALE_VARIABLE, "small")
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda path: path.name)
+def test_notebook_runs_top_to_bottom(path, tmp_path, small_scale):
+    before = sorted(NOTEBOOKS_DIR.iterdir())
+    probe = _execute(nbformat.read(path, as_version=4), path.name, tmp_path)
+    assert probe == [sys.prefix, "small", str(tmp_path)]
     assert sorted(NOTEBOOKS_DIR.iterdir()) == before, "the notebook wrote into notebooks/"
+
+
+def test_a_failing_cell_fails_with_its_error(tmp_path, small_scale):
+    notebook = nbformat.v4.new_notebook(cells=[
+        nbformat.v4.new_code_cell("x = 1"),
+        nbformat.v4.new_code_cell("raise ValueError('gain must be positive, got -3')"),
+        nbformat.v4.new_code_cell("print('never reached')"),
+    ])
+    with pytest.raises(pytest.fail.Exception, match=r"bad.ipynb: a cell failed(.|\n)*-3"):
+        _execute(notebook, "bad.ipynb", tmp_path)
