@@ -92,3 +92,66 @@ def test_model_of_another_dimension_leaves_the_metrics(pin_run, tmp_path):
         reproduce(tmp_path, replay=False, progress=lambda line: None)
     assert (tmp_path / "metrics.json").read_bytes() == before
     assert not (tmp_path / "reproduction.npz").exists()
+
+
+@pytest.fixture(scope="module")
+def drawing_run(tmp_path_factory):
+    """Learn and reproduce drawing from three demonstrations synthesised from the seeded plans.
+
+    The operator's seeded plans are followed exactly (no teleoperation simulated, to keep the
+    test small): stiffness 150 with the pen on the paper, 40 in the air, a 2 N contact force
+    while the plan presses the pen below the sheet. The reproduction runs in the scene.
+    """
+    from hemg_drake.learning.demos import Demonstration
+    from hemg_drake.pipeline import SCENARIOS_DIR
+    from hemg_drake.scenario import load_scenario
+    from hemg_drake.tasks.drawing import DrawingParams
+
+    run = tmp_path_factory.mktemp("drawing")
+    scenario = load_scenario(SCENARIOS_DIR / "drawing.yaml")
+    operator = scenario.operator
+    paper = DrawingParams().paper_center[2]
+    demos = []
+    for seed in scenario.seeds():
+        plan = scenario.task_plan().perturbed(
+            seed,
+            timing_std=operator.timing_std,
+            path_std=operator.path_std,
+            effort_std=operator.effort_std,
+        )
+        t = np.arange(0.0, scenario.duration + 1e-9, scenario.log_period)
+        p_WE = plan.position(t)
+        down = p_WE[:, 2] < paper
+        zeros = np.zeros(len(t))
+        demos.append(Demonstration(
+            seed=seed, time=t, p_WE=p_WE, v_WE=plan.velocity(t), p_MS=np.zeros((len(t), 3)),
+            envelope=zeros, activation=zeros, gain=np.where(down, 150.0, 40.0),
+            f_WE=np.outer(2.0 * down, [0.0, 0.0, 1.0]),
+        ))  # fmt: skip
+    save_dataset(run / "dataset.npz", demos, {"scenario": scenario.to_yaml()})
+    learn(run, n_iter=20, progress=lambda line: None)
+    quiet = dict(replay=False, progress=lambda line: None)
+    offset = reproduce(run, start_offset=(0.0, 0.03, 0.0), out_dir=run / "offset", **quiet)
+    return reproduce(run, **quiet), offset
+
+
+def test_drawing_three_strokes_stiff_on_paper(drawing_run):
+    for metrics in drawing_run:
+        assert metrics["success"] and metrics["strokes"] == 3
+        assert metrics["stiffness_on_paper"] > metrics["stiffness_in_air"] + 50.0
+        assert metrics["stiffness_correlation"] > 0.7
+    # The line is drawn in shape; from 3 cm aside it is drawn 3 cm aside (the demonstrations
+    # show no correction towards their path, so GMR learns none).
+    metrics, offset = drawing_run
+    assert metrics["stroke_shape_error_m"][0] <= 0.005
+    assert offset["stroke_placement_error_m"][0] > metrics["stroke_placement_error_m"][0] + 0.01
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known gap: N = 18 states over the whole task smooth the zig-zag (stroke 3, "
+    "about 12 mm shape error measured; 4-6 mm for the others); see docs/reproduction.md",
+)
+def test_drawing_every_stroke_shape_within_5_mm(drawing_run):
+    for metrics in drawing_run:
+        assert max(metrics["stroke_shape_error_m"]) <= 0.005
