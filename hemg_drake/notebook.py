@@ -1,4 +1,5 @@
-"""Small helpers for the walkthroughs in ``notebooks/``: a scale switch and inline replays.
+"""Small helpers for the walkthroughs in ``notebooks/``: the scale switch, the repository's
+scenarios, inline replays, and stripping outputs before a commit.
 
 The test suite executes every notebook with ``HEMG_DRAKE_NOTEBOOK_SCALE=small`` so that each
 runs in seconds; a user who opens one gets the full scale::
