@@ -35,7 +35,7 @@ def test_demo_writes_every_file_and_the_metrics(pin_run):
     assert "<svg" in (run / "reproduction_diagram.svg").read_text()
     saved = json.loads((out / "metrics.json").read_text())
     assert saved == json.loads(json.dumps(results))
-    assert set(saved) == {"cotter_pin", "cotter_pin (start +3 cm)"}
+    assert set(saved) == {"cotter_pin", "cotter_pin (start 3 cm away)"}
 
 
 def test_pin_is_pulled_out_within_table_ii(pin_run):
@@ -46,10 +46,10 @@ def test_pin_is_pulled_out_within_table_ii(pin_run):
     assert metrics["velocity_rmse_m_per_s"] <= 0.0788
     assert metrics["stiffness_correlation"] > 0.5
     assert metrics["tracking_force_peak_n"] >= metrics["tracking_force_mean_n"] > 0
-    # From 3 cm beside the demonstrations' start, the pin comes out too.
-    offset = results["cotter_pin (start +3 cm)"]
+    # From 3 cm below the demonstrations' start, the pin comes out too.
+    offset = results["cotter_pin (start 3 cm away)"]
     assert offset["success"]
-    assert np.allclose(offset["start_offset"], [0.0, 0.03, 0.0])
+    assert np.allclose(offset["start_offset"], [0.0, 0.0, -0.03])
 
 
 def test_same_seeds_same_metrics(pin_run, tmp_path):
