@@ -41,10 +41,13 @@ def main():
         duration = float(demos[0].time[-1])
         for scene in (False, True):
             result, seconds = timed(
-                lambda scene=scene: run_reproduction(scenario, model, duration=duration, scene=scene)
+                lambda scene=scene: run_reproduction(
+                    scenario, model, duration=duration, scene=scene
+                )
             )
-            print(f"  reproduction {'in the scene' if scene else 'in free space'}: "
-                  f"{duration:g} s simulated in {seconds:.2f} s ({duration / seconds:.1f}x real time)")
+            where = "in the scene" if scene else "in free space"
+            print(f"  reproduction {where}: {duration:g} s simulated in {seconds:.2f} s "
+                  f"({duration / seconds:.1f}x real time)")
         _, seconds = timed(lambda: task_metrics(task, demos, result))
         print(f"  metrics (DTW alignments of {len(data)} + 1 logs): {seconds:.2f} s")
 

@@ -61,7 +61,9 @@ def _load_demonstrations(run_dir):
     path = run_dir / DATASET
     demos, metadata = load_dataset(path)
     if "scenario" not in metadata:
-        raise ValueError(f"{path}: the metadata holds no scenario (record it with hemg-drake demonstrate)")
+        raise ValueError(
+            f"{path}: the metadata holds no scenario (record it with hemg-drake demonstrate)"
+        )
     return demos, parse_scenario(metadata["scenario"], source=f"{path} metadata")
 
 
@@ -312,7 +314,9 @@ def format_metrics(results):
     return "\n".join(lines)
 
 
-def run_demo(out_dir="runs", *, tasks=TASKS, changes=None, n_iter=100, replays=True, progress=print):
+def run_demo(
+    out_dir="runs", *, tasks=TASKS, changes=None, n_iter=100, replays=True, progress=print
+):
     """The full demo: for each task, demonstrate, learn, reproduce (twice), draw and measure.
 
     Per task, ``out_dir/TASK/`` gets the dataset, demonstration replays and Fig. 8 (a)-(b) or

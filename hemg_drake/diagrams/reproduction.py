@@ -22,11 +22,11 @@ dynamical system then runs on its own state, exactly as the numpy
 stiffness. ``observe="tool"`` feeds the slave's actual tool point instead (the paper's
 wording); then any tracking error the task imposes (the detent holding the pin while K is
 low) is integrated into x* by eq. 18, and x* runs away from a slave that cannot follow
-(measured on the cotter pin). k* is clipped to the scenario's [k_min, k_max] (Drake's ``Saturation``):
-GMR may extrapolate beyond the demonstrated gains, and the PD is only checked inside its
-range. The arm starts at rest with its tool point on ``start`` (default: the demonstrations'
-start, the task plan's first point), placed there by the damped-Newton inverse kinematics
-of the demonstration diagram.
+(measured on the cotter pin). k* is clipped to the scenario's [k_min, k_max] (Drake's
+``Saturation``): GMR may extrapolate beyond the demonstrated gains, and the PD is only
+checked inside its range. The arm starts at rest with its tool point on ``start``
+(default: the demonstrations' start, the task plan's first point), placed there by the
+damped-Newton inverse kinematics of the demonstration diagram.
 
 :func:`build_reproduction_diagram` builds it; :func:`run_reproduction` simulates it and
 returns a :class:`ReproductionLog` and the task's outcome.
@@ -47,6 +47,7 @@ from pydrake.systems.primitives import (
 )
 
 from hemg_drake.control.clik import Clik
+from hemg_drake.fileio import save_npz_atomic
 from hemg_drake.control.pd import VariableGainPd
 from hemg_drake.diagrams.demonstration import (
     SCENE_BUILDERS,
@@ -97,8 +98,6 @@ class ReproductionLog:
 
     def save(self, path):
         """Write the log to an NPZ file, atomically."""
-        from hemg_drake.fileio import save_npz_atomic
-
         save_npz_atomic(path, **dc.asdict(self))
 
 

@@ -16,8 +16,9 @@ plain alternative (every signal resampled to a common length over its own durati
 for comparison. The velocities follow the position path: DTW never aligns on them.
 
 **Tasks.** Drawing: the strokes are cut from a log by
-:func:`hemg_drake.viz.ink.ink_strokes`; :func:`stroke_shape_error` compares a stroke with the demonstrations' mean stroke after
-resampling both by arc length. Forces: :func:`force_statistics`. Stiffness:
+:func:`hemg_drake.viz.ink.ink_strokes`; :func:`stroke_errors` compares a stroke with the
+demonstrations' mean stroke after resampling both by arc length: its shape (both centred)
+and its placement (the centroids' distance). Forces: :func:`force_statistics`. Stiffness:
 :func:`stiffness_correlation` (Pearson, along the same warping path).
 """
 
@@ -109,7 +110,9 @@ def mean_demonstration(demos, position_columns=slice(0, 3)):
     total = np.zeros_like(reference)
     for c, demo in enumerate(demos):
         if demo.shape[1] != reference.shape[1]:
-            raise ValueError(f"demo {c} has {demo.shape[1]} columns, demo 0 has {reference.shape[1]}")
+            raise ValueError(
+                f"demo {c} has {demo.shape[1]} columns, demo 0 has {reference.shape[1]}"
+            )
         index_ref, index_demo = dtw_path(reference[:, position_columns], demo[:, position_columns])
         # Average the samples matched to each reference sample (each is matched at least once).
         counts = np.bincount(index_ref, minlength=len(reference))[:, None]
@@ -119,7 +122,9 @@ def mean_demonstration(demos, position_columns=slice(0, 3)):
     return total / len(demos)
 
 
-def aligned_rmse(reproduced, reference, position_columns=slice(0, 3), velocity_columns=slice(3, 6)):
+def aligned_rmse(
+    reproduced, reference, position_columns=slice(0, 3), velocity_columns=slice(3, 6)
+):
     """Table II's RMSEs of a reproduction against a reference, along their DTW path.
 
     Parameters
@@ -135,9 +140,10 @@ def aligned_rmse(reproduced, reference, position_columns=slice(0, 3), velocity_c
     reproduced = _as_trajectory("reproduced", reproduced)
     reference = _as_trajectory("reference", reference, reproduced.shape[1])
     path = dtw_path(reproduced[:, position_columns], reference[:, position_columns])
+    matched, to = reproduced[path[0]], reference[path[1]]
     return {
-        "position_rmse": _rmse(reproduced[path[0], position_columns], reference[path[1], position_columns]),
-        "velocity_rmse": _rmse(reproduced[path[0], velocity_columns], reference[path[1], velocity_columns]),
+        "position_rmse": _rmse(matched[:, position_columns], to[:, position_columns]),
+        "velocity_rmse": _rmse(matched[:, velocity_columns], to[:, velocity_columns]),
         "path": path,
     }
 
@@ -166,7 +172,9 @@ def time_normalise(trajectory, n_samples):
     return np.column_stack([np.interp(new, old, column) for column in trajectory.T])
 
 
-def time_normalised_rmse(reproduced, demos, position_columns=slice(0, 3), velocity_columns=slice(3, 6)):
+def time_normalised_rmse(
+    reproduced, demos, position_columns=slice(0, 3), velocity_columns=slice(3, 6)
+):
     """RMSEs against the mean of the demonstrations, all resampled to the mean length.
 
     Returns
@@ -270,7 +278,9 @@ def stroke_errors(stroke, demo_strokes, n_samples=50):
     mean = np.mean([resample_by_arc_length(s, n_samples) for s in demo_strokes], axis=0)
     points = resample_by_arc_length(stroke, n_samples)
     if points.shape[1] != mean.shape[1]:
-        raise ValueError(f"stroke has {points.shape[1]} columns, the demonstrated strokes {mean.shape[1]}")
+        raise ValueError(
+            f"stroke has {points.shape[1]} columns, the demonstrated strokes {mean.shape[1]}"
+        )
     offset = points.mean(axis=0) - mean.mean(axis=0)
     return {
         "shape": _rmse(points - offset, mean),
