@@ -20,12 +20,12 @@ def _learn(args):
 
 
 def _reproduce(args):
-    from hemg_drake.pipeline import reproduce
+    from hemg_drake.pipeline import DEFAULT_WEIGHTING, reproduce
 
     reproduce(
         args.run,
         start_offset=args.start_offset,
-        weighting=args.weighting,
+        weighting=args.weighting or DEFAULT_WEIGHTING,
         out_dir=args.out,
         replay=not args.no_replay,
     )
@@ -98,8 +98,8 @@ def build_parser():
         metavar=("DX", "DY", "DZ"), help="start this far from the demonstrations' start (m)",
     )  # fmt: skip
     reproduce.add_argument(
-        "--weighting", choices=["temporal", "spatial", "forward"], default="temporal",
-        help="HSMM state weighting",
+        "--weighting", choices=["temporal", "spatial", "forward"],
+        help="HSMM state weighting (default: the pipeline's, temporal)",
     )  # fmt: skip
     reproduce.add_argument("--out", help="output folder (default: the run folder)")
     reproduce.add_argument("--no-replay", action="store_true", help="write no HTML replay")

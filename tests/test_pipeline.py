@@ -60,6 +60,16 @@ def test_same_seeds_same_metrics(pin_run, tmp_path):
     assert again == results["cotter_pin"]
 
 
+def test_reproduce_command_from_an_offset_start(pin_run, tmp_path, capsys):
+    out, _ = pin_run
+    command = ["reproduce", str(out / "cotter_pin"), "--start-offset", "0", "0", "-0.03"]
+    assert main([*command, "--out", str(tmp_path), "--no-replay"]) == 0
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    assert metrics["start_offset"] == [0.0, 0.0, -0.03] and metrics["success"]
+    assert "pos RMSE (mm)" in capsys.readouterr().out
+    assert not (tmp_path / "reproduction.html").exists()
+
+
 def test_missing_run_folder_is_a_clear_error(tmp_path, capsys):
     with pytest.raises(FileNotFoundError, match="run folder not found"):
         learn(tmp_path / "nowhere")
