@@ -1,6 +1,7 @@
 """Shared test settings: headless plots, paths to the shared facts."""
 
 import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -17,3 +18,27 @@ def facts_dir():
     if not FACTS.is_dir():
         pytest.fail(f"shared facts not found at {FACTS}")
     return FACTS
+
+
+
+def _missing_tool(name, package):
+    """Skip a test whose tool is missing; under CI (which installs it) fail instead."""
+    if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
+        pytest.fail(f"{name} is missing under CI: .ci/run must install Debian's {package}")
+    pytest.skip(f"{name} not installed (apt-get install {package})")
+
+
+@pytest.fixture
+def chromium():
+    """Headless Chromium renders the HTML replays."""
+    from hemg_drake.viz.screenshot import find_chromium
+
+    if find_chromium() is None:
+        _missing_tool("chromium", "chromium")
+
+
+@pytest.fixture
+def graphviz():
+    """Graphviz's dot draws the diagram pictures."""
+    if shutil.which("dot") is None:
+        _missing_tool("dot", "graphviz")

@@ -7,7 +7,6 @@ whatever happens, which also stops any Meshcat server it started.
 """
 
 import os
-import shutil
 import sys
 from pathlib import Path
 
@@ -78,10 +77,8 @@ def small_scale(monkeypatch):
     monkeypatch.setenv(SCALE_VARIABLE, "small")
 
 
-# The notebooks draw their diagrams with Graphviz (.ci/run installs it).
-@pytest.mark.skipif(shutil.which("dot") is None, reason="graphviz's dot is not installed")
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda path: path.name)
-def test_notebook_runs_top_to_bottom(path, tmp_path, small_scale):
+def test_notebook_runs_top_to_bottom(path, tmp_path, small_scale, graphviz):
     before = sorted(NOTEBOOKS_DIR.iterdir())
     probe = _execute(nbformat.read(path, as_version=4), path.name, tmp_path)
     assert probe == [sys.prefix, "small", str(tmp_path)]

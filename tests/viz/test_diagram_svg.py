@@ -1,6 +1,5 @@
 """Diagram pictures: Graphviz draws every subsystem and port of a small diagram."""
 
-import shutil
 import xml.etree.ElementTree as ET
 
 import pytest
@@ -8,9 +7,6 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Adder, ConstantVectorSource, Gain
 
 from hemg_drake.viz.diagram_svg import diagram_svg
-
-needs_dot = pytest.mark.skipif(shutil.which("dot") is None, reason="graphviz not installed")
-
 
 @pytest.fixture
 def diagram():
@@ -31,8 +27,7 @@ def _text(svg):
     return " ".join(t for t in root.itertext())
 
 
-@needs_dot
-def test_svg_names_every_subsystem_and_exported_port(diagram):
+def test_svg_names_every_subsystem_and_exported_port(diagram, graphviz):
     text = _text(diagram_svg(diagram))
     for name in ("stiffness_source", "summing_junction", "doubling_gain"):
         assert name in text
@@ -40,8 +35,7 @@ def test_svg_names_every_subsystem_and_exported_port(diagram):
         assert port in text
 
 
-@needs_dot
-def test_depth_zero_draws_the_diagram_as_one_box(diagram):
+def test_depth_zero_draws_the_diagram_as_one_box(diagram, graphviz):
     text = _text(diagram_svg(diagram, max_depth=0))
     assert "summing_junction" not in text and "offset_in" in text
 

@@ -16,7 +16,7 @@ from pydrake.systems.framework import DiagramBuilder
 from hemg_drake.robots.baxter import FLOOR_Z, add_baxter_arm
 from hemg_drake.viz import screenshot
 from hemg_drake.viz.recording import ReplayRecorder
-from hemg_drake.viz.screenshot import find_chromium, render_html_to_png
+from hemg_drake.viz.screenshot import render_html_to_png
 
 # Network references that would make a browser fetch something to render the page.
 NETWORK_PATTERNS = [
@@ -108,14 +108,6 @@ def test_render_errors(tmp_path, monkeypatch):
     monkeypatch.setattr(screenshot, "find_chromium", lambda: None)
     with pytest.raises(FileNotFoundError, match="chromium"):
         render_html_to_png(page, tmp_path / "x.png")
-
-
-@pytest.fixture
-def chromium():
-    if find_chromium() is None:
-        if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
-            pytest.fail("chromium is missing under CI: .ci/run must install it")
-        pytest.skip("chromium not installed (apt-get install chromium)")
 
 
 def _arm_pixels(png):
