@@ -36,6 +36,9 @@ SCENARIOS_DIR = Path(__file__).resolve().parents[1] / "scenarios"
 DATASET, MODEL = "dataset.npz", "model.npz"
 REG_COVAR = 0.5
 DEFAULT_WEIGHTING = "temporal"
+# kappa of the reproducer's cross-track attractor (1/s): a start offset decays towards the
+# demonstrated path with the time constant 1 / kappa (docs/reproduction.md).
+RESTORING_GAIN = 0.0
 # Start offsets of the demo's second reproduction (m), 3 cm from the demonstrations' start.
 # Cotter pin: along the pull axis, below the ring (the grasp holds the ring from the start,
 # so the arm is pulled most of the way back to it; the demonstrations vary along this axis
@@ -131,6 +134,7 @@ def reproduce(
     *,
     start_offset=(0.0, 0.0, 0.0),
     weighting=DEFAULT_WEIGHTING,
+    restoring_gain=RESTORING_GAIN,
     out_dir=None,
     replay=True,
     progress=print,
@@ -144,6 +148,8 @@ def reproduce(
         Added to the demonstrations' mean start position.
     weighting : {"temporal", "spatial", "forward"}
         State weighting of the reproducer.
+    restoring_gain : float
+        kappa of the reproducer's cross-track attractor (1/s).
     out_dir : path-like, optional
         Where to write (created); default ``run_dir``.
     replay : bool
@@ -179,6 +185,7 @@ def reproduce(
         duration=duration,
         start=start,
         weighting=weighting,
+        restoring_gain=restoring_gain,
         replay_path=out_dir / "reproduction.html" if replay else None,
     )
     progress(
@@ -187,7 +194,12 @@ def reproduce(
         f"{time.perf_counter() - began:.1f} s"
     )
     metrics = task_metrics(scenario.task, demos, result)
-    metrics.update(weighting=weighting, start=start.tolist(), start_offset=offset.tolist())
+    metrics.update(
+        weighting=weighting,
+        restoring_gain=restoring_gain,
+        start=start.tolist(),
+        start_offset=offset.tolist(),
+    )
     result.log.save(out_dir / "reproduction.npz")
     _write_figures(scenario.task, demos, result.log, out_dir)
     write_text_atomic(out_dir / "metrics.json", json.dumps(metrics, indent=2) + "\n")

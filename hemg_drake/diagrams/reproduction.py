@@ -164,6 +164,7 @@ def build_reproduction_diagram(
     *,
     start=None,
     weighting="forward",
+    restoring_gain=0.0,
     observe="reference",
     tracking_gains=TRACKING_GAINS,
     meshcat=None,
@@ -183,6 +184,8 @@ def build_reproduction_diagram(
         demonstrations start.
     weighting : {"temporal", "spatial", "forward"}
         State weighting of the reproducer (:mod:`hemg_drake.learning.reproduce`).
+    restoring_gain : float
+        kappa of the reproducer's cross-track attractor (1/s; 0: eqs. 15-18 alone).
     observe : {"reference", "tool"}
         The position the reproducer observes: its own x* or the slave's tool point.
     tracking_gains : (float, float)
@@ -225,7 +228,13 @@ def build_reproduction_diagram(
 
     reproducer = add(
         "reproducer",
-        HsmmGmrReproducer(model=model, start=start, dt=scenario.log_period, weighting=weighting),
+        HsmmGmrReproducer(
+            model=model,
+            start=start,
+            dt=scenario.log_period,
+            weighting=weighting,
+            restoring_gain=restoring_gain,
+        ),
     )
     clik_config = scenario.clik
     clik = add(
@@ -323,6 +332,7 @@ def run_reproduction(
     duration=None,
     start=None,
     weighting="forward",
+    restoring_gain=0.0,
     observe="reference",
     replay_path=None,
     scene=True,
@@ -331,7 +341,7 @@ def run_reproduction(
 
     Parameters
     ----------
-    scenario, model, start, weighting, observe, scene
+    scenario, model, start, weighting, restoring_gain, observe, scene
         As :func:`build_reproduction_diagram`.
     duration : float, optional
         Simulated seconds; default ``scenario.duration`` (a demonstration's length).
@@ -355,6 +365,7 @@ def run_reproduction(
         model,
         start=start,
         weighting=weighting,
+        restoring_gain=restoring_gain,
         observe=observe,
         recorder=recorder,
         scene=scene,

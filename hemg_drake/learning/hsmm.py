@@ -12,10 +12,11 @@ from hemg_drake.learning import _kernels
 from hemg_drake.learning.gmr import gaussian_log_pdf
 from hemg_drake.learning.reproduce import ResidualForward
 
-FORMAT_VERSION = 1
+# Version 2 added data_range_ (reproduction clips the stiffness to it).
+FORMAT_VERSION = 2
 _FITTED = (
     "startprob_", "transmat_", "means_", "covariances_",
-    "duration_means_", "duration_stds_", "occupancy_",
+    "duration_means_", "duration_stds_", "occupancy_", "data_range_",
 )  # fmt: skip
 
 
@@ -107,6 +108,9 @@ class HSMM:
         In steps.
     occupancy_ : array, shape (N,)
         Fraction of training samples in each state (the prior of eq. 14).
+    data_range_ : array, shape (2, D)
+        Smallest and largest value of each dimension in the training data (reproduction
+        keeps k* inside it).
     max_duration_ : int
     log_likelihood_history_ : list of float
         Total log-likelihood of all demonstrations before each M-step.
@@ -217,6 +221,7 @@ class HSMM:
                     f"demo {c} has {len(demo)} steps, fewer than n_states = {self.n_states}"
                 )
         samples = np.concatenate(demos)
+        self.data_range_ = np.stack([samples.min(axis=0), samples.max(axis=0)])
         scale = samples.std(axis=0)
         scale[scale == 0] = 1.0
         lengths = [len(demo) for demo in demos]
@@ -540,7 +545,8 @@ class HSMM:
         version = arrays.get("format_version")
         if version is None or version.shape != () or int(version) != FORMAT_VERSION:
             raise ValueError(
-                f"{path}: HSMM model format version {version}, this code reads {FORMAT_VERSION}"
+                f"{path}: HSMM model format version {version}, this code reads "
+                f"{FORMAT_VERSION} (fit the model again, e.g. hemg-drake learn)"
             )
         missing = [k for k in (*_FITTED, "settings", "max_duration_") if k not in arrays]
         if missing:
@@ -564,7 +570,7 @@ class HSMM:
         shapes = {
             "startprob_": (n,), "transmat_": (n, n), "means_": (n, n_dims),
             "covariances_": (n, n_dims, n_dims), "duration_means_": (n,),
-            "duration_stds_": (n,), "occupancy_": (n,),
+            "duration_stds_": (n,), "occupancy_": (n,), "data_range_": (2, n_dims),
         }  # fmt: skip
         for name, shape in shapes.items():
             value = getattr(self, name)
@@ -579,5 +585,7 @@ class HSMM:
             raise ValueError(
                 f"{path}: damaged HSMM model file, covariances_ not positive definite"
             ) from None
+        if np.any(self.data_range_[0] > self.data_range_[1]):
+            raise ValueError(f"{path}: damaged HSMM model file, data_range_ minimum > maximum")
         if np.any(self.duration_stds_ <= 0) or self.max_duration_ < 1:
             raise ValueError(f"{path}: damaged HSMM model file, bad duration parameters")

@@ -6,8 +6,26 @@ One step, from the current position x_t and the predicted forward variable:
    ``"temporal"`` the forward variable without observation (timing alone);
    ``"spatial"``  h_i proportional to pi_i N(x_t | mu_i^x, S_i^xx) (eq. 14);
    ``"forward"``  the forward variable observing x_t (eqs. 11, 13);
-2. [xdot*; k*] = sum_i h_i [mu_i^O + S_i^OI (S_i^II)^-1 (x_t - mu_i^I)] (eqs. 15-17);
+2. [xdot*; k*] = sum_i h_i [mu_i^O + S_i^OI (S_i^II)^-1 (x_t - mu_i^I)] (eqs. 15-17),
+   plus, with ``restoring_gain`` kappa > 0, the cross-track attractor
+   kappa sum_i h_i (I - u_i u_i^T) (mu_i^x - x_t) added to xdot*, and k* clipped to the
+   stiffness range of the training data (``HSMM.data_range_``);
 3. x*_{t+1} = x*_t + dt xdot* (eq. 18).
+
+The cross-track attractor. When every demonstration starts at one point, eqs. 15-17 hold
+no information on how to return to the path from elsewhere: a start offset is carried
+along the whole task. The attractor pulls x_t towards the active states' path, across it
+only: u_i is the principal direction of S_i^xx (the direction in which state i's samples
+spread, the path's direction where the state moves), so the pull does not fight or
+distort the motion along the path and the timing is kept. Where one state dominates, an
+offset across the path decays as exp(-kappa t): time constant 1 / kappa. kappa = 0 is
+eqs. 15-18 exactly. (The minimal-intervention alternative, a gain proportional to
+(S_i^xx)^-1, was not taken: its gains scale with the inverse of the demonstrations'
+spread, millimetres here, so it needs a second tuning constant and is stiff.)
+
+k* is clipped because GMR's linear regression (eq. 16) extrapolates: away from the
+training data, or between states, it can return a stiffness outside anything
+demonstrated (even a negative one); the clip keeps the reproduced gain a demonstrated one.
 
 Modelling choices. The forward variable is kept in its residual-duration form
 (Yu 2010; Calinon's pbdlib ``demo_HSMM``): alpha[i, d] = p(state i active at
@@ -83,16 +101,26 @@ class HsmmGmrPolicy:
     weighting : {"temporal", "spatial", "forward"}
     dt : float
         Step in seconds (eq. 18).
+    restoring_gain : float
+        kappa of the cross-track attractor in 1/s, >= 0 (0: eqs. 15-18 alone); an offset
+        across the path decays with the time constant 1 / kappa. kappa dt must stay below
+        1 (explicit Euler, eq. 18).
     """
 
-    def __init__(self, model, *, weighting="forward", dt=0.01):
+    def __init__(self, model, *, weighting="forward", dt=0.01, restoring_gain=0.0):
         if weighting not in WEIGHTINGS:
             raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be a finite number > 0, got {dt!r}")
+        if not (np.isfinite(restoring_gain) and 0 <= restoring_gain * dt < 1):
+            raise ValueError(
+                f"restoring_gain must be finite, >= 0 and < 1 / dt = {1 / dt:g} 1/s, "
+                f"got {restoring_gain!r}"
+            )
         self.forward = ResidualForward(model)
         self.weighting = weighting
         self.dt = float(dt)
+        self.restoring_gain = float(restoring_gain)
         self.n_position = len(model.position_dims_)
         self.n_stiffness = len(model.stiffness_dims_)
         self.n_states = model.n_states
@@ -102,6 +130,13 @@ class HsmmGmrPolicy:
             covariances=model.covariances_,
             input_dims=model.position_dims_,
             output_dims=np.concatenate([model.velocity_dims_, model.stiffness_dims_]),
+        )
+        self.stiffness_range = model.data_range_[:, model.stiffness_dims_]
+        # Cross-track projectors I - u_i u_i^T, u_i the direction of state i's mean velocity.
+        velocities = model.means_[:, model.velocity_dims_]
+        directions = velocities / np.linalg.norm(velocities, axis=1, keepdims=True)
+        self.cross_track = np.eye(self.n_position) - np.einsum(
+            "np,nq->npq", directions, directions
         )
 
     def check_position(self, x, name="position"):
@@ -148,7 +183,13 @@ class HsmmGmrPolicy:
             h, predicted_next = self.forward.step(predicted, log_emission)
         output = h @ self.gmr._component_means(query)[0]
         xdot = output[: self.n_position]
-        return h, xdot, output[self.n_position :], x_star + self.dt * xdot, predicted_next
+        if self.restoring_gain > 0:
+            towards = self.gmr.input_means_ - x  # (N, P)
+            xdot = xdot + self.restoring_gain * np.einsum(
+                "n,npq,nq->p", h, self.cross_track, towards
+            )
+        k = np.clip(output[self.n_position :], *self.stiffness_range)
+        return h, xdot, k, x_star + self.dt * xdot, predicted_next
 
 
 @dataclass(frozen=True)
@@ -176,10 +217,11 @@ class Reproduction:
     h: np.ndarray
 
 
-def reproduce(model, start, n_steps, *, dt=0.01, weighting="forward"):
+def reproduce(model, start, n_steps, *, dt=0.01, weighting="forward", restoring_gain=0.0):
     """Reproduce a task from a start position, step by step (eqs. 12-18).
 
-    The position observed at each step is the reproduction's own x*_t.
+    The position observed at each step is the reproduction's own x*_t. k* is clipped to
+    the stiffness range of the training data.
 
     Parameters
     ----------
@@ -192,12 +234,14 @@ def reproduce(model, start, n_steps, *, dt=0.01, weighting="forward"):
     dt : float
         Step in s.
     weighting : {"temporal", "spatial", "forward"}
+    restoring_gain : float
+        kappa of the cross-track attractor (1/s); see :class:`HsmmGmrPolicy`.
 
     Returns
     -------
     Reproduction
     """
-    policy = HsmmGmrPolicy(model, weighting=weighting, dt=dt)
+    policy = HsmmGmrPolicy(model, weighting=weighting, dt=dt, restoring_gain=restoring_gain)
     x = policy.check_position(start, "start")
     if not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
         raise ValueError(f"n_steps must be an integer >= 1, got {n_steps!r}")

@@ -26,7 +26,9 @@ class HsmmGmrReproducer(LeafSystem):
     t_k = k dt the system reads ``p_WE`` as the current position x_k (input of
     the weighting and of GMR), then stores h_k, xdot*_k, k*_k and
     x*_{k+1} = x*_k + dt xdot*_k (eq. 18). With ``p_WE`` fed from ``x_star``
-    this is exactly :func:`hemg_drake.learning.reproduce.reproduce`.
+    this is exactly :func:`hemg_drake.learning.reproduce.reproduce`, including the
+    optional cross-track attractor (``restoring_gain``) and the clip of k* to the
+    training data's stiffness range.
 
     Every output is a state output, so the system has no direct feedthrough
     and ``x_star`` can close a loop. Before the first update, ``xdot_star``,
@@ -44,11 +46,16 @@ class HsmmGmrReproducer(LeafSystem):
         Period in s (Table I: 0.01).
     weighting : {"temporal", "spatial", "forward"}
         See :mod:`hemg_drake.learning.reproduce`.
+    restoring_gain : float
+        kappa of the cross-track attractor in 1/s (0: eqs. 15-18 alone); an offset across
+        the demonstrated path decays with the time constant 1 / kappa.
     """
 
-    def __init__(self, *, model, start, dt=0.01, weighting="forward"):
+    def __init__(self, *, model, start, dt=0.01, weighting="forward", restoring_gain=0.0):
         LeafSystem.__init__(self)
-        self._policy = HsmmGmrPolicy(model, weighting=weighting, dt=dt)
+        self._policy = HsmmGmrPolicy(
+            model, weighting=weighting, dt=dt, restoring_gain=restoring_gain
+        )
         start = self._policy.check_position(start, "start")
         predicted = self._policy.forward.initial()
         h, xdot, k, _, _ = self._policy.step(start, start, predicted)

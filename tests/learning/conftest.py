@@ -19,6 +19,7 @@ def set_parameters(*, means, covariances, startprob, transmat, duration_means,
     model.duration_means_ = np.asarray(duration_means, dtype=float)
     model.duration_stds_ = np.asarray(duration_stds, dtype=float)
     model.occupancy_ = np.full(len(means), 1.0 / len(means))
+    model.data_range_ = np.outer([-np.inf, np.inf], np.ones(model.means_.shape[1]))  # no data
     model.max_duration_ = max_duration
     model.log_likelihood_history_ = []
     return model

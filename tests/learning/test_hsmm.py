@@ -153,10 +153,14 @@ def test_save_and_load_round_trip(models, tmp_path):
     path = tmp_path / "model.npz"
     model.save(path)
     loaded = HSMM.load(path)
-    for name in ("means_", "covariances_", "transmat_", "duration_stds_", "occupancy_"):
+    for name in ("means_", "covariances_", "transmat_", "duration_stds_", "occupancy_",
+                 "data_range_"):
         np.testing.assert_array_equal(getattr(loaded, name), getattr(model, name))
     assert loaded.log_likelihood(demos[0]) == model.log_likelihood(demos[0])
     assert loaded.n_position == 3 and loaded.max_duration_ == model.max_duration_
+    # The range of the training data, per dimension (reproduction clips k* to it).
+    samples = np.concatenate(demos)
+    np.testing.assert_array_equal(loaded.data_range_, [samples.min(0), samples.max(0)])
 
 
 def test_load_rejects_damaged_and_other_version_files(models, tmp_path):
@@ -176,9 +180,18 @@ def test_load_rejects_damaged_and_other_version_files(models, tmp_path):
 
     with np.load(good) as data:
         arrays = dict(data)
-    np.savez(tmp_path / "future.npz", **{**arrays, "format_version": np.array(2)})
-    with pytest.raises(ValueError, match="version 2"):
+    np.savez(tmp_path / "future.npz", **{**arrays, "format_version": np.array(3)})
+    with pytest.raises(ValueError, match="version 3"):
         HSMM.load(tmp_path / "future.npz")
+
+    older = {key: value for key, value in arrays.items() if key != "data_range_"}
+    np.savez(tmp_path / "older.npz", **{**older, "format_version": np.array(1)})
+    with pytest.raises(ValueError, match="version 1, this code reads 2 .fit the model again"):
+        HSMM.load(tmp_path / "older.npz")
+
+    np.savez(tmp_path / "range.npz", **{**arrays, "data_range_": arrays["data_range_"][::-1]})
+    with pytest.raises(ValueError, match="data_range_ minimum > maximum"):
+        HSMM.load(tmp_path / "range.npz")
 
     np.savez(tmp_path / "bad.npz", **{**arrays, "transmat_": arrays["transmat_"][:2]})
     with pytest.raises(ValueError, match="transmat_"):

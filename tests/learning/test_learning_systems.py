@@ -29,17 +29,24 @@ def run(diagram, systems, n_steps):
     return {key: np.array([row[key] for row in rows]) for key in rows[0]}
 
 
-@pytest.mark.parametrize("weighting", ["temporal", "spatial", "forward"])
-def test_reproducer_in_a_simulator_equals_the_numpy_reproduction(path_task, weighting):
-    start, n_steps = path_task.mean[0, :3], 80
+@pytest.mark.parametrize(
+    "weighting, kappa", [("temporal", 0.0), ("spatial", 0.0), ("forward", 0.0), ("temporal", 5.0)]
+)
+def test_reproducer_in_a_simulator_equals_the_numpy_reproduction(path_task, weighting, kappa):
+    # From 1 cm aside, so that the cross-track attractor (kappa > 0) has work to do.
+    start, n_steps = path_task.mean[0, :3] + [0.0, 0.01, 0.0], 80
     builder = DiagramBuilder()
     reproducer = builder.AddSystem(
-        HsmmGmrReproducer(model=path_task.model, start=start, dt=DT, weighting=weighting)
+        HsmmGmrReproducer(
+            model=path_task.model, start=start, dt=DT, weighting=weighting, restoring_gain=kappa
+        )
     )
     builder.Connect(reproducer.GetOutputPort("x_star"), reproducer.GetInputPort("p_WE"))
     log = run(builder.Build(), {"r": reproducer}, n_steps)
 
-    expected = reproduce(path_task.model, start, n_steps + 1, dt=DT, weighting=weighting)
+    expected = reproduce(
+        path_task.model, start, n_steps + 1, dt=DT, weighting=weighting, restoring_gain=kappa
+    )
     # After the update at t_k the state holds step k's outputs and x*_{k+1}.
     np.testing.assert_allclose(log["r", "x_star"], expected.x[1:], rtol=0, atol=1e-9)
     np.testing.assert_allclose(log["r", "xdot_star"], expected.xdot[:-1], rtol=0, atol=1e-9)
@@ -121,6 +128,8 @@ def test_bad_parameters_and_inputs_are_rejected(path_task):
         HsmmGmrReproducer(model=model, start=start[:2])
     with pytest.raises(ValueError, match="weighting"):
         HsmmGmrReproducer(model=model, start=start, weighting="spacial")
+    with pytest.raises(ValueError, match="restoring_gain"):
+        HsmmGmrReproducer(model=model, start=start, restoring_gain=-1.0)
     reproducer = HsmmGmrReproducer(model=model, start=start)
     simulator = Simulator(reproducer)
     reproducer.GetInputPort("p_WE").FixValue(simulator.get_mutable_context(), [0.0, np.nan, 0.0])

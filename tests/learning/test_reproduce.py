@@ -60,3 +60,75 @@ def test_bad_input_is_rejected(path_task):
         reproduce(model, start, 0)
     with pytest.raises(ValueError, match="not fitted"):
         reproduce(HSMM(3), start, 10)
+
+
+@pytest.fixture(scope="module")
+def line_model():
+    """Three noisy demonstrations of a 10 cm straight move along x at 0.1 m/s."""
+    rng = np.random.default_rng(3)
+    demos = []
+    for _ in range(3):
+        t = np.arange(0.0, 1.0, 0.01)
+        x = np.column_stack([0.1 * t, np.zeros_like(t), np.zeros_like(t)])
+        x += rng.normal(0.0, 1e-3, x.shape)
+        v = np.column_stack([np.full_like(t, 0.1), np.zeros_like(t), np.zeros_like(t)])
+        v += rng.normal(0.0, 1e-3, v.shape)
+        k = 50.0 + 100.0 * t + rng.normal(0.0, 1.0, len(t))
+        demos.append(np.column_stack([x, v, k]))
+    return HSMM(4, init="time", reg_covar=0.1, n_iter=10, seed=0).fit(demos)
+
+
+def test_with_no_restoring_gain_the_rollout_is_eqs_15_to_18(line_model):
+    # An independent rollout: temporal weights, GMR's conditional mean, Euler (eq. 18).
+    from hemg_drake.learning.gmr import Gmr
+
+    start, n = np.array([0.0, 0.01, 0.0]), 60
+    result = reproduce(line_model, start, n, weighting="temporal", restoring_gain=0.0)
+    gmr = Gmr(
+        priors=line_model.occupancy_, means=line_model.means_,
+        covariances=line_model.covariances_, input_dims=[0, 1, 2], output_dims=[3, 4, 5, 6],
+    )  # fmt: skip
+    h = line_model.forward_variable(n, observe=False)
+    x = start
+    for t in range(n):
+        np.testing.assert_allclose(result.x[t], x, atol=1e-12)
+        x = x + 0.01 * gmr.predict(x, weights=h[t])[0][:3]
+
+
+def test_a_start_offset_across_the_path_decays_with_time_constant_one_over_kappa(line_model):
+    start = np.array([0.0, 0.01, 0.0])  # 1 cm across the demonstrated path
+    kappa, n = 4.0, 80
+    carried = reproduce(line_model, start, n, weighting="temporal")
+    restored = reproduce(line_model, start, n, weighting="temporal", restoring_gain=kappa)
+    t = restored.t
+    # Without the attractor the offset is carried along; with it, it decays as exp(-kappa t).
+    assert np.all(np.abs(carried.x[:, 1]) > 0.008)
+    expected = 0.01 * (1.0 - kappa * 0.01) ** np.arange(n)  # the Euler step of exp(-kappa t)
+    np.testing.assert_allclose(restored.x[:, 1], expected, atol=1e-3)
+    assert abs(restored.x[-1, 1]) < 0.01 * np.exp(-kappa * t[-1]) + 1e-3
+    # Along the path the motion (the timing) is the same.
+    np.testing.assert_allclose(restored.x[:, 0], carried.x[:, 0], atol=2e-3)
+
+
+def test_stiffness_is_clipped_to_the_training_range(line_model):
+    # 0.5 m before the start of the path GMR's regression (eq. 16) extrapolates the rising
+    # stiffness below anything demonstrated; the reproduction keeps it in the data's range.
+    from hemg_drake.learning.gmr import Gmr
+
+    far = np.array([-0.5, 0.0, 0.0])
+    result = reproduce(line_model, far, 5, weighting="temporal")
+    gmr = Gmr(
+        priors=line_model.occupancy_, means=line_model.means_,
+        covariances=line_model.covariances_, input_dims=[0, 1, 2], output_dims=[3, 4, 5, 6],
+    )  # fmt: skip
+    raw = gmr.predict(far, weights=result.h[0])[0][3]
+    low, high = line_model.data_range_[:, 6]
+    assert raw < low - 20.0
+    assert result.k[0, 0] == pytest.approx(low)
+    assert np.all((result.k >= low) & (result.k <= high))
+
+
+@pytest.mark.parametrize("gain", [-1.0, np.nan, 100.0])
+def test_bad_restoring_gain_is_rejected(path_task, gain):
+    with pytest.raises(ValueError, match="restoring_gain"):
+        reproduce(path_task.model, path_task.mean[0, :3], 10, restoring_gain=gain)
