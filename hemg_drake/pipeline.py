@@ -38,7 +38,7 @@ REG_COVAR = 0.5
 DEFAULT_WEIGHTING = "temporal"
 # kappa of the reproducer's cross-track attractor (1/s): a start offset decays towards the
 # demonstrated path with the time constant 1 / kappa (docs/reproduction.md).
-RESTORING_GAIN = 0.0
+RESTORING_GAIN = 2.0
 # Start offsets of the demo's second reproduction (m), 3 cm from the demonstrations' start.
 # Cotter pin: along the pull axis, below the ring (the grasp holds the ring from the start,
 # so the arm is pulled most of the way back to it; the demonstrations vary along this axis

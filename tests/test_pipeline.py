@@ -150,17 +150,22 @@ def test_drawing_three_strokes_stiff_on_paper(drawing_run):
         assert metrics["success"] and metrics["strokes"] == 3
         assert metrics["stiffness_on_paper"] > metrics["stiffness_in_air"] + 50.0
         assert metrics["stiffness_correlation"] > 0.7
-    # The line is drawn in shape; from 3 cm aside it is drawn 3 cm aside (the demonstrations
-    # show no correction towards their path, so GMR learns none).
+    # The line is drawn in shape; from 3 cm aside the reproduction returns to the demonstrated
+    # path (the cross-track attractor, time constant 0.5 s) before the first stroke: every
+    # stroke lands within 3 mm of where it lands from the demonstrations' start.
     metrics, offset = drawing_run
+    assert offset["restoring_gain"] > 0
     assert metrics["stroke_shape_error_m"][0] <= 0.005
-    assert offset["stroke_placement_error_m"][0] > metrics["stroke_placement_error_m"][0] + 0.01
+    for placed, aside in zip(
+        metrics["stroke_placement_error_m"], offset["stroke_placement_error_m"], strict=True
+    ):
+        assert aside <= placed + 0.003
 
 
 @pytest.mark.xfail(
     strict=True,
     reason="known gap: N = 18 states over the whole task smooth the zig-zag (stroke 3, "
-    "about 12 mm shape error measured; 4-6 mm for the others); see docs/reproduction.md",
+    "about 14 mm shape error measured at full scale); see docs/reproduction.md",
 )
 def test_drawing_every_stroke_shape_within_5_mm(drawing_run):
     for metrics in drawing_run:

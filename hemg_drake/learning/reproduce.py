@@ -8,20 +8,24 @@ One step, from the current position x_t and the predicted forward variable:
    ``"forward"``  the forward variable observing x_t (eqs. 11, 13);
 2. [xdot*; k*] = sum_i h_i [mu_i^O + S_i^OI (S_i^II)^-1 (x_t - mu_i^I)] (eqs. 15-17),
    plus, with ``restoring_gain`` kappa > 0, the cross-track attractor
-   kappa sum_i h_i (I - u_i u_i^T) (mu_i^x - x_t) added to xdot*, and k* clipped to the
+   kappa sum_i h_i (I - w_i u_i u_i^T) (mu_i^x - x_t) added to xdot*, and k* clipped to the
    stiffness range of the training data (``HSMM.data_range_``);
 3. x*_{t+1} = x*_t + dt xdot* (eq. 18).
 
 The cross-track attractor. When every demonstration starts at one point, eqs. 15-17 hold
 no information on how to return to the path from elsewhere: a start offset is carried
 along the whole task. The attractor pulls x_t towards the active states' path, across it
-only: u_i is the principal direction of S_i^xx (the direction in which state i's samples
-spread, the path's direction where the state moves), so the pull does not fight or
-distort the motion along the path and the timing is kept. Where one state dominates, an
-offset across the path decays as exp(-kappa t): time constant 1 / kappa. kappa = 0 is
-eqs. 15-18 exactly. (The minimal-intervention alternative, a gain proportional to
-(S_i^xx)^-1, was not taken: its gains scale with the inverse of the demonstrations'
-spread, millimetres here, so it needs a second tuning constant and is stiff.)
+only: u_i is the direction of state i's mean velocity mu_i^xdot (the path's direction
+there), so the pull neither fights nor distorts the motion along the path and the timing
+is kept. A state that barely moves (a hold) has no direction; its projector fades to the
+identity (weight s_i^2 / (s_i^2 + STILL s_max^2) on u_i u_i^T, s_i = |mu_i^xdot|), so it
+attracts in every direction. Where one state dominates, an offset across the path decays as
+exp(-kappa t): time constant 1 / kappa; kappa = 0 is eqs. 15-18 exactly. Measured
+alternatives: the principal direction of S_i^xx instead of mu_i^xdot follows the
+covariance floor (``reg_covar``, relative to each axis' spread in the data) rather than the
+path when the floor is large, and the drawing then lost its strokes; the minimal-
+intervention gain (S_i^xx)^-1 scales with the inverse of the demonstrations' spread
+(millimetres) and would need a second tuning constant.
 
 k* is clipped because GMR's linear regression (eq. 16) extrapolates: away from the
 training data, or between states, it can return a stiffness outside anything
@@ -48,6 +52,8 @@ from hemg_drake.learning import _kernels
 from hemg_drake.learning.gmr import Gmr, softmax
 
 WEIGHTINGS = ("temporal", "spatial", "forward")
+# A state moving slower than STILL ** 0.5 times the fastest state counts as half still.
+STILL = 0.05
 
 
 class ResidualForward:
@@ -132,11 +138,14 @@ class HsmmGmrPolicy:
             output_dims=np.concatenate([model.velocity_dims_, model.stiffness_dims_]),
         )
         self.stiffness_range = model.data_range_[:, model.stiffness_dims_]
-        # Cross-track projectors I - u_i u_i^T, u_i the direction of state i's mean velocity.
+        # Cross-track projectors I - w_i u_i u_i^T, u_i the direction of state i's mean
+        # velocity; w_i = s_i^2 / (s_i^2 + s_ref^2) with s_i its speed: a state that barely
+        # moves (a hold) has no path direction and attracts in every direction.
         velocities = model.means_[:, model.velocity_dims_]
-        directions = velocities / np.linalg.norm(velocities, axis=1, keepdims=True)
+        speeds_squared = np.sum(velocities**2, axis=1)
+        along = speeds_squared / (speeds_squared + (STILL * speeds_squared.max()) + 1e-300)
         self.cross_track = np.eye(self.n_position) - np.einsum(
-            "np,nq->npq", directions, directions
+            "n,np,nq->npq", along / np.maximum(speeds_squared, 1e-300), velocities, velocities
         )
 
     def check_position(self, x, name="position"):

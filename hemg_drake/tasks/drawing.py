@@ -210,14 +210,32 @@ def _stroke_shapes():
     return line, arc, zigzag
 
 
-# Durations (s): of one pen-down chord per stroke, and of the moves around the strokes.
-_CHORD_TIME = (1.2, 0.3, 0.4)
-_PRESS_TIME = 0.3
-_LIFT_TIME = 0.4
-_TRAVEL_TIME = 0.7
+# Timing (s) of the moves around the strokes: brisk, as a person lifts and moves a pen.
+_PRESS_TIME = 0.2
+_LIFT_TIME = 0.3
+_TRAVEL_TIME = 0.5
+# A pen-down chord takes length / _DRAW_SPEED plus _TURN_TIME per half turn (pi rad) of the
+# corner that ends it: people slow down before sharp turns (the corners of the zig-zag get
+# the most time, the arc's gentle bends little). Chosen so that the line takes 1.2 s and an
+# arc chord 0.3 s.
+_DRAW_SPEED = 0.13
+_TURN_TIME = 0.75
 # Pen-down segments start and end this high above the paper (m): the arm's lag and
 # overshoot at the end of a free move stay clear of the paper.
 _CLEARANCE = 0.005
+
+
+def _chord_times(xy):
+    """Duration (s) of each chord of a stroke's corners ``xy`` (k, 2), by its length and turn.
+
+    The last chord turns by 90 degrees into the pen's lift.
+    """
+    chords = np.diff(xy, axis=0)
+    lengths = np.linalg.norm(chords, axis=1)
+    directions = chords / lengths[:, None]
+    cosines = np.sum(directions[:-1] * directions[1:], axis=1)
+    turns = np.append(np.arccos(np.clip(cosines, -1.0, 1.0)), 0.5 * np.pi)
+    return lengths / _DRAW_SPEED + _TURN_TIME * turns / np.pi
 
 
 def default_drawing_plan(params=None):
@@ -229,7 +247,8 @@ def default_drawing_plan(params=None):
     point is at the arm's home pose). Around each stroke: descend (free) to 5 mm above the
     paper, press (pen down) to ``press_depth`` below it, draw (pen down, one segment per
     chord), release (pen down) to 5 mm above, lift (free) to ``hover_height``. Pen-down
-    segments are forceful, the others free. 11.6 s in all.
+    segments are forceful, the others free. 11.7 s in all; chord durations by length and
+    turn (people slow down before sharp corners), brisk pen lifts.
 
     Parameters
     ----------
@@ -252,12 +271,12 @@ def default_drawing_plan(params=None):
         durations.append(duration)
         pen_down.append(down)
 
-    for shape, chord_time in zip(_stroke_shapes(), _CHORD_TIME):
+    for shape in _stroke_shapes():
         xy = center[:2] + shape
         go([*xy[0], hover], _TRAVEL_TIME, False)
         go([*xy[0], touch], _LIFT_TIME, False)
         go([*xy[0], press], _PRESS_TIME, True)
-        for corner in xy[1:]:
+        for corner, chord_time in zip(xy[1:], _chord_times(xy)):
             go([*corner, press], chord_time, True)
         go([*xy[-1], touch], _PRESS_TIME, True)
         go([*xy[-1], hover], _LIFT_TIME, False)
