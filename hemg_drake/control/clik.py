@@ -1,5 +1,7 @@
 """Closed-loop inverse kinematics (CLIK) of the slave's tool point, eq. 21."""
 
+import math
+
 import numpy as np
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import LeafSystem
@@ -106,35 +108,34 @@ class Clik(LeafSystem):
             raise ValueError("Clik needs a model instance with one velocity per position")
         self._n = nq
         # Columns of the full-plant Jacobian that belong to the arm.
-        self._v_columns = plant.GetVelocitiesFromArray(model_instance, np.arange(plant.num_velocities()))
-        self._v_columns = self._v_columns.astype(int)
+        self._v_columns = velocity_columns(plant, model_instance)
         lower = plant.GetPositionLowerLimits()
         upper = plant.GetPositionUpperLimits()
         q_columns = plant.GetPositionsFromArray(model_instance, np.arange(plant.num_positions())).astype(int)
         self._q_lower = lower[q_columns] + limit_margin
         self._q_upper = upper[q_columns] - limit_margin
         self._v_max = plant.GetVelocityUpperLimits()[self._v_columns]
+        self._zeros = np.zeros(self._n)
 
         self._p_desired = self.DeclareVectorInputPort("p_WE_desired", 3)
         self._state = self.DeclareVectorInputPort("state", 2 * self._n)
-        # Discrete state [q_d; qdot_d].
-        self._xd = self.DeclareDiscreteState(2 * self._n)
+        # Discrete state q_d and qdot_d, two groups so that the outputs are the state itself.
+        self._q_d_index = self.DeclareDiscreteState(self._n)
+        self._v_d_index = self.DeclareDiscreteState(self._n)
         self.DeclareInitializationDiscreteUpdateEvent(self._initialize)
         self.DeclarePeriodicDiscreteUpdateEvent(
             period_sec=self._period, offset_sec=0.0, update=self._update
         )
-        self.DeclareVectorOutputPort("q_desired", self._n, self._calc_q_desired)
-        self.DeclareVectorOutputPort("v_desired", self._n, self._calc_v_desired)
+        self.DeclareStateOutputPort("q_desired", self._q_d_index)
+        self.DeclareStateOutputPort("v_desired", self._v_d_index)
 
-    def _calc_q_desired(self, context, output):
-        output.SetFromVector(context.get_discrete_state(self._xd).get_value()[: self._n])
-
-    def _calc_v_desired(self, context, output):
-        output.SetFromVector(context.get_discrete_state(self._xd).get_value()[self._n :])
+    def _set(self, discrete_state, q_d, v_d):
+        discrete_state.set_value(self._q_d_index, q_d)
+        discrete_state.set_value(self._v_d_index, v_d)
 
     def _initialize(self, context, discrete_state):
-        q = np.clip(self._state.Eval(context)[: self._n], self._q_lower, self._q_upper)
-        discrete_state.set_value(self._xd, np.concatenate([q, np.zeros(self._n)]))
+        q = self._state.Eval(context)[: self._n]
+        self._set(discrete_state, np.minimum(np.maximum(q, self._q_lower), self._q_upper), self._zeros)
 
     def p_WE(self, q):
         """Tool-point position for arm configuration ``q`` (m), by forward kinematics."""
@@ -145,14 +146,11 @@ class Clik(LeafSystem):
 
     def qdot(self, q, p_WE_desired):
         """The CLIK joint velocity of eq. 21 at ``q`` (rad/s), before limits."""
+        # The Jacobian reuses the forward kinematics that p_WE cached in the plant context.
         e = np.asarray(p_WE_desired, float) - self.p_WE(q)
+        world = self._plant.world_frame()
         J = self._plant.CalcJacobianTranslationalVelocity(
-            self._plant_context,
-            JacobianWrtVariable.kV,
-            self._frame_E,
-            self._p_EoE_E,
-            self._plant.world_frame(),
-            self._plant.world_frame(),
+            self._plant_context, JacobianWrtVariable.kV, self._frame_E, self._p_EoE_E, world, world
         )[:, self._v_columns]
         if self._method == "transpose":
             return self._gain * J.T @ e
@@ -160,18 +158,35 @@ class Clik(LeafSystem):
         return self._gain * J.T @ np.linalg.solve(JJt, e)
 
     def _update(self, context, discrete_state):
-        q_d = context.get_discrete_state(self._xd).get_value()[: self._n]
+        q_d = context.get_discrete_state(self._q_d_index).value()
         p_desired = self._p_desired.Eval(context)
-        if not np.all(np.isfinite(p_desired)):
+        if not all(map(math.isfinite, p_desired.tolist())):
             # Hold the reference rather than integrate a NaN into it.
-            discrete_state.set_value(self._xd, np.concatenate([q_d, np.zeros(self._n)]))
+            self._set(discrete_state, q_d, self._zeros)
             return
         qdot = self.qdot(q_d, p_desired)
         # Uniform scaling keeps the direction of the step within the velocity limits.
-        ratio = np.max(np.abs(qdot) / self._v_max)
+        ratio = (np.abs(qdot) / self._v_max).max()
         if ratio > 1.0:
             qdot = qdot / ratio
-        q_next = np.clip(q_d + self._period * qdot, self._q_lower, self._q_upper)
-        discrete_state.set_value(
-            self._xd, np.concatenate([q_next, (q_next - q_d) / self._period])
-        )
+        # np.minimum/np.maximum rather than np.clip: the same numbers, at half the cost.
+        q_next = np.minimum(np.maximum(q_d + self._period * qdot, self._q_lower), self._q_upper)
+        self._set(discrete_state, q_next, (q_next - q_d) / self._period)
+
+
+def velocity_columns(plant, model_instance):
+    """Where the model instance's velocities sit among the plant's: a slice if contiguous.
+
+    Index full-plant arrays (J, M, g) with it; a slice gives a view instead of the copy that
+    an index array makes, which counts in the 1 kHz controllers.
+
+    Returns
+    -------
+    slice, or array of int, shape (nv,)
+    """
+    all_velocities = np.arange(plant.num_velocities(), dtype=float)
+    columns = plant.GetVelocitiesFromArray(model_instance, all_velocities).astype(int)
+    start = int(columns[0]) if len(columns) else 0
+    if np.array_equal(columns, np.arange(start, start + len(columns))):
+        return slice(start, start + len(columns))
+    return columns

@@ -2,9 +2,9 @@
 
 from pydrake.systems.framework import LeafSystem
 
-from hemg_drake.teleop._validate import as_scalar, as_vector
+from hemg_drake.teleop._validate import as_scalar
 from hemg_drake.teleop.mapping import WorkspaceMapping
-from hemg_drake.teleop.master import TOUCH_X_PEAK_FORCE, saturate_norm
+from hemg_drake.teleop.master import TOUCH_X_PEAK_FORCE, all_finite, saturate_norm
 
 MODES = ("force", "position_error")
 
@@ -85,7 +85,10 @@ class ForceFeedback(LeafSystem):
         )
 
     def _input(self, context, name):
-        return as_vector(name, self._inputs[name].Eval(context), 3)
+        value = self._inputs[name].Eval(context)
+        if not all_finite(value.tolist()):
+            raise ValueError(f"{name} must be finite, got {value.tolist()}")
+        return value
 
     def _calc_motor_force(self, context, output):
         if self.mode == "force":
@@ -98,4 +101,4 @@ class ForceFeedback(LeafSystem):
                 self._input(context, "v_WE")
             ) - self._input(context, "v_MS")
             force = self.stiffness * error + self.damping * error_rate
-        output.SetFromVector(saturate_norm(force, self.peak_force))
+        output.SetFromVector(saturate_norm(force.tolist(), self.peak_force))

@@ -143,11 +143,11 @@ class WorkspaceMap(LeafSystem):
             "v_WE_desired", 3, self._calc_v_WE_desired, prerequisites_of_calc=prerequisites
         )
 
-    def _master_sample(self, context):
-        """[p_MS; v_MS] on the output side: the current input, or the FIFO's oldest row."""
+    def _master_sample(self, context, port, rows):
+        """``port``'s value on the output side: the current input, or the FIFO's oldest."""
         if self.delay_steps == 0:
-            return np.concatenate([self._p_MS_input.Eval(context), self._v_MS_input.Eval(context)])
-        return context.get_discrete_state_vector().value()[:6]
+            return port.Eval(context)
+        return context.get_discrete_state_vector().value()[rows]
 
     def _update(self, context, discrete_state):
         fifo = context.get_discrete_state_vector().value()
@@ -160,7 +160,9 @@ class WorkspaceMap(LeafSystem):
         discrete_state.set_value(np.concatenate([fifo[6:], newest]))
 
     def _calc_p_WE_desired(self, context, output):
-        output.SetFromVector(self.mapping.master_to_slave(self._master_sample(context)[:3]))
+        p_MS = self._master_sample(context, self._p_MS_input, slice(0, 3))
+        output.SetFromVector(self.mapping.master_to_slave(p_MS))
 
     def _calc_v_WE_desired(self, context, output):
-        output.SetFromVector(self.mapping.velocity_to_slave(self._master_sample(context)[3:]))
+        v_MS = self._master_sample(context, self._v_MS_input, slice(3, 6))
+        output.SetFromVector(self.mapping.velocity_to_slave(v_MS))

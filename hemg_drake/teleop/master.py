@@ -21,17 +21,29 @@ TOUCH_X_WORKSPACE = (0.16, 0.12, 0.12)  # m, width x height x depth (data sheet,
 def saturate_norm(force, limit):
     """Scale ``force`` down to norm ``limit`` if it is longer, keeping its direction.
 
+    Plain floats, not numpy: this runs several times per 1 kHz step, where numpy's per-call
+    overhead on 3-vectors costs more than the arithmetic (the results are the same to the bit).
+
     Parameters
     ----------
-    force : array, shape (3,)
+    force : sequence of 3 floats (list or array, shape (3,))
     limit : float, >= 0
 
     Returns
     -------
-    array, shape (3,)
+    list of 3 floats
     """
-    norm = math.sqrt(force @ force)  # not np.linalg.norm: this runs at 1 kHz
-    return force if norm <= limit else force * (limit / norm)
+    x, y, z = force
+    norm = math.sqrt(x * x + y * y + z * z)
+    if norm <= limit:
+        return [x, y, z]
+    scale = limit / norm
+    return [x * scale, y * scale, z * scale]
+
+
+def all_finite(values):
+    """True if every number of the sequence ``values`` is finite (cheap at 1 kHz)."""
+    return all(map(math.isfinite, values))
 
 
 def _zero_order_hold(A, B, period):
@@ -119,8 +131,10 @@ class MasterDynamics:
                 )
             ]
         )
-        self._free_coefficients = self._coefficients[0].tolist()
-        self._half_size = 0.5 * self.workspace_size
+        # The same as plain floats, indexed by "beyond a wall" (False 0, True 1).
+        self._mode_coefficients = self._coefficients.tolist()
+        self._free_coefficients = self._mode_coefficients[0]
+        self._half_size = (0.5 * self.workspace_size).tolist()
 
     def step(self, p_MS, v_MS, hand_force, motor_force):
         """Advance the tip by one period under forces held constant over it.
@@ -137,21 +151,33 @@ class MasterDynamics:
         p_MS, v_MS : array, shape (3,)
             At the end of the sample.
         """
-        force = hand_force + saturate_norm(motor_force, self.peak_force)
+        p_next, v_next = self.step_floats(
+            list(map(float, p_MS)),
+            list(map(float, v_MS)),
+            list(map(float, hand_force)),
+            list(map(float, motor_force)),
+        )
+        return np.array(p_next), np.array(v_next)
+
+    def step_floats(self, p_MS, v_MS, hand_force, motor_force):
+        """:meth:`step` on lists of 3 floats, returning two lists (what the system runs)."""
+        force = [h + m for h, m in zip(hand_force, saturate_norm(motor_force, self.peak_force))]
         if self.friction > 0.0:
             # The force that stops the tip within one free-space step; friction supplies
             # up to its limit of the difference (stick), else it slides at its limit.
-            a11, b1 = self._coefficients[0, 3], self._coefficients[0, 5]
-            force = force + saturate_norm(-a11 * v_MS / b1 - force, self.friction)
-        p_wall = np.minimum(np.maximum(p_MS, -self._half_size), self._half_size)
-        outside = p_MS != p_wall
-        if outside.any():
-            a00, a01, a10, a11, b0, b1 = self._coefficients[outside.astype(np.intp)].T
-        else:  # the usual case, as plain floats
-            a00, a01, a10, a11, b0, b1 = self._free_coefficients
-        # Beyond a wall, -k (x - x_wall) = -k x + k x_wall: the constant joins the input.
-        u = force + self.wall_stiffness * (p_wall * outside)
-        return a00 * p_MS + a01 * v_MS + b0 * u, a10 * p_MS + a11 * v_MS + b1 * u
+            a11, b1 = self._free_coefficients[3], self._free_coefficients[5]
+            stop = [-a11 * v / b1 - f for v, f in zip(v_MS, force)]
+            force = [f + s for f, s in zip(force, saturate_norm(stop, self.friction))]
+        p_next, v_next = [], []
+        for p, v, f, half in zip(p_MS, v_MS, force, self._half_size):
+            p_wall = min(max(p, -half), half)
+            outside = p != p_wall
+            a00, a01, a10, a11, b0, b1 = self._mode_coefficients[outside]
+            # Beyond a wall, -k (x - x_wall) = -k x + k x_wall: the constant joins the input.
+            u = f + self.wall_stiffness * (p_wall * outside)
+            p_next.append(a00 * p + a01 * v + b0 * u)
+            v_next.append(a10 * p + a11 * v + b1 * u)
+        return p_next, v_next
 
 
 class HapticMaster(LeafSystem):
@@ -210,11 +236,14 @@ class HapticMaster(LeafSystem):
         )
 
     def _update(self, context, discrete_state):
-        state = context.get_discrete_state_vector().CopyToVector()
-        hand_force = as_vector("hand_force", self._hand_force_input.Eval(context), 3)
-        motor_force = as_vector("motor_force", self._motor_force_input.Eval(context), 3)
-        p_MS, v_MS = self.dynamics.step(state[:3], state[3:], hand_force, motor_force)
-        discrete_state.set_value(np.concatenate([p_MS, v_MS]))
+        state = context.get_discrete_state_vector().value().tolist()
+        hand_force = self._hand_force_input.Eval(context).tolist()
+        motor_force = self._motor_force_input.Eval(context).tolist()
+        for name, force in (("hand_force", hand_force), ("motor_force", motor_force)):
+            if not all_finite(force):
+                raise ValueError(f"{name} must be finite, got {force}")
+        p_MS, v_MS = self.dynamics.step_floats(state[:3], state[3:], hand_force, motor_force)
+        discrete_state.set_value(p_MS + v_MS)
 
     def _calc_p_MS(self, context, output):
         output.SetFromVector(context.get_discrete_state_vector().value()[:3])

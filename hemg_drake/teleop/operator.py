@@ -2,12 +2,13 @@
 
 import math
 
+import numpy as np
 from pydrake.systems.framework import LeafSystem
 
 from hemg_drake.tasks.plan import TaskPlan
-from hemg_drake.teleop._validate import as_scalar, as_vector
+from hemg_drake.teleop._validate import as_scalar
 from hemg_drake.teleop.mapping import WorkspaceMapping
-from hemg_drake.teleop.master import saturate_norm
+from hemg_drake.teleop.master import all_finite, saturate_norm
 
 
 class OperatorModel:
@@ -90,9 +91,16 @@ class OperatorModel:
 
     def hand_force(self, t, p_MS, v_MS):
         """Force (N, in M, shape (3,)) the hand puts on the stylus at time t (s)."""
-        p_target = self.mapping.slave_to_master(self.plan.position(t))
-        v_target = self.mapping.velocity_to_master(self.plan.velocity(t))
-        force = self.hand_stiffness * (p_target - p_MS) + self.hand_damping * (v_target - v_MS)
+        return np.array(self.hand_force_floats(t, list(p_MS), list(v_MS)))
+
+    def hand_force_floats(self, t, p_MS, v_MS):
+        """:meth:`hand_force` with ``p_MS``, ``v_MS`` and the result as lists of 3 floats."""
+        p_target = self.mapping.slave_to_master(self.plan.position(t)).tolist()
+        v_target = self.mapping.velocity_to_master(self.plan.velocity(t)).tolist()
+        k, d = self.hand_stiffness, self.hand_damping
+        force = [
+            k * (pt - p) + d * (vt - v) for pt, p, vt, v in zip(p_target, p_MS, v_target, v_MS)
+        ]
         return saturate_norm(force, self.max_hand_force)
 
     def activation_target(self, t, feedback_force):
@@ -103,7 +111,8 @@ class OperatorModel:
             level = rest + segment.effort * (self.levels[segment.kind] - rest)
         else:
             level = rest
-        felt = self.co_contraction_gain * math.sqrt(feedback_force @ feedback_force)
+        x, y, z = feedback_force
+        felt = self.co_contraction_gain * math.sqrt(x * x + y * y + z * z)
         return min(max(level + felt, 0.0), 1.0)
 
     def activation_step(self, t, activation, feedback_force):
@@ -165,13 +174,19 @@ class SimulatedOperator(LeafSystem):
         )
         self._activation_output = self.DeclareStateOutputPort("activation", activation_index)
 
+    def _input_floats(self, context, name, port):
+        values = port.Eval(context).tolist()
+        if not all_finite(values):
+            raise ValueError(f"{name} must be finite, got {values}")
+        return values
+
     def _calc_hand_force(self, context, output):
-        p_MS = as_vector("p_MS", self._p_MS_input.Eval(context), 3)
-        v_MS = as_vector("v_MS", self._v_MS_input.Eval(context), 3)
-        output.SetFromVector(self.model.hand_force(context.get_time(), p_MS, v_MS))
+        p_MS = self._input_floats(context, "p_MS", self._p_MS_input)
+        v_MS = self._input_floats(context, "v_MS", self._v_MS_input)
+        output.SetFromVector(self.model.hand_force_floats(context.get_time(), p_MS, v_MS))
 
     def _update(self, context, discrete_state):
-        feedback_force = as_vector("feedback_force", self._feedback_force_input.Eval(context), 3)
+        feedback_force = self._input_floats(context, "feedback_force", self._feedback_force_input)
         activation = context.get_discrete_state_vector().GetAtIndex(0)
         discrete_state.set_value(
             [self.model.activation_step(context.get_time(), activation, feedback_force)]
