@@ -110,6 +110,7 @@ class BushingForceSensor(LeafSystem):
             raise ValueError("BushingForceSensor needs a finalized plant")
         self._plant = plant
         self._bushing = bushing
+        self._frame_C = bushing.frameC()
         self._plant_context = plant.CreateDefaultContext()
         self.state_input = self.DeclareVectorInputPort(
             "state", plant.num_positions() + plant.num_velocities()
@@ -119,5 +120,5 @@ class BushingForceSensor(LeafSystem):
     def _calc_f_WE(self, context, output):
         self._plant.SetPositionsAndVelocities(self._plant_context, self.state_input.Eval(context))
         F_C_C = self._bushing.CalcBushingSpatialForceOnFrameC(self._plant_context)
-        R_WC = self._bushing.frameC().CalcRotationMatrixInWorld(self._plant_context)
+        R_WC = self._frame_C.CalcRotationMatrixInWorld(self._plant_context)
         output.SetFromVector(R_WC @ F_C_C.translational())

@@ -223,30 +223,30 @@ class HapticMaster(LeafSystem):
         p_initial = as_vector("p_MS_initial", p_MS_initial, 3)
         self._hand_force_input = self.DeclareVectorInputPort("hand_force", 3)
         self._motor_force_input = self.DeclareVectorInputPort("motor_force", 3)
-        state_index = self.DeclareDiscreteState(np.concatenate([p_initial, np.zeros(3)]))
+        # p_MS and v_MS in two state groups: their output ports are then the state itself.
+        self._p_index = self.DeclareDiscreteState(p_initial)
+        self._v_index = self.DeclareDiscreteState(np.zeros(3))
         self.DeclarePeriodicDiscreteUpdateEvent(
             period_sec=self.dynamics.period, offset_sec=0.0, update=self._update
         )
-        self._state_output = self.DeclareStateOutputPort("state", state_index)
-        self._p_MS_output = self.DeclareVectorOutputPort(
-            "p_MS", 3, self._calc_p_MS, prerequisites_of_calc={self.xd_ticket()}
+        self._state_output = self.DeclareVectorOutputPort(
+            "state", 6, self._calc_state, prerequisites_of_calc={self.xd_ticket()}
         )
-        self._v_MS_output = self.DeclareVectorOutputPort(
-            "v_MS", 3, self._calc_v_MS, prerequisites_of_calc={self.xd_ticket()}
-        )
+        self._p_MS_output = self.DeclareStateOutputPort("p_MS", self._p_index)
+        self._v_MS_output = self.DeclareStateOutputPort("v_MS", self._v_index)
 
     def _update(self, context, discrete_state):
-        state = context.get_discrete_state_vector().value().tolist()
+        p_MS = context.get_discrete_state(self._p_index).value().tolist()
+        v_MS = context.get_discrete_state(self._v_index).value().tolist()
         hand_force = self._hand_force_input.Eval(context).tolist()
         motor_force = self._motor_force_input.Eval(context).tolist()
         for name, force in (("hand_force", hand_force), ("motor_force", motor_force)):
             if not all_finite(force):
                 raise ValueError(f"{name} must be finite, got {force}")
-        p_MS, v_MS = self.dynamics.step_floats(state[:3], state[3:], hand_force, motor_force)
-        discrete_state.set_value(p_MS + v_MS)
+        p_MS, v_MS = self.dynamics.step_floats(p_MS, v_MS, hand_force, motor_force)
+        discrete_state.set_value(self._p_index, p_MS)
+        discrete_state.set_value(self._v_index, v_MS)
 
-    def _calc_p_MS(self, context, output):
-        output.SetFromVector(context.get_discrete_state_vector().value()[:3])
-
-    def _calc_v_MS(self, context, output):
-        output.SetFromVector(context.get_discrete_state_vector().value()[3:])
+    def _calc_state(self, context, output):
+        p_MS = context.get_discrete_state(self._p_index).value()
+        output.SetFromVector(np.concatenate([p_MS, context.get_discrete_state(self._v_index).value()]))
