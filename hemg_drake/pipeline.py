@@ -35,6 +35,7 @@ TASKS = ("cotter_pin", "drawing")
 SCENARIOS_DIR = Path(__file__).resolve().parents[1] / "scenarios"
 DATASET, MODEL = "dataset.npz", "model.npz"
 REG_COVAR = 0.5
+INIT = "time"
 DEFAULT_WEIGHTING = "temporal"
 # kappa of the reproducer's cross-track attractor (1/s): a start offset decays towards the
 # demonstrated path with the time constant 1 / kappa (docs/reproduction.md).
@@ -112,7 +113,7 @@ def learn(run_dir, *, n_iter=100, progress=print):
     check_enough_data(data, scenario.num_states)
     start = time.perf_counter()
     model = HSMM(
-        scenario.num_states, init="time", reg_covar=REG_COVAR, n_iter=n_iter, seed=scenario.seed
+        scenario.num_states, init=INIT, reg_covar=REG_COVAR, n_iter=n_iter, seed=scenario.seed
     ).fit(data)
     progress(
         f"learn: HSMM N = {model.n_states} on {len(data)} demonstrations, {model.n_iter_} EM "

@@ -14,6 +14,7 @@ from hemg_drake.learning.reproduce import ResidualForward
 
 # Version 2 added data_range_ (reproduction clips the stiffness to it).
 FORMAT_VERSION = 2
+INITS = ("kmeans", "time", "polyline")
 _FITTED = (
     "startprob_", "transmat_", "means_", "covariances_",
     "duration_means_", "duration_stds_", "occupancy_", "data_range_",
@@ -23,6 +24,59 @@ _FITTED = (
 def _log(x):
     with np.errstate(divide="ignore"):
         return np.log(x)
+
+
+def polyline_segments(points, n_segments, *, max_points=300):
+    """Cut a path into the pieces that lie closest to straight lines (Bellman 1961).
+
+    Minimises, by dynamic programming, the sum over pieces of the squared distances of
+    their points to the piece's own least-squares line (for a piece with scatter matrix S,
+    the sum of the eigenvalues of S but the largest). Straight runs and holds cost nothing,
+    corners a lot, so the cuts fall where the path turns. Paths longer than ``max_points``
+    are cut on every k-th point (the DP is O(n_segments T^2)).
+
+    Parameters
+    ----------
+    points : array, shape (T, P)
+        T >= n_segments.
+    n_segments : int
+
+    Returns
+    -------
+    array of int, shape (n_segments + 1,)
+        Boundaries: piece i is points[b[i] : b[i + 1]]; b[0] = 0, b[-1] = T, increasing.
+    """
+    points = np.asarray(points, dtype=float)
+    n_points = len(points)
+    if n_points < n_segments:
+        raise ValueError(f"{n_points} points cannot make {n_segments} pieces")
+    step = max(1, min(-(-n_points // max_points), n_points // n_segments))
+    x = points[::step]
+    count = len(x)
+    # Scatter of x[a:b] for every a < b, from cumulative sums.
+    first = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])
+    second = np.concatenate(
+        [np.zeros((1, x.shape[1], x.shape[1])), np.cumsum(x[:, :, None] * x[:, None, :], 0)]
+    )
+    a, b = np.triu_indices(count + 1, 1)
+    total = first[b] - first[a]
+    scatter = second[b] - second[a] - total[:, :, None] * total[:, None, :] / (b - a)[:, None, None]
+    cost = np.full((count + 1, count + 1), np.inf)
+    cost[a, b] = np.maximum(np.linalg.eigvalsh(scatter)[:, :-1].sum(axis=1), 0.0)
+    # best[k, j]: least cost of x[:j] in k pieces; arg[k, j]: where its last piece starts.
+    best = np.full(count + 1, np.inf)
+    best[0] = 0.0
+    arg = np.zeros((n_segments + 1, count + 1), dtype=int)
+    for k in range(1, n_segments + 1):
+        candidates = best[:, None] + cost
+        arg[k] = np.argmin(candidates, axis=0)
+        best = candidates[arg[k], np.arange(count + 1)]
+    bounds = [count]
+    for k in range(n_segments, 0, -1):
+        bounds.append(arg[k, bounds[-1]])
+    bounds = step * np.array(bounds[::-1])
+    bounds[-1] = n_points
+    return bounds
 
 
 def check_demos(demos, n_dims=None):
@@ -84,11 +138,13 @@ class HSMM:
         Maximum number of EM iterations.
     tol : float
         Stop when the log-likelihood gains less than ``tol * |log-likelihood|``.
-    init : {"kmeans", "time"}
+    init : {"kmeans", "time", "polyline"}
         "kmeans": seeded k-means++ on the positions x of all samples (best of
         ``n_init`` runs), durations and transitions from its runs; "time": each demonstration
         cut into N equal segments, a left-to-right model (zeros in A stay
-        zero under EM).
+        zero under EM); "polyline": left to right too, each demonstration cut into the N
+        pieces whose positions lie closest to straight lines (:func:`polyline_segments`),
+        so that states start where the path turns, not at equal times.
     n_init : int
         k-means restarts.
     n_position : int, optional
@@ -162,8 +218,8 @@ class HSMM:
             raise ValueError(f"n_iter must be an integer >= 1, got {self.n_iter!r}")
         if not self.tol >= 0:
             raise ValueError(f"tol must be >= 0, got {self.tol!r}")
-        if self.init not in ("kmeans", "time"):
-            raise ValueError(f"init must be 'kmeans' or 'time', got {self.init!r}")
+        if self.init not in INITS:
+            raise ValueError(f"init must be one of {INITS}, got {self.init!r}")
         if not integer(self.n_init) or self.n_init < 1:
             raise ValueError(f"n_init must be an integer >= 1, got {self.n_init!r}")
         if self.n_position is not None and (not integer(self.n_position) or self.n_position < 1):
@@ -254,6 +310,11 @@ class HSMM:
         n = self.n_states
         if self.init == "time":
             labels = [np.minimum(np.arange(len(d)) * n // len(d), n - 1) for d in demos]
+        elif self.init == "polyline":
+            p = self._n_position(samples.shape[1])
+            labels = [
+                np.repeat(np.arange(n), np.diff(polyline_segments(d[:, :p], n))) for d in demos
+            ]
         else:
             # Cluster positions only: states are then regions of the GMR input
             # space (what eq. 14 weighs), and strokes that look alike in

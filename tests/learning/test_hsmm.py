@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.stats import multivariate_normal, norm
 
-from hemg_drake.learning.hsmm import HSMM
+from hemg_drake.learning.hsmm import HSMM, polyline_segments
 
 
 def segmentations(n_steps, n_states, max_duration):
@@ -244,3 +244,54 @@ def test_model_and_data_of_different_dimension_are_rejected(models):
             method(wrong)
     with pytest.raises(ValueError, match="not fitted"):
         HSMM(2).log_likelihood(wrong)
+
+
+def zig_zag(rng, counts=(50, 30, 40, 25)):
+    """A hold-free zig-zag in 3-D: straight runs of ``counts`` samples between 5 corners."""
+    corners = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.5], [0, 2, 0.5]], float)
+    runs = [np.linspace(a, b, n, endpoint=False) for a, b, n in zip(corners, corners[1:], counts)]
+    return np.concatenate(runs) + rng.normal(0.0, 1e-3, (sum(counts), 3))
+
+
+def test_polyline_segments_cut_at_the_corners():
+    rng = np.random.default_rng(0)
+    path = zig_zag(rng)
+    # A brute force over every pair of inner cuts finds the same least-squares cut.
+    # Cut at the corners (a corner sample lies on both lines: either side will do).
+    np.testing.assert_allclose(polyline_segments(path, 4), [0, 50, 80, 120, 145], atol=1)
+    # In 3 pieces: the least-squares cut that a brute force over every pair of cuts finds.
+    bounds = polyline_segments(path, 3)
+    assert bounds[0] == 0 and bounds[-1] == len(path) and np.all(np.diff(bounds) > 0)
+
+    def residual(piece):
+        centred = piece - piece.mean(axis=0)
+        return np.sum(np.linalg.svd(centred, compute_uv=False)[1:] ** 2)
+
+    best = min(
+        (residual(path[:i]) + residual(path[i:j]) + residual(path[j:]), (i, j))
+        for i in range(1, len(path) - 1) for j in range(i + 1, len(path))
+    )  # fmt: skip
+    assert tuple(bounds[1:3]) == best[1]
+    # A long path is cut on every k-th point: the cuts land within k samples of the corners.
+    long = zig_zag(rng, counts=(500, 300, 400, 250))
+    cuts = polyline_segments(long, 4, max_points=300)[1:-1]
+    assert np.all(np.abs(cuts - [500, 800, 1200]) <= 5)
+    with pytest.raises(ValueError, match="cannot make 5 pieces"):
+        polyline_segments(path[:4], 5)
+
+
+def test_polyline_init_gives_a_state_per_straight_run(models):
+    rng = np.random.default_rng(1)
+    demos = []
+    for _ in range(2):
+        x = zig_zag(rng)
+        demos.append(np.column_stack([x, np.gradient(x, 0.01, axis=0)]))
+    model = HSMM(4, init="polyline", n_iter=5, seed=0).fit(demos)
+    # Left to right, and each state is one run: its mean velocity points along that run.
+    assert np.allclose(np.triu(model.transmat_, 2), 0) and np.allclose(np.tril(model.transmat_), 0)
+    runs = np.array([[1, 0, 0], [0, 1, 0], [-1, 0, 0.5], [0, 1, 0]], float)
+    runs /= np.linalg.norm(runs, axis=1, keepdims=True)
+    directions = model.means_[:, 3:6] / np.linalg.norm(model.means_[:, 3:6], axis=1)[:, None]
+    assert np.all(np.sum(directions * runs, axis=1) > 0.95)
+    history = np.asarray(model.log_likelihood_history_)
+    assert np.all(np.diff(history) >= -1e-9 * np.abs(history[1:]))
