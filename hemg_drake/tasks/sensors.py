@@ -121,4 +121,5 @@ class BushingForceSensor(LeafSystem):
         self._plant.SetPositionsAndVelocities(self._plant_context, self.state_input.Eval(context))
         F_C_C = self._bushing.CalcBushingSpatialForceOnFrameC(self._plant_context)
         R_WC = self._frame_C.CalcRotationMatrixInWorld(self._plant_context)
-        output.SetFromVector(R_WC @ F_C_C.translational())
+        # F.Rotate(R): the same product as R @ f, without pydrake's shape-matching wrapper.
+        output.SetFromVector(F_C_C.Rotate(R_WC).translational())
