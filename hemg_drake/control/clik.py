@@ -111,7 +111,8 @@ class Clik(LeafSystem):
         self._v_columns = velocity_columns(plant, model_instance)
         lower = plant.GetPositionLowerLimits()
         upper = plant.GetPositionUpperLimits()
-        q_columns = plant.GetPositionsFromArray(model_instance, np.arange(plant.num_positions())).astype(int)
+        all_positions = np.arange(plant.num_positions())
+        q_columns = plant.GetPositionsFromArray(model_instance, all_positions).astype(int)
         self._q_lower = lower[q_columns] + limit_margin
         self._q_upper = upper[q_columns] - limit_margin
         self._v_max = plant.GetVelocityUpperLimits()[self._v_columns]
@@ -134,8 +135,8 @@ class Clik(LeafSystem):
         discrete_state.set_value(self._v_d_index, v_d)
 
     def _initialize(self, context, discrete_state):
-        q = self._state.Eval(context)[: self._n]
-        self._set(discrete_state, np.minimum(np.maximum(q, self._q_lower), self._q_upper), self._zeros)
+        q = np.clip(self._state.Eval(context)[: self._n], self._q_lower, self._q_upper)
+        self._set(discrete_state, q, self._zeros)
 
     def p_WE(self, q):
         """Tool-point position for arm configuration ``q`` (m), by forward kinematics."""

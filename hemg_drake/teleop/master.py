@@ -249,4 +249,5 @@ class HapticMaster(LeafSystem):
 
     def _calc_state(self, context, output):
         p_MS = context.get_discrete_state(self._p_index).value()
-        output.SetFromVector(np.concatenate([p_MS, context.get_discrete_state(self._v_index).value()]))
+        v_MS = context.get_discrete_state(self._v_index).value()
+        output.SetFromVector(np.concatenate([p_MS, v_MS]))
