@@ -14,13 +14,16 @@ A run folder ``runs/NAME/`` holds one task's files::
 every file is written atomically, so a failed step leaves the folder as it was.
 :func:`run_demo` runs demonstrate, learn and reproduce for both tasks (``make demo``).
 
-Learning settings (measured on the two tasks' datasets, ``docs/reproduction.md``): the
-HSMM is initialised by equal time segments (``init="time"``, left to right: k-means shares
-states between the drawing's look-alike strokes), with a covariance floor ``reg_covar`` of
-0.5 (relative to each dimension's variance), which keeps the integrated GMR velocity field
-(eqs. 16-18) from amplifying deviations, and the reproduction weighs the states by the
-HSMM's timing alone (``"temporal"``), which reproduced both tasks best (the table in the
-docs).
+Learning settings (measured on the two tasks' datasets, ``docs/reproduction.md``), per
+task in ``LEARNING``: the positions learnt (the measured tool point, or the slave's
+reference for the drawing, :func:`learning_data`), a left-to-right initialisation (equal
+times for the pin, straight pieces of the path for the drawing; k-means shares states
+between the drawing's look-alike strokes) and a covariance floor ``reg_covar`` (relative to
+each dimension's variance), which keeps the integrated GMR velocity field (eqs. 16-18) from
+amplifying deviations. The reproduction weighs the states by the HSMM's timing alone
+(``"temporal"``) and adds the cross-track attractor of
+:mod:`hemg_drake.learning.reproduce` (``RESTORING_GAIN``), so that a reproduction started
+away from the demonstrations returns to their path.
 """
 
 import json
@@ -35,17 +38,29 @@ TASKS = ("cotter_pin", "drawing")
 SCENARIOS_DIR = Path(__file__).resolve().parents[1] / "scenarios"
 DATASET, MODEL = "dataset.npz", "model.npz"
 REG_COVAR = 0.5
-INIT = "time"
+# What the HSMM learns its positions from, and how its states start, per task (measured,
+# docs/reproduction.md). Drawing: the slave's reference (a pen on the sheet cannot show the
+# press in its measured position) and states that start where its path turns (the
+# zig-zag's corners get their own states). Cotter pin: the measured tool point (the
+# reference runs ahead of the pin while the detent holds it, and learnt from it the
+# reproduction tracked the demonstrations less well) and states at equal times (its path
+# is one straight line whose phases differ in speed and force, not direction).
+# The drawing's covariance floor is lower than the pin's: its polyline states are narrow
+# straight pieces, and 0.2 drew its strokes in shape best (0.1: 4.3 mm zig-zag, 0.5: 5.3 mm).
+LEARNING = {
+    "cotter_pin": {"positions": "tool", "init": "time", "reg_covar": REG_COVAR},
+    "drawing": {"positions": "reference", "init": "polyline", "reg_covar": 0.2},
+}
 DEFAULT_WEIGHTING = "temporal"
 # kappa of the reproducer's cross-track attractor (1/s): a start offset decays towards the
 # demonstrated path with the time constant 1 / kappa (docs/reproduction.md).
 RESTORING_GAIN = 2.0
-# Start offsets of the demo's second reproduction (m), 3 cm from the demonstrations' start.
-# Cotter pin: along the pull axis, below the ring (the grasp holds the ring from the start,
-# so the arm is pulled most of the way back to it; the demonstrations vary along this axis
-# only, and a sideways start 30 standard deviations off their path sends GMR's velocity
-# field astray). Drawing: sideways, in the air above the sheet.
-START_OFFSETS = {"cotter_pin": (0.0, 0.0, -0.03), "drawing": (0.0, 0.03, 0.0)}
+# Start offsets of the demo's second reproduction (m), 3 cm from the demonstrations' start,
+# across the task's path. Cotter pin: sideways of the pull axis. The grasp holds the ring
+# from t = 0 (the scene's model), so the hand starts with the grasp stretched by 3 cm
+# (150 N towards the ring), as if pushed aside after grasping; the reproduction has to
+# bring it back onto the pull axis before it pulls. Drawing: sideways, above the sheet.
+START_OFFSETS = {"cotter_pin": (0.03, 0.0, 0.0), "drawing": (0.0, 0.03, 0.0)}
 # Drawing: shortest pen contact (log samples, 0.01 s each) that counts as a stroke.
 MIN_STROKE_SAMPLES = 10
 
@@ -87,11 +102,52 @@ def check_enough_data(observations, n_states):
         )
 
 
+def learning_data(demos, scenario):
+    """The observations the HSMM learns, [x, xdot, k] per demonstration, shape (T_c, 7).
+
+    With ``LEARNING[task]["positions"]`` = "tool": the measured tool point p_WE, v_WE.
+    With "reference": the slave's reference during the demonstration, the master's
+    position mapped by the scenario's workspace map (what CLIK tracked), and its rate of
+    change (central differences over the log). The reproduction's x* is a reference that
+    the slave tracks with the learnt stiffness k; it is the pair (reference, stiffness) that
+    made the demonstrated contact force. Learnt from the tool point, a pen on the sheet
+    teaches a reference on the sheet's surface and the reproduction barely presses
+    (measured: strokes broke off). k is the gain in both cases.
+    """
+    from hemg_drake.diagrams.demonstration import workspace_mapping
+    from hemg_drake.learning.demos import observations
+
+    if LEARNING[scenario.task]["positions"] == "tool":
+        return observations(demos)
+    mapping = workspace_mapping(scenario)
+    data = []
+    for demo in demos:
+        p_WE_desired = mapping.master_to_slave(demo.p_MS)
+        v_WE_desired = np.gradient(p_WE_desired, demo.time, axis=0)
+        data.append(np.column_stack([p_WE_desired, v_WE_desired, demo.gain]))
+    return data
+
+
+def fit_model(data, scenario, *, n_iter=100):
+    """The HSMM of the pipeline's settings (``LEARNING``) fitted to ``data``."""
+    from hemg_drake.learning.hsmm import HSMM
+
+    check_enough_data(data, scenario.num_states)
+    settings = LEARNING[scenario.task]
+    return HSMM(
+        scenario.num_states,
+        init=settings["init"],
+        reg_covar=settings["reg_covar"],
+        n_iter=n_iter,
+        seed=scenario.seed,
+    ).fit(data)
+
+
 def learn(run_dir, *, n_iter=100, progress=print):
     """Fit the HSMM of a run folder's dataset; write ``model.npz`` and Fig. 8 (c).
 
     N is the scenario's ``num_states`` (stored with the dataset); the observations are
-    [p_WE, v_WE, gain] (D = 7).
+    :func:`learning_data`, [x_d, xdot_d, gain] (D = 7).
 
     Parameters
     ----------
@@ -103,18 +159,13 @@ def learn(run_dir, *, n_iter=100, progress=print):
     -------
     HSMM, the fitted model.
     """
-    from hemg_drake.learning.demos import observations
-    from hemg_drake.learning.hsmm import HSMM
     from hemg_drake.viz.figures import plot_state_activations, save_figure
 
     run_dir = _run_dir(run_dir)
     demos, scenario = _load_demonstrations(run_dir)
-    data = observations(demos)
-    check_enough_data(data, scenario.num_states)
+    data = learning_data(demos, scenario)
     start = time.perf_counter()
-    model = HSMM(
-        scenario.num_states, init=INIT, reg_covar=REG_COVAR, n_iter=n_iter, seed=scenario.seed
-    ).fit(data)
+    model = fit_model(data, scenario, n_iter=n_iter)
     progress(
         f"learn: HSMM N = {model.n_states} on {len(data)} demonstrations, {model.n_iter_} EM "
         f"iterations in {time.perf_counter() - start:.1f} s"
