@@ -132,3 +132,23 @@ def test_stiffness_is_clipped_to_the_training_range(line_model):
 def test_bad_restoring_gain_is_rejected(path_task, gain):
     with pytest.raises(ValueError, match="restoring_gain"):
         reproduce(path_task.model, path_task.mean[0, :3], 10, restoring_gain=gain)
+
+
+def test_a_state_that_holds_still_attracts_in_every_direction():
+    # Demonstrations hold still for 0.5 s, then move along x: a start 1 cm off along x (the
+    # later motion's direction) is pulled back during the hold too.
+    rng = np.random.default_rng(4)
+    demos = []
+    for _ in range(3):
+        t = np.arange(0.0, 1.5, 0.01)
+        s = np.clip(t - 0.5, 0.0, None)
+        x = np.column_stack([0.1 * s, np.zeros_like(t), np.zeros_like(t)])
+        v = np.column_stack([0.1 * (t > 0.5), np.zeros_like(t), np.zeros_like(t)])
+        data = np.column_stack([x, v, np.full_like(t, 50.0)])
+        demos.append(data + rng.normal(0.0, 1e-3, data.shape))
+    model = HSMM(3, init="time", reg_covar=0.1, n_iter=10, seed=0).fit(demos)
+    start = np.array([0.01, 0.0, 0.0])
+    carried = reproduce(model, start, 40, weighting="temporal")
+    restored = reproduce(model, start, 40, weighting="temporal", restoring_gain=4.0)
+    assert abs(carried.x[-1, 0]) > 0.008
+    assert abs(restored.x[-1, 0]) < 0.01 * np.exp(-4.0 * 0.39) + 1e-3
