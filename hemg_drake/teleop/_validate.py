@@ -10,8 +10,7 @@ def as_vector(name, value, size):
     array = np.asarray(value, dtype=float)
     if array.shape != (size,):
         raise ValueError(f"{name} must have shape ({size},), got {array.shape}")
-    # Plain floats: 7x cheaper than np.isfinite(...).all(), and this runs at 1 kHz.
-    if not all(map(math.isfinite, array.tolist())):
+    if not all_finite(array.tolist()):
         raise ValueError(f"{name} must be finite, got {array.tolist()}")
     return array
 
@@ -23,3 +22,12 @@ def as_scalar(name, value, *, minimum=0.0, strict=True):
         bound = ">" if strict else ">="
         raise ValueError(f"{name} must be finite and {bound} {minimum}, got {value}")
     return number
+
+
+def all_finite(values):
+    """True if every number of the sequence ``values`` is finite.
+
+    On plain floats (``array.tolist()``): 7x cheaper than ``np.isfinite(...).all()`` on a
+    3-vector, and the teleoperation systems check their inputs at 1 kHz.
+    """
+    return all(map(math.isfinite, values))

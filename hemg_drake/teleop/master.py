@@ -10,7 +10,7 @@ import numpy as np
 from pydrake.systems.framework import LeafSystem
 from scipy.linalg import expm
 
-from hemg_drake.teleop._validate import as_scalar, as_vector
+from hemg_drake.teleop._validate import all_finite, as_scalar, as_vector
 
 # Touch X figures (shared/facts/touch_x.md); all are constructor parameters.
 TOUCH_X_MASS = 0.045  # kg, apparent mass at the tip (data sheet, unverified)
@@ -39,11 +39,6 @@ def saturate_norm(force, limit):
         return [x, y, z]
     scale = limit / norm
     return [x * scale, y * scale, z * scale]
-
-
-def all_finite(values):
-    """True if every number of the sequence ``values`` is finite (cheap at 1 kHz)."""
-    return all(map(math.isfinite, values))
 
 
 def _zero_order_hold(A, B, period):

@@ -6,9 +6,9 @@ import numpy as np
 from pydrake.systems.framework import LeafSystem
 
 from hemg_drake.tasks.plan import TaskPlan
-from hemg_drake.teleop._validate import as_scalar
+from hemg_drake.teleop._validate import all_finite, as_scalar
 from hemg_drake.teleop.mapping import WorkspaceMapping
-from hemg_drake.teleop.master import all_finite, saturate_norm
+from hemg_drake.teleop.master import saturate_norm
 
 
 class OperatorModel:

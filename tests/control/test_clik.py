@@ -121,3 +121,22 @@ def test_nan_target_holds_the_reference():
 def test_bad_parameters_are_named(kwargs, message):
     with pytest.raises(ValueError, match=message):
         make_clik(**kwargs)
+
+
+def test_velocity_columns_index_like_the_plant():
+    """Indexing with velocity_columns picks what GetVelocitiesFromArray picks, by a slice."""
+    from pydrake.multibody.plant import MultibodyPlant
+    from pydrake.multibody.tree import SpatialInertia
+
+    from hemg_drake.control.clik import velocity_columns
+
+    plant = MultibodyPlant(1e-3)
+    other = plant.AddModelInstance("other")
+    plant.AddRigidBody("free", other, SpatialInertia.SolidSphereWithMass(1.0, 0.1))
+    arm = add_baxter_arm(plant)
+    plant.Finalize()
+    values = np.arange(plant.num_velocities(), dtype=float) * 10.0
+    for model in (arm.model_instance, other):
+        columns = velocity_columns(plant, model)
+        np.testing.assert_array_equal(values[columns], plant.GetVelocitiesFromArray(model, values))
+        assert isinstance(columns, slice)  # Drake numbers a model's velocities contiguously
