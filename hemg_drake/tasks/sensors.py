@@ -50,6 +50,7 @@ class ContactForceSensor(LeafSystem):
         if not plant.is_finalized():
             raise ValueError("ContactForceSensor needs a finalized plant")
         self._geometries = frozenset(plant.GetCollisionGeometriesForBody(body))
+        self._body_index = body.index()
         if not self._geometries:
             raise ValueError(f"ContactForceSensor: body {body.name()!r} has no collision geometry")
         self.contact_results_input = self.DeclareAbstractInputPort(
@@ -61,11 +62,12 @@ class ContactForceSensor(LeafSystem):
         results = self.contact_results_input.Eval(context)
         f_WE = np.zeros(3)
         for i in range(results.num_point_pair_contacts()):
+            # By body index: the same test as geometry B (or A) being one of the body's,
+            # without copying the point pair out of the results.
             info = results.point_pair_contact_info(i)
-            pair = info.point_pair()
-            if pair.id_B in self._geometries:
+            if info.bodyB_index() == self._body_index:
                 f_WE += info.contact_force()
-            elif pair.id_A in self._geometries:
+            elif info.bodyA_index() == self._body_index:
                 f_WE -= info.contact_force()
         for i in range(results.num_hydroelastic_contacts()):
             info = results.hydroelastic_contact_info(i)
