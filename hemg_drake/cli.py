@@ -20,12 +20,13 @@ def _learn(args):
 
 
 def _reproduce(args):
-    from hemg_drake.pipeline import DEFAULT_WEIGHTING, reproduce
+    from hemg_drake.pipeline import DEFAULT_WEIGHTING, RESTORING_GAIN, reproduce
 
     reproduce(
         args.run,
         start_offset=args.start_offset,
         weighting=args.weighting or DEFAULT_WEIGHTING,
+        restoring_gain=RESTORING_GAIN if args.restoring_gain is None else args.restoring_gain,
         out_dir=args.out,
         replay=not args.no_replay,
     )
@@ -100,6 +101,10 @@ def build_parser():
     reproduce.add_argument(
         "--weighting", choices=["temporal", "spatial", "forward"],
         help="HSMM state weighting (default: the pipeline's, temporal)",
+    )  # fmt: skip
+    reproduce.add_argument(
+        "--restoring-gain", type=float, metavar="KAPPA",
+        help="pull back to the demonstrated path at this rate (1/s; 0: none; default 2)",
     )  # fmt: skip
     reproduce.add_argument("--out", help="output folder (default: the run folder)")
     reproduce.add_argument("--no-replay", action="store_true", help="write no HTML replay")

@@ -68,8 +68,13 @@ def test_reproduce_command_from_an_offset_start(pin_run, tmp_path, capsys):
     assert main([*command, "--out", str(tmp_path), "--no-replay"]) == 0
     metrics = json.loads((tmp_path / "metrics.json").read_text())
     assert metrics["start_offset"] == [0.0, 0.0, -0.03] and metrics["success"]
+    assert metrics["restoring_gain"] == 2.0  # the pipeline's default
     assert "pos RMSE (mm)" in capsys.readouterr().out
     assert not (tmp_path / "reproduction.html").exists()
+    # A bad restoring gain is a one-line error, before anything is written.
+    assert main([*command, "--out", str(tmp_path / "bad"), "--restoring-gain", "-1"]) == 2
+    assert "restoring_gain must be finite, >= 0" in capsys.readouterr().err
+    assert not (tmp_path / "bad" / "metrics.json").exists()
 
 
 def test_missing_run_folder_is_a_clear_error(tmp_path, capsys):
