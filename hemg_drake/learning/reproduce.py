@@ -139,13 +139,17 @@ class HsmmGmrPolicy:
         )
         self.stiffness_range = model.data_range_[:, model.stiffness_dims_]
         # Cross-track projectors I - w_i u_i u_i^T, u_i the direction of state i's mean
-        # velocity; w_i = s_i^2 / (s_i^2 + s_ref^2) with s_i its speed: a state that barely
-        # moves (a hold) has no path direction and attracts in every direction.
+        # velocity; w_i = s_i^2 / (s_i^2 + STILL s_max^2) with s_i its speed: a state that
+        # barely moves (a hold) has no path direction and attracts in every direction.
         velocities = model.means_[:, model.velocity_dims_]
         speeds_squared = np.sum(velocities**2, axis=1)
-        along = speeds_squared / (speeds_squared + (STILL * speeds_squared.max()) + 1e-300)
+        weights = speeds_squared / np.maximum(
+            speeds_squared + STILL * speeds_squared.max(), np.finfo(float).tiny
+        )
+        # w_i u_i u_i^T = (w_i / s_i^2) v_i v_i^T
+        scaled = weights / np.maximum(speeds_squared, np.finfo(float).tiny)
         self.cross_track = np.eye(self.n_position) - np.einsum(
-            "n,np,nq->npq", along / np.maximum(speeds_squared, 1e-300), velocities, velocities
+            "n,np,nq->npq", scaled, velocities, velocities
         )
 
     def check_position(self, x, name="position"):
