@@ -7,9 +7,11 @@ wall clock and by this process's CPU time: as shipped, without visualisation and
 Meshcat replay recorder (plus the HTML export); then without visualisation with the haptic
 loop (master) and CLIK at 500 Hz instead of 1 kHz, the plant still at 1 ms (the tests'
 figures are unchanged at that rate: same pin, strokes within 0.05 mm of the 1 kHz runs'
-bounds). Then, from a profile of the cotter-pin run,
-the CPU time per simulated second of each system's callbacks (cProfile inflates Python
-calls, so read the shares, not the absolute numbers).
+bounds). Then the ceiling: the plant and the task's scene alone (no Python system; the arm
+held by a constant gravity-compensating torque), the cost that no change to the Python
+systems can remove. Then, from a profile of the cotter-pin run, the CPU time per simulated
+second of each system's callbacks (cProfile inflates Python calls, so read the shares, not
+the absolute numbers).
 
     .venv/bin/python benchmarks/bench_demonstration.py
 """
@@ -22,9 +24,19 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+from pydrake.multibody.plant import AddMultibodyPlant
 from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource
 
-from hemg_drake.diagrams.demonstration import build_demonstration_diagram
+from hemg_drake.control.clik import velocity_columns
+from hemg_drake.diagrams.demonstration import (
+    SCENE_BUILDERS,
+    build_demonstration_diagram,
+    solve_arm_positions,
+)
+from hemg_drake.robots.baxter import add_baxter_arm
 from hemg_drake.robots.baxter import FLOOR_Z
 from hemg_drake.scenario import load_scenario
 from hemg_drake.viz.recording import ReplayRecorder
@@ -54,6 +66,27 @@ def run(scenario, *, record):
     del built, simulator
     gc.collect()  # releases the Meshcat server
     return wall, cpu, export, size
+
+
+def plant_alone(scenario):
+    """Wall seconds to simulate ``WINDOW`` s of the scenario's plant and scene by themselves."""
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlant(scenario.plant, builder)
+    arm = add_baxter_arm(plant)
+    SCENE_BUILDERS[scenario.task](plant, arm)
+    plant.Finalize()
+    q = solve_arm_positions(plant, arm, scenario.task_plan().points[0])
+    plant.SetDefaultPositions(arm.model_instance, q)
+    gravity = plant.CalcGravityGeneralizedForces(plant.CreateDefaultContext())
+    hold = builder.AddSystem(
+        ConstantVectorSource(-gravity[velocity_columns(plant, arm.model_instance)])
+    )
+    builder.Connect(hold.get_output_port(), plant.get_actuation_input_port(arm.model_instance))
+    simulator = Simulator(builder.Build())
+    simulator.Initialize()
+    start = time.perf_counter()
+    simulator.AdvanceTo(WINDOW)
+    return time.perf_counter() - start
 
 
 def profile_by_system(scenario):
@@ -96,6 +129,8 @@ def main():
             if record:
                 line += f"  (HTML export {export:.2f} s, {size / 1e6:.1f} MB)"
             print(line)
+        wall = min(plant_alone(scenario) for _ in range(REPEATS))
+        print(f"{name:10s} plant alone : real-time factor {WINDOW / wall:4.2f}x wall (ceiling)")
     scenario = load_scenario(SCENARIOS / "cotter_pin.yaml")
     shares, total = profile_by_system(scenario)
     print(f"\ncotter pin, profiled: {total * 1e3:.0f} ms of CPU per simulated second in all")

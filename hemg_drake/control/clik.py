@@ -46,7 +46,8 @@ class Clik(LeafSystem):
     ``sigma_max`` is about 2 m^2, so the default gain suits a 1 ms period.
 
     Outputs ``q_desired`` and ``v_desired`` (``qdot_d``) match the inputs of
-    :class:`~hemg_drake.control.pd.VariableGainPd`.
+    :class:`~hemg_drake.control.pd.VariableGainPd`; they are the two discrete-state
+    groups themselves (state output ports, no computation per evaluation).
 
     Parameters
     ----------

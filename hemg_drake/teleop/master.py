@@ -205,7 +205,8 @@ class HapticMaster(LeafSystem):
     1 ms too; a continuous state would instead force an error-controlled integrator on the
     whole diagram for a 45 g mass whose walls are stiff. The outputs depend on the state
     only (no direct feedthrough), so the master closes loops with the operator and the
-    force feedback without algebraic loops. A NaN or infinite input raises ValueError.
+    force feedback without algebraic loops; ``p_MS`` and ``v_MS`` are two discrete-state
+    groups, output as they are. A NaN or infinite input raises ValueError.
 
     Modelling choices: the walls' damper acts whenever the tip is beyond a wall (on the way
     out too); the Touch X's continuous-force rating (1.75 N, a thermal limit over minutes)
