@@ -24,9 +24,14 @@ wording); then any tracking error the task imposes (the detent holding the pin w
 low) is integrated into x* by eq. 18, and x* runs away from a slave that cannot follow
 (measured on the cotter pin). k* is clipped to the scenario's [k_min, k_max] (Drake's
 ``Saturation``): GMR may extrapolate beyond the demonstrated gains, and the PD is only
-checked inside its range. The arm starts at rest with its tool point on ``start``
-(default: the demonstrations' start, the task plan's first point), placed there by the
-damped-Newton inverse kinematics of the demonstration diagram.
+checked inside its range. x*_0 is ``start`` (default: the demonstrations' start, the task
+plan's first point), and the arm starts at rest where it settles in the task's scene while
+the PD holds it there with the first k* (:func:`settled_arm_positions`): in free space
+with its tool point on ``start`` (damped-Newton inverse kinematics of the demonstration
+diagram); beside the cotter pin's grasped ring, where the PD balances the stretched grasp,
+a few mm from the ring (the arm is much softer than the grasp). Started at rest on ``start``
+instead, the grasp (150 N at 3 cm) would snap the tool back to the ring at 1.5 m/s in the
+first 0.03 s: released springs, not the learnt task.
 
 :func:`build_reproduction_diagram` builds it; :func:`run_reproduction` simulates it and
 returns a :class:`ReproductionLog` and the task's outcome.
@@ -65,6 +70,8 @@ OBSERVED = ("reference", "tool")
 POSITION_SIZE = 3
 # A model is learnt over xi = [x, xdot, k]: D = 3 + 3 + 1.
 MODEL_DIMENSION = 7
+# Simulated time (s) for the arm to come to rest in the scene before a reproduction starts.
+SETTLE_TIME = 1.0
 
 
 @dc.dataclass(frozen=True, eq=False)
@@ -116,7 +123,7 @@ class ReproductionDiagram:
     scene : object or None
         What the task's scene builder returned; None in free space.
     logger : VectorLogSink
-    start : array, shape (3,), x*_0 and the arm's initial tool point (m).
+    start : array, shape (3,), x*_0 (m), where the arm was held to rest.
     goal : array, shape (3,), x_g of eq. 23 (m).
     n_states : int, N.
     """
@@ -158,6 +165,97 @@ def check_model(model):
         )
 
 
+@dc.dataclass(frozen=True, eq=False)
+class _Slave:
+    """The slave side of a reproduction diagram: plant, scene, CLIK, stiffness limits, PD."""
+
+    plant: object
+    scene_graph: object
+    arm: object
+    scene: object
+    limits: object
+    p_WE_desired_input: object
+    gain_input: object
+    f_WE_output: object
+
+
+def _add_slave(builder, scenario, start, *, scene, positions=None):
+    """Add the Baxter plant (+ the task's scene), CLIK, the gain's Saturation and the PD.
+
+    The arm starts at rest in ``positions`` (7,), default with its tool point on ``start``.
+    Left to connect: CLIK's ``p_WE_desired`` and the Saturation's input (the stiffness).
+    """
+    plant, scene_graph = AddMultibodyPlant(scenario.plant, builder)
+    arm = add_baxter_arm(plant)
+    task_scene = SCENE_BUILDERS[scenario.task](plant, arm) if scene else None
+    plant.Finalize()
+    if positions is None:
+        positions = solve_arm_positions(plant, arm, start)
+    plant.SetDefaultPositions(arm.model_instance, positions)
+    clik_config = scenario.clik
+    clik = builder.AddNamedSystem(
+        "clik",
+        Clik(
+            plant=plant,
+            model_instance=arm.model_instance,
+            frame_E=arm.tool_frame,
+            gain=clik_config.gain,
+            method=clik_config.method,
+            damping=clik_config.damping,
+            period=clik_config.period,
+        ),
+    )
+    pd = builder.AddNamedSystem("pd", VariableGainPd(plant=plant, arm=arm))
+    limits = builder.AddNamedSystem(
+        "stiffness_limits", Saturation([scenario.emg.k_min], [scenario.emg.k_max])
+    )
+    arm_state = plant.get_state_output_port(arm.model_instance)
+    builder.Connect(arm_state, clik.GetInputPort("state"))
+    builder.Connect(arm_state, pd.state_input)
+    builder.Connect(clik.GetOutputPort("q_desired"), pd.q_desired_input)
+    builder.Connect(clik.GetOutputPort("v_desired"), pd.v_desired_input)
+    builder.Connect(limits.get_output_port(), pd.gain_input)
+    builder.Connect(pd.torque_output, plant.get_actuation_input_port(arm.model_instance))
+    # Wires the scene's own systems (the pin's detent) as well as its force sensor.
+    f_WE = task_scene.force_output_port(builder) if task_scene is not None else None
+    return _Slave(
+        plant, scene_graph, arm, task_scene, limits,
+        clik.GetInputPort("p_WE_desired"), limits.get_input_port(), f_WE,
+    )  # fmt: skip
+
+
+def settled_arm_positions(scenario, start, gain, *, duration=SETTLE_TIME):
+    """Where the arm comes to rest in the task's scene while the PD holds its tool at ``start``.
+
+    Simulates the slave alone (no reproducer) for ``duration`` with the reference held at
+    ``start`` and the gain at ``gain`` (its first k*), from the configuration that puts the
+    tool point on ``start``. Free of contact this is that configuration; when the scene pulls
+    on the tool there (the cotter pin's grasp, stretched by a start beside the ring) it is
+    the static balance of the PD and the scene's force.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    start : array, shape (3,), the held reference (m).
+    gain : float or array of shape (1,), the PD's gain K.
+    duration : float, s.
+
+    Returns
+    -------
+    q : array, shape (7,), rad.
+    """
+    builder = DiagramBuilder()
+    slave = _add_slave(builder, scenario, start, scene=True)
+    reference = builder.AddSystem(ConstantVectorSource(np.asarray(start, dtype=float)))
+    stiffness = builder.AddSystem(ConstantVectorSource(np.atleast_1d(gain).astype(float)))
+    builder.Connect(reference.get_output_port(), slave.p_WE_desired_input)
+    builder.Connect(stiffness.get_output_port(), slave.gain_input)
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(duration)
+    plant_context = slave.plant.GetMyContextFromRoot(simulator.get_context())
+    return slave.plant.GetPositions(plant_context, slave.arm.model_instance)
+
+
 def build_reproduction_diagram(
     scenario,
     model,
@@ -180,8 +278,8 @@ def build_reproduction_diagram(
     model : HSMM
         Fitted over [x, xdot, k] (D = 7).
     start : array, shape (3,), optional
-        Where the tool point starts (m); default the task plan's first point, where the
-        demonstrations start.
+        x*_0 (m), where the arm is held when it starts (:func:`settled_arm_positions`);
+        default the task plan's first point, where the demonstrations start.
     weighting : {"temporal", "spatial", "forward"}
         State weighting of the reproducer (:mod:`hemg_drake.learning.reproduce`).
     restoring_gain : float
@@ -216,73 +314,49 @@ def build_reproduction_diagram(
         raise ValueError(f"start must be 3 finite numbers (m), got {start!r}")
     goal = np.array(plan.points[-1], dtype=float)
 
+    reproducer = HsmmGmrReproducer(
+        model=model,
+        start=start,
+        dt=scenario.log_period,
+        weighting=weighting,
+        restoring_gain=restoring_gain,
+    )
+    gain_0 = reproducer.GetOutputPort("k_star").Eval(reproducer.CreateDefaultContext())
+    q_0 = settled_arm_positions(scenario, start, gain_0) if scene else None
+
     builder = DiagramBuilder()
-    plant, scene_graph = AddMultibodyPlant(scenario.plant, builder)
-    arm = add_baxter_arm(plant)
-    task_scene = SCENE_BUILDERS[scenario.task](plant, arm) if scene else None
-    plant.Finalize()
-    plant.SetDefaultPositions(arm.model_instance, solve_arm_positions(plant, arm, start))
+    slave = _add_slave(builder, scenario, start, scene=scene, positions=q_0)
+    plant, scene_graph, arm, task_scene = slave.plant, slave.scene_graph, slave.arm, slave.scene
 
     def add(name, system):
         return builder.AddNamedSystem(name, system)
 
-    reproducer = add(
-        "reproducer",
-        HsmmGmrReproducer(
-            model=model,
-            start=start,
-            dt=scenario.log_period,
-            weighting=weighting,
-            restoring_gain=restoring_gain,
-        ),
-    )
-    clik_config = scenario.clik
-    clik = add(
-        "clik",
-        Clik(
-            plant=plant,
-            model_instance=arm.model_instance,
-            frame_E=arm.tool_frame,
-            gain=clik_config.gain,
-            method=clik_config.method,
-            damping=clik_config.damping,
-            period=clik_config.period,
-        ),
-    )
-    pd = add("pd", VariableGainPd(plant=plant, arm=arm))
-    limits = add("stiffness_limits", Saturation([scenario.emg.k_min], [scenario.emg.k_max]))
+    add("reproducer", reproducer)
     tool_point = add("tool_point", ToolPointKinematics(plant=plant, arm=arm))
     kp, kd = tracking_gains
     tracking = add("tracking_force", TrackingForce(kp=kp, kd=kd))
     goal_source = add("goal", ConstantVectorSource(goal))
 
-    arm_state = plant.get_state_output_port(arm.model_instance)
     connect = builder.Connect
-    connect(arm_state, tool_point.state_input)
-    connect(arm_state, clik.GetInputPort("state"))
-    connect(arm_state, pd.state_input)
+    connect(plant.get_state_output_port(arm.model_instance), tool_point.state_input)
     observed = tool_point.p_WE_output if observe == "tool" else reproducer.GetOutputPort("x_star")
     connect(observed, reproducer.GetInputPort("p_WE"))
-    connect(reproducer.GetOutputPort("x_star"), clik.GetInputPort("p_WE_desired"))
-    connect(clik.GetOutputPort("q_desired"), pd.q_desired_input)
-    connect(clik.GetOutputPort("v_desired"), pd.v_desired_input)
-    connect(reproducer.GetOutputPort("k_star"), limits.get_input_port())
-    connect(limits.get_output_port(), pd.gain_input)
-    connect(pd.torque_output, plant.get_actuation_input_port(arm.model_instance))
+    connect(reproducer.GetOutputPort("x_star"), slave.p_WE_desired_input)
+    connect(reproducer.GetOutputPort("k_star"), slave.gain_input)
     connect(reproducer.GetOutputPort("x_star"), tracking.GetInputPort("x_star"))
     connect(reproducer.GetOutputPort("xdot_star"), tracking.GetInputPort("xdot_star"))
     connect(goal_source.get_output_port(), tracking.GetInputPort("x_goal"))
     builder.ExportOutput(tracking.GetOutputPort("F_tr"), "tracking_force")
 
     f_WE = (
-        task_scene.force_output_port(builder)
+        slave.f_WE_output
         if task_scene is not None
         else add("no_contact", ConstantVectorSource(np.zeros(3))).get_output_port()
     )
     sources = {
         "x_star": reproducer.GetOutputPort("x_star"),
         "xdot_star": reproducer.GetOutputPort("xdot_star"),
-        "k_star": limits.get_output_port(),
+        "k_star": slave.limits.get_output_port(),
         "h": reproducer.GetOutputPort("h"),
         "p_WE": tool_point.p_WE_output,
         "v_WE": tool_point.v_WE_output,

@@ -4,7 +4,11 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from hemg_drake.diagrams.reproduction import build_reproduction_diagram, run_reproduction
+from hemg_drake.diagrams.reproduction import (
+    build_reproduction_diagram,
+    run_reproduction,
+    settled_arm_positions,
+)
 from hemg_drake.learning.hsmm import HSMM
 from hemg_drake.learning.reproduce import reproduce
 from hemg_drake.learning.systems import tracking_force
@@ -96,3 +100,26 @@ def test_bad_input(scenario, model):
         build_reproduction_diagram(scenario, model, start=[3.0, 0.0, 0.0], scene=False)
     with pytest.raises(ValueError, match="duration"):
         run_reproduction(scenario, model, duration=-1.0, scene=False)
+
+
+def test_a_start_beside_the_grasped_ring_begins_at_rest(scenario, model):
+    # 3 cm beside the ring the grasp pulls 150 N on the tool: the arm starts where the PD,
+    # holding x*_0 there, balances it (settled_arm_positions), not at rest 3 cm away, where
+    # the released grasp would snap the tool back to the ring (1.5 m/s, measured).
+    start = START + [0.03, 0.0, 0.0]
+    result = run_reproduction(scenario, model, start=start, duration=0.2, weighting="temporal")
+    log = result.log
+    np.testing.assert_allclose(log.x_star[0], start, atol=1e-12)
+    # Stiff grasp, soft arm (K = k*_0): the tool rests within a few mm of the ring ...
+    aside = log.p_WE[0, 0] - START[0]
+    assert 0.0 < aside < 0.005
+    # ... held there against the grasp's stretch (5000 N/m), and does not snap sideways.
+    np.testing.assert_allclose(log.f_WE[0, 0], -5000.0 * aside, rtol=0.1)
+    assert np.max(np.abs(log.v_WE[:, 0])) < 0.2
+    # With the grasp unstretched, the arm rests with its tool on the start.
+    q = settled_arm_positions(scenario, START, 10.0)
+    built = build_reproduction_diagram(scenario, model, scene=False)
+    context = built.plant.CreateDefaultContext()
+    built.plant.SetPositions(context, built.arm.model_instance, q)
+    p_WE = built.arm.tool_frame.CalcPoseInWorld(context).translation()
+    np.testing.assert_allclose(p_WE, START, atol=1e-3)
