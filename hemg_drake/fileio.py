@@ -4,6 +4,7 @@ import contextlib
 import io
 import os
 import tempfile
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -57,3 +58,20 @@ def save_npz_atomic(path, **arrays):
     buffer = io.BytesIO()
     np.savez_compressed(buffer, **arrays)
     write_bytes_atomic(path, buffer.getvalue())
+
+
+def load_npz(path, *, kind):
+    """All arrays of an NPZ file, as a dict; no pickles.
+
+    Raises ``FileNotFoundError`` for a missing file and ``ValueError`` naming the
+    file and what it should have been (``kind``, e.g. "HSMM model") for one that
+    numpy cannot read (truncated, not a zip archive, pickled objects).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{kind} file not found: {path}")
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            return {name: archive[name] for name in archive.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as error:
+        raise ValueError(f"{path}: not a readable NPZ file ({kind} expected): {error}") from None

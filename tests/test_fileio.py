@@ -39,3 +39,15 @@ def test_file_mode_follows_the_umask(tmp_path):
     finally:
         os.umask(old)
     assert (tmp_path / "a.txt").stat().st_mode & 0o777 == 0o644
+
+
+def test_load_npz_names_the_file_and_the_kind(tmp_path):
+    from hemg_drake.fileio import load_npz
+
+    with pytest.raises(FileNotFoundError, match="HSMM model file not found: .*none.npz"):
+        load_npz(tmp_path / "none.npz", kind="HSMM model")
+    write_text_atomic(tmp_path / "junk.npz", "not a zip archive")
+    with pytest.raises(ValueError, match=r"junk.npz: not a readable NPZ file \(dataset expected\)"):
+        load_npz(tmp_path / "junk.npz", kind="dataset")
+    save_npz_atomic(tmp_path / "ok.npz", x=np.arange(2.0))
+    np.testing.assert_array_equal(load_npz(tmp_path / "ok.npz", kind="dataset")["x"], [0.0, 1.0])

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
-from hemg_drake.fileio import save_npz_atomic, write_text_atomic
+from hemg_drake.fileio import load_npz, save_npz_atomic, write_text_atomic
 
 MYO_CHANNELS = 8
 MYO_RATE = 200.0
@@ -225,14 +225,10 @@ def _load_csv(path):
 
 
 def _load_npz(path):
-    try:
-        archive = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as error:
-        raise ValueError(f"{path}: not a readable NPZ file ({error})") from None
-    with archive:
-        if NPZ_KEY not in archive.files:
-            raise ValueError(f"{path}: no array named {NPZ_KEY!r} (found {sorted(archive.files)})")
-        emg = archive[NPZ_KEY]
+    arrays = load_npz(path, kind="sEMG recording")
+    if NPZ_KEY not in arrays:
+        raise ValueError(f"{path}: no array named {NPZ_KEY!r} (found {sorted(arrays)})")
+    emg = arrays[NPZ_KEY]
     if emg.ndim != 2 or emg.shape[1] != MYO_CHANNELS:
         raise ValueError(
             f"{path}: array {NPZ_KEY!r} must have shape (n_samples, {MYO_CHANNELS}), "

@@ -14,14 +14,13 @@ scenario's YAML text). Only plain arrays are stored (no pickles).
 
 import dataclasses as dc
 import json
-import zipfile
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import numpy as np
 
 import hemg_drake
-from hemg_drake.fileio import save_npz_atomic
+from hemg_drake.fileio import load_npz, save_npz_atomic
 
 FORMAT_VERSION = 1
 # Number of columns of each logged field (1 for a scalar signal, stored as shape (T,)).
@@ -149,13 +148,7 @@ def load_dataset(path):
         or malformed array: the message names the file and the array.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"dataset file not found: {path}")
-    try:
-        with np.load(path, allow_pickle=False) as archive:
-            arrays = {name: archive[name] for name in archive.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as error:
-        raise ValueError(f"{path}: not a readable dataset (NPZ) file: {error}") from None
+    arrays = load_npz(path, kind="dataset")
     if "metadata" not in arrays:
         raise ValueError(f"{path}: no 'metadata' array; not a hemg_drake dataset")
     try:

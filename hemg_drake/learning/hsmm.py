@@ -1,13 +1,12 @@
 """Hidden semi-Markov model with explicit Gaussian durations, trained by EM (eqs. 4-11)."""
 
 import json
-import zipfile
 from pathlib import Path
 
 import numpy as np
 from scipy.cluster.vq import kmeans2
 
-from hemg_drake.fileio import save_npz_atomic
+from hemg_drake.fileio import load_npz, save_npz_atomic
 from hemg_drake.learning import _kernels
 from hemg_drake.learning.gmr import gaussian_log_pdf
 from hemg_drake.learning.reproduce import ResidualForward
@@ -596,13 +595,7 @@ class HSMM:
         naming the file for a damaged one or another format version.
         """
         path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"no HSMM model file at {path}")
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                arrays = {key: data[key] for key in data.files}
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as error:
-            raise ValueError(f"{path}: not a readable HSMM model file ({error})") from None
+        arrays = load_npz(path, kind="HSMM model")
         version = arrays.get("format_version")
         if version is None or version.shape != () or int(version) != FORMAT_VERSION:
             raise ValueError(
