@@ -117,7 +117,34 @@ def synthesize_emg(
     return emg
 
 
-class SyntheticEmgSource(LeafSystem):
+class _SampledSource(LeafSystem):
+    """What every sEMG source shares: sample k is taken at t = k * period and held.
+
+    Subclasses implement ``_sample(context, k)``, returning the 8 values of
+    sample k, or None to keep the last one.
+    """
+
+    def __init__(self, period):
+        LeafSystem.__init__(self)
+        self._emg_state = self.DeclareDiscreteState(MYO_CHANNELS)
+        self._count_state = self.DeclareDiscreteState(1)
+        self.DeclarePeriodicDiscreteUpdateEvent(
+            period_sec=_check_period(period), offset_sec=0.0, update=self._update_sample
+        )
+        self._emg_output = self.DeclareStateOutputPort("emg", self._emg_state)
+
+    def get_emg_output_port(self):
+        return self._emg_output
+
+    def _update_sample(self, context, discrete_state):
+        k = int(context.get_discrete_state(self._count_state).GetAtIndex(0))
+        sample = self._sample(context, k)
+        if sample is not None:
+            discrete_state.set_value(self._emg_state, sample)
+        discrete_state.set_value(self._count_state, [k + 1])
+
+
+class SyntheticEmgSource(_SampledSource):
     """Synthetic MYO-like raw sEMG whose amplitude grows with muscle activation.
 
     .. pydrake_system::
@@ -166,28 +193,17 @@ class SyntheticEmgSource(LeafSystem):
         exponent=1.0,
         period=MYO_PERIOD,
     ):
-        LeafSystem.__init__(self)
+        _SampledSource.__init__(self, period)
         self._model = _NoiseModel(seed, channel_gains, rest_std, exponent)
         self._activation_input = self.DeclareVectorInputPort("activation", 1)
-        self._emg_state = self.DeclareDiscreteState(MYO_CHANNELS)
-        self._count_state = self.DeclareDiscreteState(1)
-        self.DeclarePeriodicDiscreteUpdateEvent(
-            period_sec=_check_period(period), offset_sec=0.0, update=self._update_sample
-        )
-        self._emg_output = self.DeclareStateOutputPort("emg", self._emg_state)
 
     def get_activation_input_port(self):
         return self._activation_input
 
-    def get_emg_output_port(self):
-        return self._emg_output
-
-    def _update_sample(self, context, discrete_state):
+    def _sample(self, context, k):
         activation = float(self._activation_input.Eval(context)[0])
         activation = 0.0 if math.isnan(activation) else min(max(activation, 0.0), 1.0)
-        k = int(context.get_discrete_state(self._count_state).GetAtIndex(0))
-        discrete_state.set_value(self._emg_state, self._model.sample(activation, k))
-        discrete_state.set_value(self._count_state, [k + 1])
+        return self._model.sample(activation, k)
 
 
 def _int8_problem(value):
@@ -312,7 +328,7 @@ def save_emg_recording(path, emg):
         write_text_atomic(path, "".join(",".join(map(str, row)) + "\n" for row in emg))
 
 
-class FileEmgSource(LeafSystem):
+class FileEmgSource(_SampledSource):
     """Replays a raw sEMG recording at 200 Hz.
 
     .. pydrake_system::
@@ -339,30 +355,18 @@ class FileEmgSource(LeafSystem):
     """
 
     def __init__(self, *, filename, at_end="hold", period=MYO_PERIOD):
-        LeafSystem.__init__(self)
         if at_end not in ("hold", "loop"):
             raise ValueError(f"at_end must be 'hold' or 'loop', got {at_end!r}")
         self._recording = load_emg_recording(filename).astype(float)
         self._loop = at_end == "loop"
-        self._emg_state = self.DeclareDiscreteState(MYO_CHANNELS)
-        self._count_state = self.DeclareDiscreteState(1)
-        self.DeclarePeriodicDiscreteUpdateEvent(
-            period_sec=_check_period(period), offset_sec=0.0, update=self._update_sample
-        )
-        self._emg_output = self.DeclareStateOutputPort("emg", self._emg_state)
+        _SampledSource.__init__(self, period)
 
-    def get_emg_output_port(self):
-        return self._emg_output
-
-    def _update_sample(self, context, discrete_state):
-        k = int(context.get_discrete_state(self._count_state).GetAtIndex(0))
+    def _sample(self, context, k):
         n = len(self._recording)
-        row = k % n if self._loop else min(k, n - 1)
-        discrete_state.set_value(self._emg_state, self._recording[row])
-        discrete_state.set_value(self._count_state, [k + 1])
+        return self._recording[k % n if self._loop else min(k, n - 1)]
 
 
-class LiveEmgSource(LeafSystem):
+class LiveEmgSource(_SampledSource):
     """Outputs the newest raw sEMG sample of a live armband, polled at 200 Hz.
 
     .. pydrake_system::
@@ -390,29 +394,21 @@ class LiveEmgSource(LeafSystem):
     """
 
     def __init__(self, *, device, period=MYO_PERIOD):
-        LeafSystem.__init__(self)
         if not callable(getattr(device, "read_emg", None)):
             raise ValueError("device must have a read_emg() method")
         self._device = device
-        self._emg_state = self.DeclareDiscreteState(MYO_CHANNELS)
-        self.DeclarePeriodicDiscreteUpdateEvent(
-            period_sec=_check_period(period), offset_sec=0.0, update=self._update_sample
-        )
-        self._emg_output = self.DeclareStateOutputPort("emg", self._emg_state)
+        _SampledSource.__init__(self, period)
 
-    def get_emg_output_port(self):
-        return self._emg_output
-
-    def _update_sample(self, context, discrete_state):
+    def _sample(self, context, k):
         sample = self._device.read_emg()
         if sample is None:
-            return
+            return None
         sample = np.asarray(sample, dtype=float)
         if sample.shape != (MYO_CHANNELS,) or not np.all(np.isfinite(sample)):
             raise ValueError(
                 f"device.read_emg() must return {MYO_CHANNELS} finite values, got {sample!r}"
             )
-        discrete_state.set_value(self._emg_state, np.clip(sample, INT8_MIN, INT8_MAX))
+        return np.clip(sample, INT8_MIN, INT8_MAX)
 
 
 def open_myo_device(**kwargs):
