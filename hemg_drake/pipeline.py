@@ -56,10 +56,11 @@ DEFAULT_WEIGHTING = "temporal"
 # demonstrated path with the time constant 1 / kappa (docs/reproduction.md).
 RESTORING_GAIN = 2.0
 # Start offsets of the demo's second reproduction (m), 3 cm from the demonstrations' start,
-# across the task's path. Cotter pin: sideways of the pull axis. The grasp holds the ring
-# from t = 0 (the scene's model), so the hand starts with the grasp stretched by 3 cm
-# (150 N towards the ring), as if pushed aside after grasping; the reproduction has to
-# bring it back onto the pull axis before it pulls. Drawing: sideways, above the sheet.
+# across the task's path: x*_0 is there and the arm starts at rest where the PD holds it.
+# Cotter pin: sideways of the pull axis. The grasp holds the ring from t = 0 (the scene's
+# model), as if the hand were pushed aside after grasping: the stiff grasp keeps the tool
+# a few mm from the ring against the soft arm (settled_arm_positions), and the reproduction
+# brings x* back onto the pull axis before it pulls. Drawing: sideways, above the sheet.
 START_OFFSETS = {"cotter_pin": (0.03, 0.0, 0.0), "drawing": (0.0, 0.03, 0.0)}
 # Drawing: shortest pen contact (log samples, 0.01 s each) that counts as a stroke.
 MIN_STROKE_SAMPLES = 10
