@@ -29,7 +29,7 @@ plan's first point), and the arm starts at rest where it settles in the task's s
 the PD holds it there with the first k* (:func:`settled_arm_positions`): in free space
 with its tool point on ``start`` (damped-Newton inverse kinematics of the demonstration
 diagram); beside the cotter pin's grasped ring, where the PD balances the stretched grasp,
-a few mm from the ring (the arm is much softer than the grasp). Started at rest on ``start``
+about 1 mm from the ring (the arm is much softer than the grasp). Started at rest on ``start``
 instead, the grasp (150 N at 3 cm) would snap the tool back to the ring at 1.5 m/s in the
 first 0.03 s: released springs, not the learnt task.
 

@@ -110,7 +110,7 @@ def test_a_start_beside_the_grasped_ring_begins_at_rest(scenario, model):
     result = run_reproduction(scenario, model, start=start, duration=0.2, weighting="temporal")
     log = result.log
     np.testing.assert_allclose(log.x_star[0], start, atol=1e-12)
-    # Stiff grasp, soft arm (K = k*_0): the tool rests within a few mm of the ring ...
+    # Stiff grasp, soft arm (K = k*_0): the tool rests within millimetres of the ring ...
     aside = log.p_WE[0, 0] - START[0]
     assert 0.0 < aside < 0.005
     # ... held there against the grasp's stretch (5000 N/m), and does not snap sideways.
