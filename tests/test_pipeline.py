@@ -46,12 +46,13 @@ def test_pin_is_pulled_out_within_table_ii(pin_run):
     assert metrics["velocity_rmse_m_per_s"] <= 0.0788
     assert metrics["stiffness_correlation"] > 0.5
     assert metrics["tracking_force_peak_n"] >= metrics["tracking_force_mean_n"] > 0
-    # From 3 cm aside of the pull axis (the grasp stretched), the pin comes out too, and the
-    # reproduction returns to the demonstrated path: within Table II's position RMSE again.
+    # From x*_0 3 cm aside of the pull axis (the arm held at rest against the grasp), the pin
+    # comes out too, and the reproduction returns to the demonstrated path: within Table II.
     offset = results["cotter_pin (start 3 cm away)"]
     assert offset["success"] and offset["restoring_gain"] > 0
     assert np.allclose(offset["start_offset"], [0.03, 0.0, 0.0])
     assert offset["position_rmse_m"] <= 0.0022
+    assert offset["velocity_rmse_m_per_s"] <= 0.0788
 
 
 def test_same_seeds_same_metrics(pin_run, tmp_path):
