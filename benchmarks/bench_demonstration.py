@@ -24,18 +24,14 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 from pydrake.multibody.plant import AddMultibodyPlant
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
 from hemg_drake.control.clik import velocity_columns
-from hemg_drake.diagrams.demonstration import (
-    SCENE_BUILDERS,
-    build_demonstration_diagram,
-    solve_arm_positions,
-)
+from hemg_drake.diagrams.demonstration import build_demonstration_diagram
+from hemg_drake.diagrams.slave import SCENE_BUILDERS, solve_arm_positions
 from hemg_drake.robots.baxter import add_baxter_arm
 from hemg_drake.robots.baxter import FLOOR_Z
 from hemg_drake.scenario import load_scenario

@@ -22,21 +22,16 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.geometry import MeshcatVisualizer
-from pydrake.multibody.plant import AddMultibodyPlant
-from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, Multiplexer
 
-from hemg_drake.control.clik import Clik
-from hemg_drake.control.pd import VariableGainPd
+from hemg_drake.diagrams.slave import add_slave
 from hemg_drake.emg.calibration import EmgCalibration
 from hemg_drake.emg.chain import add_emg_gain_chain
 from hemg_drake.emg.sources import MYO_RATE, SyntheticEmgSource, synthesize_emg
 from hemg_drake.learning.demos import FIELD_WIDTHS, Demonstration, save_dataset
-from hemg_drake.robots.baxter import FLOOR_Z, add_baxter_arm
-from hemg_drake.tasks.cotter_pin import add_cotter_pin_scene
-from hemg_drake.tasks.drawing import add_drawing_scene
+from hemg_drake.robots.baxter import FLOOR_Z
 from hemg_drake.teleop.feedback import ForceFeedback
 from hemg_drake.teleop.mapping import WorkspaceMap, WorkspaceMapping
 from hemg_drake.teleop.master import HapticMaster
@@ -45,62 +40,8 @@ from hemg_drake.viz.figures import plot_demonstrations, save_figure
 from hemg_drake.viz.ink import add_ink_to_recording, in_contact
 from hemg_drake.viz.recording import ReplayRecorder
 
-# Each task's scene: added to the plant before Finalize, its handle has force_output_port.
-SCENE_BUILDERS = {"cotter_pin": add_cotter_pin_scene, "drawing": add_drawing_scene}
 # Logged signals after time, in the order of the logger's input vector.
 LOGGED_FIELDS = tuple(name for name in FIELD_WIDTHS if name != "time")
-
-
-class ToolPointKinematics(LeafSystem):
-    """Position and velocity of the arm's tool point E in the world, from the arm's state.
-
-    .. pydrake_system::
-
-        name: ToolPointKinematics
-        input_ports:
-        - state
-        output_ports:
-        - p_WE
-        - v_WE
-
-    ``state`` is the arm's [q; v] (14: rad, rad/s); ``p_WE`` (3, m) and ``v_WE`` (3, m/s)
-    are the origin of ``frame_E`` (the tool frame) measured and expressed in W, by forward
-    kinematics on the controller's own plant context: v_WE = J_WE(q) v.
-
-    Timing: stateless, direct feedthrough; computed only when a consumer (the logger every
-    log period, or the force feedback in ``position_error`` mode) evaluates it.
-    """
-
-    def __init__(self, *, plant, arm, frame_E=None):
-        LeafSystem.__init__(self)
-        self._plant = plant
-        self._context = plant.CreateDefaultContext()
-        self._model = arm.model_instance
-        self._frame_E = arm.tool_frame if frame_E is None else frame_E
-        all_velocities = np.arange(plant.num_velocities(), dtype=float)
-        self._columns = plant.GetVelocitiesFromArray(self._model, all_velocities).astype(int)
-        n = len(arm.joint_names)
-        self._n = n
-        self.state_input = self.DeclareVectorInputPort("state", 2 * n)
-        self.p_WE_output = self.DeclareVectorOutputPort("p_WE", 3, self._calc_p_WE)
-        self.v_WE_output = self.DeclareVectorOutputPort("v_WE", 3, self._calc_v_WE)
-
-    def _set_positions(self, context):
-        x = self.state_input.Eval(context)
-        self._plant.SetPositions(self._context, self._model, x[: self._n])
-        return x[self._n :]
-
-    def _calc_p_WE(self, context, output):
-        self._set_positions(context)
-        output.SetFromVector(self._frame_E.CalcPoseInWorld(self._context).translation())
-
-    def _calc_v_WE(self, context, output):
-        v = self._set_positions(context)
-        world = self._plant.world_frame()
-        J_WE = self._plant.CalcJacobianTranslationalVelocity(
-            self._context, JacobianWrtVariable.kV, self._frame_E, np.zeros(3), world, world
-        )
-        output.SetFromVector(J_WE[:, self._columns] @ v)
 
 
 class SampleHold(LeafSystem):
@@ -197,41 +138,6 @@ def emg_calibration(scenario):
     )
 
 
-def solve_arm_positions(plant, arm, p_WE, *, iterations=200, damping=0.01):
-    """Arm configuration that puts the tool point at ``p_WE``, from the home configuration.
-
-    Damped Newton steps on the tool point's translational Jacobian, kept inside the joint
-    limits. Used to start a demonstration at rest on the plan's first point.
-
-    Returns
-    -------
-    q : array, shape (7,), rad.
-
-    Raises
-    ------
-    ValueError
-        The point is not reached within 1 mm.
-    """
-    context = plant.CreateDefaultContext()
-    world = plant.world_frame()
-    all_velocities = np.arange(plant.num_velocities(), dtype=float)
-    columns = plant.GetVelocitiesFromArray(arm.model_instance, all_velocities).astype(int)
-    q = arm.home_positions.copy()
-    for _ in range(iterations):
-        plant.SetPositions(context, arm.model_instance, q)
-        error = p_WE - arm.tool_frame.CalcPoseInWorld(context).translation()
-        if np.linalg.norm(error) < 1e-6:
-            break
-        J = plant.CalcJacobianTranslationalVelocity(
-            context, JacobianWrtVariable.kV, arm.tool_frame, np.zeros(3), world, world
-        )[:, columns]
-        step = J.T @ np.linalg.solve(J @ J.T + damping**2 * np.eye(3), error)
-        q = np.clip(q + step, arm.position_lower, arm.position_upper)
-    if np.linalg.norm(error) > 1e-3:
-        raise ValueError(f"the plan's first point {p_WE.tolist()} is out of the arm's reach")
-    return q
-
-
 def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, scene=True):
     """Build the teleoperated demonstration diagram for one seeded demonstration.
 
@@ -268,13 +174,9 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
     p_MS_initial = mapping.slave_to_master(task_plan.points[0])
 
     builder = DiagramBuilder()
-    plant, scene_graph = AddMultibodyPlant(scenario.plant, builder)
-    arm = add_baxter_arm(plant)
-    task_scene = SCENE_BUILDERS[scenario.task](plant, arm) if scene else None
-    plant.Finalize()
-    plant.SetDefaultPositions(
-        arm.model_instance, solve_arm_positions(plant, arm, task_plan.points[0])
-    )
+    slave = add_slave(builder, scenario, start=task_plan.points[0], scene=scene)
+    plant, scene_graph, arm, task_scene = slave.plant, slave.scene_graph, slave.arm, slave.scene
+    tool_point = slave.tool_point
 
     def add(name, system):
         return builder.AddNamedSystem(name, system)
@@ -291,21 +193,6 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
             mapping=mapping, delay_steps=scenario.mapping.delay_steps, p_MS_initial=p_MS_initial
         ),
     )
-    clik_config = scenario.clik
-    clik = add(
-        "clik",
-        Clik(
-            plant=plant,
-            model_instance=arm.model_instance,
-            frame_E=arm.tool_frame,
-            gain=clik_config.gain,
-            method=clik_config.method,
-            damping=clik_config.damping,
-            period=clik_config.period,
-        ),
-    )
-    pd = add("pd", VariableGainPd(plant=plant, arm=arm))
-    tool_point = add("tool_point", ToolPointKinematics(plant=plant, arm=arm))
     emg_source = add("emg_source", SyntheticEmgSource(seed=seed))
     envelope, variable_gain = add_emg_gain_chain(
         builder,
@@ -320,19 +207,13 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
     feedback_config = dc.asdict(scenario.feedback)
     force_feedback = add("force_feedback", ForceFeedback(mapping=mapping, **feedback_config))
 
-    arm_state = plant.get_state_output_port(arm.model_instance)
     connect = builder.Connect
     connect(operator.GetOutputPort("hand_force"), master.GetInputPort("hand_force"))
     connect(operator.GetOutputPort("activation"), emg_source.get_activation_input_port())
     for name in ("p_MS", "v_MS"):
         connect(master.GetOutputPort(name), operator.GetInputPort(name))
         connect(master.GetOutputPort(name), workspace_map.GetInputPort(name))
-    connect(workspace_map.GetOutputPort("p_WE_desired"), clik.GetInputPort("p_WE_desired"))
-    connect(arm_state, clik.GetInputPort("state"))
-    connect(arm_state, pd.state_input)
-    connect(arm_state, tool_point.state_input)
-    connect(clik.GetOutputPort("q_desired"), pd.q_desired_input)
-    connect(clik.GetOutputPort("v_desired"), pd.v_desired_input)
+    connect(workspace_map.GetOutputPort("p_WE_desired"), slave.p_WE_desired_input)
     # The envelope updates half a MYO period after each sample; the hold reads it a plant
     # step later, so the PD's gain lags the envelope by one plant step.
     gain_hold = add(
@@ -344,11 +225,10 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
         ),
     )
     connect(variable_gain.get_gain_output_port(), gain_hold.u_input)
-    connect(gain_hold.y_output, pd.gain_input)
-    connect(pd.torque_output, plant.get_actuation_input_port(arm.model_instance))
+    connect(gain_hold.y_output, slave.gain_input)
 
     f_WE = (
-        task_scene.force_output_port(builder)
+        slave.f_WE_output
         if task_scene is not None
         else add("no_contact", ConstantVectorSource(np.zeros(3))).get_output_port()
     )

@@ -41,7 +41,6 @@ import dataclasses as dc
 
 import numpy as np
 from pydrake.geometry import MeshcatVisualizer
-from pydrake.multibody.plant import AddMultibodyPlant
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import (
@@ -51,16 +50,10 @@ from pydrake.systems.primitives import (
     Saturation,
 )
 
-from hemg_drake.control.clik import Clik
+from hemg_drake.diagrams.slave import add_slave
 from hemg_drake.fileio import save_npz_atomic
-from hemg_drake.control.pd import VariableGainPd
-from hemg_drake.diagrams.demonstration import (
-    SCENE_BUILDERS,
-    ToolPointKinematics,
-    solve_arm_positions,
-)
 from hemg_drake.learning.systems import HsmmGmrReproducer, TrackingForce
-from hemg_drake.robots.baxter import FLOOR_Z, add_baxter_arm
+from hemg_drake.robots.baxter import FLOOR_Z
 
 # Table I's K_pm = K_dm = 50, for eq. 23's K_ptr (N/m) and K_dtr (N s/m).
 TRACKING_GAINS = (50.0, 50.0)
@@ -165,63 +158,19 @@ def check_model(model):
         )
 
 
-@dc.dataclass(frozen=True, eq=False)
-class _Slave:
-    """The slave side of a reproduction diagram: plant, scene, CLIK, stiffness limits, PD."""
-
-    plant: object
-    scene_graph: object
-    arm: object
-    scene: object
-    limits: object
-    p_WE_desired_input: object
-    gain_input: object
-    f_WE_output: object
-
-
 def _add_slave(builder, scenario, start, *, scene, positions=None):
-    """Add the Baxter plant (+ the task's scene), CLIK, the gain's Saturation and the PD.
+    """The shared slave side (:func:`~hemg_drake.diagrams.slave.add_slave`) with the
+    reproduced stiffness k* clipped to [k_min, k_max] before the PD's gain.
 
-    The arm starts at rest in ``positions`` (7,), default with its tool point on ``start``.
-    Left to connect: CLIK's ``p_WE_desired`` and the Saturation's input (the stiffness).
+    Returns the ``Slave`` and the ``stiffness_limits`` Saturation, whose input is left to
+    connect.
     """
-    plant, scene_graph = AddMultibodyPlant(scenario.plant, builder)
-    arm = add_baxter_arm(plant)
-    task_scene = SCENE_BUILDERS[scenario.task](plant, arm) if scene else None
-    plant.Finalize()
-    if positions is None:
-        positions = solve_arm_positions(plant, arm, start)
-    plant.SetDefaultPositions(arm.model_instance, positions)
-    clik_config = scenario.clik
-    clik = builder.AddNamedSystem(
-        "clik",
-        Clik(
-            plant=plant,
-            model_instance=arm.model_instance,
-            frame_E=arm.tool_frame,
-            gain=clik_config.gain,
-            method=clik_config.method,
-            damping=clik_config.damping,
-            period=clik_config.period,
-        ),
-    )
-    pd = builder.AddNamedSystem("pd", VariableGainPd(plant=plant, arm=arm))
+    slave = add_slave(builder, scenario, start=start, positions=positions, scene=scene)
     limits = builder.AddNamedSystem(
         "stiffness_limits", Saturation([scenario.emg.k_min], [scenario.emg.k_max])
     )
-    arm_state = plant.get_state_output_port(arm.model_instance)
-    builder.Connect(arm_state, clik.GetInputPort("state"))
-    builder.Connect(arm_state, pd.state_input)
-    builder.Connect(clik.GetOutputPort("q_desired"), pd.q_desired_input)
-    builder.Connect(clik.GetOutputPort("v_desired"), pd.v_desired_input)
-    builder.Connect(limits.get_output_port(), pd.gain_input)
-    builder.Connect(pd.torque_output, plant.get_actuation_input_port(arm.model_instance))
-    # Wires the scene's own systems (the pin's detent) as well as its force sensor.
-    f_WE = task_scene.force_output_port(builder) if task_scene is not None else None
-    return _Slave(
-        plant, scene_graph, arm, task_scene, limits,
-        clik.GetInputPort("p_WE_desired"), limits.get_input_port(), f_WE,
-    )  # fmt: skip
+    builder.Connect(limits.get_output_port(), slave.gain_input)
+    return slave, limits
 
 
 def settled_arm_positions(scenario, start, gain, *, duration=SETTLE_TIME):
@@ -245,11 +194,11 @@ def settled_arm_positions(scenario, start, gain, *, duration=SETTLE_TIME):
     q : array, shape (7,), rad.
     """
     builder = DiagramBuilder()
-    slave = _add_slave(builder, scenario, start, scene=True)
+    slave, limits = _add_slave(builder, scenario, start, scene=True)
     reference = builder.AddSystem(ConstantVectorSource(np.asarray(start, dtype=float)))
     stiffness = builder.AddSystem(ConstantVectorSource(np.atleast_1d(gain).astype(float)))
     builder.Connect(reference.get_output_port(), slave.p_WE_desired_input)
-    builder.Connect(stiffness.get_output_port(), slave.gain_input)
+    builder.Connect(stiffness.get_output_port(), limits.get_input_port())
     simulator = Simulator(builder.Build())
     simulator.AdvanceTo(duration)
     plant_context = slave.plant.GetMyContextFromRoot(simulator.get_context())
@@ -325,24 +274,23 @@ def build_reproduction_diagram(
     q_0 = settled_arm_positions(scenario, start, gain_0) if scene else None
 
     builder = DiagramBuilder()
-    slave = _add_slave(builder, scenario, start, scene=scene, positions=q_0)
+    slave, limits = _add_slave(builder, scenario, start, scene=scene, positions=q_0)
     plant, scene_graph, arm, task_scene = slave.plant, slave.scene_graph, slave.arm, slave.scene
+    tool_point = slave.tool_point
 
     def add(name, system):
         return builder.AddNamedSystem(name, system)
 
     add("reproducer", reproducer)
-    tool_point = add("tool_point", ToolPointKinematics(plant=plant, arm=arm))
     kp, kd = tracking_gains
     tracking = add("tracking_force", TrackingForce(kp=kp, kd=kd))
     goal_source = add("goal", ConstantVectorSource(goal))
 
     connect = builder.Connect
-    connect(plant.get_state_output_port(arm.model_instance), tool_point.state_input)
     observed = tool_point.p_WE_output if observe == "tool" else reproducer.GetOutputPort("x_star")
     connect(observed, reproducer.GetInputPort("p_WE"))
     connect(reproducer.GetOutputPort("x_star"), slave.p_WE_desired_input)
-    connect(reproducer.GetOutputPort("k_star"), slave.gain_input)
+    connect(reproducer.GetOutputPort("k_star"), limits.get_input_port())
     connect(reproducer.GetOutputPort("x_star"), tracking.GetInputPort("x_star"))
     connect(reproducer.GetOutputPort("xdot_star"), tracking.GetInputPort("xdot_star"))
     connect(goal_source.get_output_port(), tracking.GetInputPort("x_goal"))
@@ -356,7 +304,7 @@ def build_reproduction_diagram(
     sources = {
         "x_star": reproducer.GetOutputPort("x_star"),
         "xdot_star": reproducer.GetOutputPort("xdot_star"),
-        "k_star": slave.limits.get_output_port(),
+        "k_star": limits.get_output_port(),
         "h": reproducer.GetOutputPort("h"),
         "p_WE": tool_point.p_WE_output,
         "v_WE": tool_point.v_WE_output,

@@ -104,7 +104,7 @@ def test_interaction_force_against_hold_force(low, high):
 
 def test_force_sensor_agrees_with_the_grasp_spring(low):
     """At the end of the low-gain run all is still: f_WE = k (p_WR - p_WE), by hand."""
-    scene, plant, arm = low["scene"], low["plant"], low["arm"]
+    scene, arm = low["scene"], low["arm"]
     context = low["plant_context"]
     p_WR = scene.ring_frame.CalcPoseInWorld(context).translation()
     p_WE = arm.tool_frame.CalcPoseInWorld(context).translation()
