@@ -21,12 +21,11 @@ import time
 from pathlib import Path
 
 import numpy as np
-from pydrake.geometry import MeshcatVisualizer
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, Multiplexer
+from pydrake.systems.primitives import ConstantVectorSource
 
-from hemg_drake.diagrams.slave import add_slave
+from hemg_drake.diagrams.slave import add_logger, add_slave, build_with_viewers
 from hemg_drake.emg.calibration import EmgCalibration
 from hemg_drake.emg.chain import add_emg_gain_chain
 from hemg_drake.emg.sources import MYO_RATE, SyntheticEmgSource, synthesize_emg
@@ -252,19 +251,11 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
         "gain": gain_hold.y_output,
         "f_WE": f_WE,
     }
-    widths = [FIELD_WIDTHS[name] for name in LOGGED_FIELDS]
-    mux = add("log_mux", Multiplexer(widths))
-    for i, name in enumerate(LOGGED_FIELDS):
-        connect(sources[name], mux.get_input_port(i))
-    logger = LogVectorOutput(mux.get_output_port(), builder, scenario.log_period)
-    logger.set_name("logger")
-
-    if meshcat is not None:
-        MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
-    if recorder is not None:
-        recorder.add_to_builder(builder, scene_graph)
-    diagram = builder.Build()
-    diagram.set_name("demonstration")
+    ordered = {name: sources[name] for name in LOGGED_FIELDS}
+    logger = add_logger(builder, ordered, scenario.log_period)
+    diagram = build_with_viewers(
+        builder, scene_graph, "demonstration", meshcat=meshcat, recorder=recorder
+    )
     return DemonstrationDiagram(diagram, plant, arm, plan, mapping, task_scene, logger)
 
 

@@ -40,17 +40,11 @@ returns a :class:`ReproductionLog` and the task's outcome.
 import dataclasses as dc
 
 import numpy as np
-from pydrake.geometry import MeshcatVisualizer
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import (
-    ConstantVectorSource,
-    LogVectorOutput,
-    Multiplexer,
-    Saturation,
-)
+from pydrake.systems.primitives import ConstantVectorSource, Saturation
 
-from hemg_drake.diagrams.slave import add_slave
+from hemg_drake.diagrams.slave import add_logger, add_slave, build_with_viewers
 from hemg_drake.fileio import save_npz_atomic
 from hemg_drake.learning.systems import HsmmGmrReproducer, TrackingForce
 from hemg_drake.robots.baxter import FLOOR_Z
@@ -311,19 +305,12 @@ def build_reproduction_diagram(
         "f_WE": f_WE,
         "F_tr": tracking.GetOutputPort("F_tr"),
     }
-    widths = _log_widths(model.n_states)
-    mux = add("log_mux", Multiplexer(list(widths.values())))
-    for i, name in enumerate(widths):
-        connect(sources[name], mux.get_input_port(i))
-    logger = LogVectorOutput(mux.get_output_port(), builder, scenario.log_period)
-    logger.set_name("logger")
-
-    if meshcat is not None:
-        MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
-    if recorder is not None:
-        recorder.add_to_builder(builder, scene_graph)
-    diagram = builder.Build()
-    diagram.set_name("reproduction")
+    logger = add_logger(
+        builder, {name: sources[name] for name in _log_widths(model.n_states)}, scenario.log_period
+    )
+    diagram = build_with_viewers(
+        builder, scene_graph, "reproduction", meshcat=meshcat, recorder=recorder
+    )
     return ReproductionDiagram(
         diagram, plant, arm, task_scene, logger, start.copy(), goal, model.n_states
     )

@@ -1,8 +1,9 @@
-"""The slave side that the demonstration and reproduction diagrams share.
+"""What the demonstration and reproduction diagrams share: the slave side, the log, viewers.
 
-The Baxter plant with the task's scene, the CLIK (eq. 21) and the variable-gain PD
-(eq. 20) wired to the arm, and the tool point's kinematics. What drives it differs: the
-operator through the master in a demonstration, the HSMM-GMR reproducer in a reproduction.
+The slave side is the Baxter plant with the task's scene, the CLIK (eq. 21) and the
+variable-gain PD (eq. 20) wired to the arm, and the tool point's kinematics. What drives it
+differs: the operator through the master in a demonstration, the HSMM-GMR reproducer in a
+reproduction.
 """
 
 import dataclasses as dc
@@ -10,7 +11,9 @@ import dataclasses as dc
 import numpy as np
 from pydrake.multibody.plant import AddMultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.geometry import MeshcatVisualizer
 from pydrake.systems.framework import LeafSystem
+from pydrake.systems.primitives import LogVectorOutput, Multiplexer
 
 from hemg_drake.control.clik import Clik, velocity_columns
 from hemg_drake.control.pd import VariableGainPd
@@ -194,3 +197,28 @@ def add_slave(builder, scenario, *, start, positions=None, scene=True):
         gain_input=pd.gain_input,
         f_WE_output=f_WE,
     )
+
+
+def add_logger(builder, sources, period):
+    """Log the ``sources`` (name -> output port), stacked in their order, every ``period`` s.
+
+    Returns the ``VectorLogSink`` (named ``logger``; its mux ``log_mux``).
+    """
+    ports = list(sources.values())
+    mux = builder.AddNamedSystem("log_mux", Multiplexer([port.size() for port in ports]))
+    for i, port in enumerate(ports):
+        builder.Connect(port, mux.get_input_port(i))
+    logger = LogVectorOutput(mux.get_output_port(), builder, period)
+    logger.set_name("logger")
+    return logger
+
+
+def build_with_viewers(builder, scene_graph, name, *, meshcat=None, recorder=None):
+    """Add a live Meshcat view and/or a replay recorder, then build the diagram ``name``."""
+    if meshcat is not None:
+        MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
+    if recorder is not None:
+        recorder.add_to_builder(builder, scene_graph)
+    diagram = builder.Build()
+    diagram.set_name(name)
+    return diagram
