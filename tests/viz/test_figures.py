@@ -131,6 +131,7 @@ def _two_state_model():
     model.duration_means_ = np.array([20.0, 20.0])
     model.duration_stds_ = np.array([2.0, 2.0])
     model.occupancy_ = np.array([0.4, 0.6])
+    model.data_range_ = np.outer([-np.inf, np.inf], np.ones(7))  # k* left unclipped
     model.max_duration_ = 40
     model.log_likelihood_history_ = []
     return model
