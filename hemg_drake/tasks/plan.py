@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 
+from hemg_drake.teleop._validate import as_scalar, as_seed
+
 SEGMENT_KINDS = ("free", "forceful")
 _FIELDS = ("times", "points", "kinds", "pen_down", "effort")
 
@@ -244,11 +246,9 @@ class TaskPlan:
         -------
         TaskPlan
         """
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-        for name, value in (("timing_std", timing_std), ("effort_std", effort_std)):
-            if not (np.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be finite and >= 0, got {value}")
+        seed = as_seed(seed)
+        timing_std = as_scalar("timing_std", timing_std, strict=False)
+        effort_std = as_scalar("effort_std", effort_std, strict=False)
         path_std = np.broadcast_to(_field_array("path_std", path_std), (3,))
         if not np.all(np.isfinite(path_std) & (path_std >= 0)):
             raise ValueError(

@@ -134,9 +134,12 @@ def test_missing_field_and_bad_perturbation_are_named(plan):
         TaskPlan.from_dict({"times": BASE["times"], "points": BASE["points"]})
     with pytest.raises(ValueError, match="timing_std"):
         plan.perturbed(0, timing_std=-0.1)
+    with pytest.raises(ValueError, match="effort_std"):
+        plan.perturbed(0, effort_std=np.inf)
     with pytest.raises(ValueError, match="path_std"):
         plan.perturbed(0, path_std=[0.1, np.nan, 0.0])
-    with pytest.raises(ValueError, match="seed"):
-        plan.perturbed(-1)
+    for seed in (-1, 1.0, True):
+        with pytest.raises(ValueError, match="seed must be a non-negative integer"):
+            plan.perturbed(seed)
     with pytest.raises(ValueError, match="time"):
         plan.position(np.nan)
