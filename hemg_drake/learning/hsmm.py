@@ -612,7 +612,8 @@ class HSMM:
         for name in _FITTED:
             setattr(model, name, arrays[name].astype(float))
         model.max_duration_ = int(arrays["max_duration_"])
-        model.log_likelihood_history_ = arrays.get("log_likelihood_history_", []).tolist()
+        history = arrays.get("log_likelihood_history_", np.empty(0))  # optional: [] if absent
+        model.log_likelihood_history_ = history.tolist()
         model.n_iter_ = len(model.log_likelihood_history_)
         model.converged_ = None
         model._check_loaded(path)

@@ -193,6 +193,14 @@ def test_load_rejects_damaged_and_other_version_files(models, tmp_path):
     with pytest.raises(ValueError, match="data_range_ minimum > maximum"):
         HSMM.load(tmp_path / "range.npz")
 
+    # The EM history is optional: without it the model loads, with an empty history.
+    np.savez(tmp_path / "no_history.npz", **{
+        key: value for key, value in arrays.items() if key != "log_likelihood_history_"
+    })  # fmt: skip
+    bare = HSMM.load(tmp_path / "no_history.npz")
+    assert bare.log_likelihood_history_ == [] and bare.n_iter_ == 0
+    np.testing.assert_array_equal(bare.means_, model.means_)
+
     np.savez(tmp_path / "bad.npz", **{**arrays, "transmat_": arrays["transmat_"][:2]})
     with pytest.raises(ValueError, match="transmat_"):
         HSMM.load(tmp_path / "bad.npz")
