@@ -152,6 +152,11 @@ def _rmse(a, b):
     return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))))
 
 
+def _check_n_samples(n_samples):
+    if not isinstance(n_samples, (int, np.integer)) or n_samples < 2:
+        raise ValueError(f"n_samples must be an integer >= 2, got {n_samples!r}")
+
+
 def time_normalise(trajectory, n_samples):
     """Resample a trajectory to ``n_samples`` at equal fractions of its duration (linear).
 
@@ -165,8 +170,7 @@ def time_normalise(trajectory, n_samples):
     array, shape (n_samples, D)
     """
     trajectory = _as_trajectory("trajectory", trajectory)
-    if not isinstance(n_samples, (int, np.integer)) or n_samples < 2:
-        raise ValueError(f"n_samples must be an integer >= 2, got {n_samples!r}")
+    _check_n_samples(n_samples)
     old = np.linspace(0.0, 1.0, len(trajectory))
     new = np.linspace(0.0, 1.0, n_samples)
     return np.column_stack([np.interp(new, old, column) for column in trajectory.T])
@@ -243,12 +247,14 @@ def resample_by_arc_length(points, n_samples=50):
     Parameters
     ----------
     points : array, shape (T, D), T >= 2, not all equal.
+    n_samples : int >= 2
 
     Returns
     -------
     array, shape (n_samples, D)
     """
     points = _as_trajectory("points", points)
+    _check_n_samples(n_samples)
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
     if arc[-1] == 0:
         raise ValueError("a stroke of zero length cannot be resampled by arc length")

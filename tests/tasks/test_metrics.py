@@ -107,6 +107,8 @@ def test_stroke_errors_split_into_shape_and_placement():
         (lambda: metrics.time_normalise(np.zeros((5, 2)), 1), "n_samples"),
         (lambda: metrics.force_statistics(np.zeros((5, 2))), "3 columns"),
         (lambda: metrics.resample_by_arc_length(np.zeros((5, 2))), "zero length"),
+        (lambda: metrics.resample_by_arc_length(np.eye(2), 1), "n_samples"),
+        (lambda: metrics.stroke_errors(np.eye(2), [np.eye(2)], n_samples=0), "n_samples"),
         (lambda: metrics.stroke_errors(np.eye(2), []), "at least one"),
         (lambda: metrics.stroke_errors(np.eye(2), [np.eye(3)]), "columns"),
         (lambda: metrics.aligned_rmse(np.zeros((1, 7)), np.zeros((5, 7))), "T >= 2"),
