@@ -212,6 +212,23 @@ def _int8_problem(value):
     return None
 
 
+def _int8_array_problem(emg):
+    """What is wrong with the first value of ``emg`` (2-D) that is not an int8 integer, or None."""
+    if not np.issubdtype(emg.dtype, np.number) or np.issubdtype(emg.dtype, np.complexfloating):
+        return f"array {NPZ_KEY!r} has non-numeric dtype {emg.dtype}"
+    checks = (
+        (np.isnan(emg), "NaN"),
+        (~np.isfinite(emg), "an infinite value"),
+        (np.round(emg) != emg, "a non-integer value"),
+        ((emg < INT8_MIN) | (emg > INT8_MAX), f"a value outside {INT8_MIN}..{INT8_MAX}"),
+    )
+    for bad, what in checks:
+        if np.any(bad):
+            row, column = np.argwhere(bad)[0]
+            return f"row {row + 1}, column {column + 1}: {what} ({emg[row, column]})"
+    return None
+
+
 def _load_csv(path):
     rows = []
     with open(path, encoding="utf-8") as f:
@@ -250,20 +267,9 @@ def _load_npz(path):
             f"{path}: array {NPZ_KEY!r} must have shape (n_samples, {MYO_CHANNELS}), "
             f"got {emg.shape}"
         )
-    if not np.issubdtype(emg.dtype, np.number) or np.issubdtype(emg.dtype, np.complexfloating):
-        raise ValueError(f"{path}: array {NPZ_KEY!r} has non-numeric dtype {emg.dtype}")
-    checks = (
-        (np.isnan(emg), "NaN"),
-        (~np.isfinite(emg), "an infinite value"),
-        (np.round(emg) != emg, "a non-integer value"),
-        ((emg < INT8_MIN) | (emg > INT8_MAX), f"a value outside {INT8_MIN}..{INT8_MAX}"),
-    )
-    for bad, what in checks:
-        if np.any(bad):
-            row, column = np.argwhere(bad)[0]
-            raise ValueError(
-                f"{path}: row {row + 1}, column {column + 1}: {what} ({emg[row, column]})"
-            )
+    problem = _int8_array_problem(emg)
+    if problem:
+        raise ValueError(f"{path}: {problem}")
     return emg.astype(np.int64)
 
 
@@ -316,10 +322,9 @@ def save_emg_recording(path, emg):
         raise ValueError(
             f"emg must have shape (n_samples >= 1, {MYO_CHANNELS}), got {emg.shape}"
         )
-    if not np.issubdtype(emg.dtype, np.number) or np.any(~np.isfinite(emg)):
-        raise ValueError("emg must hold finite numbers")
-    if np.any(np.round(emg) != emg) or np.any((emg < INT8_MIN) | (emg > INT8_MAX)):
-        raise ValueError(f"emg must hold integers in {INT8_MIN}..{INT8_MAX}")
+    problem = _int8_array_problem(emg)
+    if problem:
+        raise ValueError(f"emg must hold finite integers in {INT8_MIN}..{INT8_MAX}: {problem}")
     emg = emg.astype(np.int64)
     path = Path(path)
     if path.suffix.lower() == ".npz":

@@ -195,9 +195,10 @@ def test_saved_recording_reads_back_exactly(tmp_path, suffix):
     [
         (np.zeros((4, 7)), "shape"),
         (np.zeros((0, 8)), "shape"),
-        (np.full((2, 8), np.nan), "finite"),
+        (np.full((2, 8), np.nan), "finite.*row 1, column 1: NaN"),
         (np.full((2, 8), 0.5), "integers"),
         (np.full((2, 8), 128), "integers in -128..127"),
+        (np.ones((2, 8), dtype=complex), "non-numeric dtype complex128"),
     ],
 )
 def test_save_recording_rejects_bad_samples(tmp_path, emg, message):
