@@ -218,6 +218,11 @@ def test_load_rejects_damaged_and_other_version_files(models, tmp_path):
         (dict(n_states=2, reg_covar=0.0), "reg_covar"),
         (dict(n_states=2, init="random"), "init"),
         (dict(n_states=2, n_iter=0), "n_iter"),
+        (dict(n_states=2, max_duration=2.5), "max_duration"),
+        (dict(n_states=2, min_duration_std=0.0), "min_duration_std"),
+        (dict(n_states=2, tol=-1.0), "tol"),
+        (dict(n_states=2, n_init=0), "n_init"),
+        (dict(n_states=2, n_position=0), "n_position"),
     ],
 )
 def test_bad_parameters_are_rejected(kwargs, message):
@@ -252,6 +257,8 @@ def test_model_and_data_of_different_dimension_are_rejected(models):
             method(wrong)
     with pytest.raises(ValueError, match="not fitted"):
         HSMM(2).log_likelihood(wrong)
+    with pytest.raises(ValueError, match="n_steps must be an integer >= 1"):
+        model.forward_variable(0, observe=False)
 
 
 def zig_zag(rng, counts=(50, 30, 40, 25)):
