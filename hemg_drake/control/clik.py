@@ -6,6 +6,8 @@ import numpy as np
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import LeafSystem
 
+from hemg_drake.teleop._validate import as_scalar, as_vector
+
 CLIK_METHODS = ("transpose", "dls")
 
 
@@ -86,22 +88,16 @@ class Clik(LeafSystem):
         LeafSystem.__init__(self)
         if method not in CLIK_METHODS:
             raise ValueError(f"Clik method must be one of {CLIK_METHODS}, got {method!r}")
-        for name, value in (("gain", gain), ("period", period)):
-            if not np.isfinite(value) or value <= 0:
-                raise ValueError(f"Clik {name} must be a positive number, got {value}")
-        if not np.isfinite(damping) or damping < 0:
-            raise ValueError(f"Clik damping must be >= 0, got {damping}")
+        self._gain = as_scalar("Clik gain", gain)
+        self._period = as_scalar("Clik period", period)
+        self._damping = as_scalar("Clik damping", damping, strict=False)
+        limit_margin = as_scalar("Clik limit_margin", limit_margin, strict=False)
+        self._p_EoE_E = np.zeros(3) if p_EoE_E is None else as_vector("Clik p_EoE_E", p_EoE_E, 3)
         self._plant = plant
         self._plant_context = plant.CreateDefaultContext()
         self._model = model_instance
         self._frame_E = frame_E
-        self._p_EoE_E = np.zeros(3) if p_EoE_E is None else np.asarray(p_EoE_E, float)
-        if self._p_EoE_E.shape != (3,) or not np.all(np.isfinite(self._p_EoE_E)):
-            raise ValueError(f"Clik p_EoE_E must be 3 finite numbers, got {p_EoE_E}")
-        self._gain = float(gain)
         self._method = method
-        self._damping = float(damping)
-        self._period = float(period)
 
         nq = plant.num_positions(model_instance)
         nv = plant.num_velocities(model_instance)

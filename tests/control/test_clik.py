@@ -116,6 +116,9 @@ def test_nan_target_holds_the_reference():
         ({"period": 0.0}, "period"),
         ({"damping": float("nan")}, "damping"),
         ({"p_EoE_E": [0.0, 0.0]}, "p_EoE_E"),
+        ({"p_EoE_E": [0.0, np.nan, 0.0]}, "p_EoE_E must be finite"),
+        ({"limit_margin": float("nan")}, "limit_margin"),
+        ({"limit_margin": -0.1}, "limit_margin"),
     ],
 )
 def test_bad_parameters_are_named(kwargs, message):
