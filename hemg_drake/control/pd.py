@@ -27,6 +27,7 @@ import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from hemg_drake.control.clik import velocity_columns
+from hemg_drake.teleop._validate import as_scalar
 
 # Per-joint stiffness per unit of K (N m/rad per unit gain), s0 s1 e0 e1 w0 w1 w2. At
 # Table I's K = 50 the shoulder holds 1000 N m/rad (1 cm at 1 m reach under 10 N m), the
@@ -124,11 +125,13 @@ class VariableGainPd(LeafSystem):
         LeafSystem.__init__(self)
         n = len(arm.joint_names)
         stiffness_scale = np.asarray(stiffness_scale, dtype=float)
-        if stiffness_scale.shape != (n,) or not np.all(stiffness_scale > 0):
-            raise ValueError(f"stiffness_scale must be {n} positive numbers, got {stiffness_scale}")
+        positive = np.isfinite(stiffness_scale) & (stiffness_scale > 0)
+        if stiffness_scale.shape != (n,) or not positive.all():
+            raise ValueError(
+                f"stiffness_scale must be {n} positive finite numbers, got {stiffness_scale}"
+            )
         _check_gain(gain, "gain")
-        if not (np.isfinite(damping_ratio) and damping_ratio > 0):
-            raise ValueError(f"damping_ratio must be positive, got {damping_ratio}")
+        damping_ratio = as_scalar("damping_ratio", damping_ratio)
         if not plant.is_finalized():
             raise ValueError("VariableGainPd needs a finalized plant")
         self._plant = plant
@@ -136,7 +139,7 @@ class VariableGainPd(LeafSystem):
         self._plant_context = plant.CreateDefaultContext()
         self._default_gain = float(gain)
         self._stiffness_scale = stiffness_scale
-        self._damping_ratio = float(damping_ratio)
+        self._damping_ratio = damping_ratio
         self._gravity_compensation = bool(gravity_compensation)
         self._effort_limit = np.asarray(arm.effort_limit, dtype=float)
         # The arm's joints among all the plant's velocities (M and g are full size).

@@ -12,6 +12,7 @@ from pydrake.systems.primitives import TrajectorySource
 
 from hemg_drake.control.clik import Clik
 from hemg_drake.control.pd import VariableGainPd
+from hemg_drake.teleop._validate import as_scalar
 
 
 def add_plan_follower(builder, *, plant, arm, plan, gain, sample_period=0.005):
@@ -35,8 +36,7 @@ def add_plan_follower(builder, *, plant, arm, plan, gain, sample_period=0.005):
     -------
     (Clik, VariableGainPd), named ``clik`` and ``pd`` in the builder.
     """
-    if not (np.isfinite(sample_period) and sample_period > 0):
-        raise ValueError(f"sample_period must be positive, got {sample_period}")
+    sample_period = as_scalar("sample_period", sample_period)
     count = int(np.ceil((plan.end_time - plan.start_time) / sample_period)) + 1
     times = np.linspace(plan.start_time, plan.end_time, count)
     trajectory = PiecewisePolynomial.FirstOrderHold(times, plan.position(times).T)

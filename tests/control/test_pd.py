@@ -160,7 +160,9 @@ def test_torque_saturates_at_effort_limits():
         ({"gain": 0.0}, "gain"),
         ({"gain": float("nan")}, "gain"),
         ({"stiffness_scale": np.ones(6)}, "stiffness_scale"),
+        ({"stiffness_scale": [1.0] * 6 + [np.inf]}, "stiffness_scale"),
         ({"damping_ratio": -1.0}, "damping_ratio"),
+        ({"damping_ratio": float("nan")}, "damping_ratio"),
     ],
 )
 def test_bad_parameters(kwargs, message):
