@@ -163,7 +163,12 @@ class Gmr:
         if weights is None:
             weights = self.responsibilities(queries)
         shape = (len(queries), len(self.priors))
-        weights = np.broadcast_to(np.asarray(weights, dtype=float), shape)
+        try:
+            weights = np.broadcast_to(np.asarray(weights, dtype=float), shape)
+        except ValueError:
+            raise ValueError(
+                f"weights must have shape ({shape[1]},) or {shape}, got {np.shape(weights)}"
+            ) from None
         means = self._component_means(queries)  # (T, N, O)
         mean = np.einsum("tn,tno->to", weights, means)
         spread = means - mean[:, None, :]

@@ -97,3 +97,5 @@ def test_bad_input_is_rejected():
         model.predict(np.zeros(2))
     with pytest.raises(ValueError, match="NaN"):
         model.predict(np.array([np.nan]))
+    with pytest.raises(ValueError, match=r"weights must have shape \(2,\) or \(1, 2\)"):
+        model.predict(np.zeros(1), weights=np.ones(3) / 3)
