@@ -1,9 +1,10 @@
 """`hemg-drake emg-figure`: Fig. 6 from a recording or the synthetic source."""
 
 import numpy as np
+import pytest
 
 from hemg_drake.cli import main
-from hemg_drake.emg.sources import synthesize_emg
+from hemg_drake.emg.sources import save_emg_recording, synthesize_emg
 from hemg_drake.fileio import write_text_atomic
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -18,8 +19,7 @@ def test_synthetic_figure(tmp_path, capsys):
 
 def test_figure_from_csv_recording(tmp_path):
     recording = tmp_path / "rec.csv"
-    rows = synthesize_emg(np.full(300, 0.5), seed=1)
-    write_text_atomic(recording, "".join(",".join(map(str, row)) + "\n" for row in rows))
+    save_emg_recording(recording, synthesize_emg(np.full(300, 0.5), seed=1))
     out = tmp_path / "fig.png"
     assert main(["emg-figure", str(recording), "--per-channel", "-o", str(out)]) == 0
     assert out.read_bytes()[:8] == PNG
@@ -35,6 +35,17 @@ def test_bad_recording_is_a_one_line_error(tmp_path, capsys):
     assert not out.exists()
 
 
-def test_bad_duration_is_a_one_line_error(tmp_path, capsys):
-    assert main(["emg-figure", "--duration", "0", "-o", str(tmp_path / "f.png")]) == 2
-    assert "--duration must be at least one sample" in capsys.readouterr().err
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (["--duration", "0"], "--duration must be at least one sample"),
+        (["--windows", "20", "0"], "window must be a positive integer, got 0"),
+        (["--seed", "-1"], "seed must be a non-negative integer, got -1"),
+    ],
+)
+def test_bad_option_is_a_one_line_error(tmp_path, capsys, options, message):
+    out = tmp_path / "f.png"
+    assert main(["emg-figure", *options, "-o", str(out)]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and message in error
+    assert not out.exists()
