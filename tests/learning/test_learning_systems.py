@@ -124,6 +124,10 @@ def test_bad_parameters_and_inputs_are_rejected(path_task):
         TrackingForce(kp=-1.0, kd=1.0)
     with pytest.raises(ValueError, match=r"kd must be a scalar or have shape \(3,\)"):
         TrackingForce(kp=1.0, kd=[1.0, 2.0])
+    with pytest.raises(ValueError, match="size must be an integer >= 1"):
+        TrackingForce(kp=1.0, kd=1.0, size=0)
+    with pytest.raises(ValueError, match="dt must be a finite number > 0"):
+        HsmmGmrReproducer(model=model, start=start, dt=np.inf)
     with pytest.raises(ValueError, match="start must have shape"):
         HsmmGmrReproducer(model=model, start=start[:2])
     with pytest.raises(ValueError, match="weighting"):
