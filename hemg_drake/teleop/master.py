@@ -116,18 +116,15 @@ class MasterDynamics:
                 ],
             ]
         )
-        # One row per mode (0 free, 1 beyond a wall): a00 a01 a10 a11 b0 b1 of the step.
-        self._coefficients = np.array(
-            [
-                np.concatenate([A.ravel(), B_d.ravel()])
-                for A, B_d in (
-                    _zero_order_hold(free, B, self.period),
-                    _zero_order_hold(wall, B, self.period),
-                )
-            ]
-        )
-        # The same as plain floats, indexed by "beyond a wall" (False 0, True 1).
-        self._mode_coefficients = self._coefficients.tolist()
+        # One row of plain floats per mode, indexed by "beyond a wall" (False 0, True 1):
+        # a00 a01 a10 a11 b0 b1 of the step.
+        self._mode_coefficients = [
+            np.concatenate([A.ravel(), B_d.ravel()]).tolist()
+            for A, B_d in (
+                _zero_order_hold(free, B, self.period),
+                _zero_order_hold(wall, B, self.period),
+            )
+        ]
         self._free_coefficients = self._mode_coefficients[0]
         self._half_size = (0.5 * self.workspace_size).tolist()
 
