@@ -37,7 +37,6 @@ from hemg_drake.fileio import write_text_atomic
 TASKS = ("cotter_pin", "drawing")
 SCENARIOS_DIR = Path(__file__).resolve().parents[1] / "scenarios"
 DATASET, MODEL = "dataset.npz", "model.npz"
-REG_COVAR = 0.5
 # What the HSMM learns its positions from, and how its states start, per task (measured,
 # docs/reproduction.md). Drawing: the slave's reference (a pen on the sheet cannot show the
 # press in its measured position) and states that start where its path turns (the
@@ -48,7 +47,7 @@ REG_COVAR = 0.5
 # The drawing's covariance floor is lower than the pin's: its polyline states are narrow
 # straight pieces, and 0.2 drew its strokes in shape best (0.1: 4.3 mm zig-zag, 0.5: 5.3 mm).
 LEARNING = {
-    "cotter_pin": {"positions": "tool", "init": "time", "reg_covar": REG_COVAR},
+    "cotter_pin": {"positions": "tool", "init": "time", "reg_covar": 0.5},
     "drawing": {"positions": "reference", "init": "polyline", "reg_covar": 0.2},
 }
 DEFAULT_WEIGHTING = "temporal"
