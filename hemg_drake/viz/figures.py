@@ -313,7 +313,7 @@ def plot_gmr_field(model, demos=(), *, plane=(0, 2), grid=15):
     if policy.n_position != 3:
         raise ValueError(f"plot_gmr_field needs a model of 3-D positions, got {policy.n_position}")
     a, b = plane
-    if sorted({a, b}) != sorted((a, b)) or not {a, b} <= {0, 1, 2}:
+    if a == b or not {a, b} <= {0, 1, 2}:
         raise ValueError(f"plane must name two different coordinates among 0, 1, 2, got {plane!r}")
     if isinstance(grid, bool) or not isinstance(grid, int) or grid < 2:
         raise ValueError(f"grid must be an integer >= 2, got {grid!r}")

@@ -1,5 +1,7 @@
 """Figures: each plot shows the data it is given, and saves as a real image."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
@@ -10,11 +12,14 @@ from hemg_drake.learning.demos import Demonstration
 from hemg_drake.learning.hsmm import HSMM
 from hemg_drake.learning.reproduce import Reproduction
 from hemg_drake.viz.figures import (
+    plot_drawing_reproduction,
     plot_emg_envelopes,
     plot_gain_law,
     plot_gmr_field,
+    plot_pin_reproduction,
     plot_reproductions,
     plot_state_activations,
+    plot_strokes,
     plot_time_series,
     save_figure,
 )
@@ -192,3 +197,53 @@ def test_learning_plots_bad_input():
         plot_reproductions([_demo(0)], {})
     with pytest.raises(ValueError, match=r"h \(T, N\)"):
         plot_state_activations(np.zeros(3), np.zeros((4, 2)))
+
+
+def _log(n=30):
+    """A reproduction log: the tool point rising along z at 0.2 m/s, k* and F_tr ramps."""
+    time = np.arange(n) * 0.01
+    return SimpleNamespace(
+        time=time, p_WE=np.outer(time, [0.0, 0.0, 0.2]) + [0.6, -0.8, 0.1],
+        v_WE=np.tile([0.0, 0.0, 0.2], (n, 1)), k_star=80 + 10 * time,
+        F_tr=np.outer(time, [1.0, 2.0, 3.0]),
+    )
+
+
+def test_pin_reproduction_shows_demos_log_and_tracking_force():
+    demos, log = [_demo(0), _demo(1)], _log()
+    grid = np.reshape(plot_pin_reproduction(demos, log).axes, (3, 3))
+    *demo_lines, reproduced = grid[0, 2].get_lines()
+    np.testing.assert_array_equal(demo_lines[1].get_ydata(), demos[1].p_WE[:, 2])
+    np.testing.assert_array_equal(reproduced.get_ydata(), log.p_WE[:, 2])
+    assert reproduced.get_label() == "reproduction"
+    np.testing.assert_array_equal(grid[1, 2].get_lines()[-1].get_ydata(), log.v_WE[:, 2])
+    np.testing.assert_array_equal(grid[2, 1].get_lines()[0].get_ydata(), log.F_tr[:, 1])
+
+
+def test_drawing_reproduction_shows_positions_and_stiffness():
+    demos, log = [_demo(0)], _log()
+    axes = plot_drawing_reproduction(demos, log).axes
+    demo_line, reproduced = axes[1].get_lines()
+    np.testing.assert_array_equal(demo_line.get_ydata(), demos[0].p_WE[:, 1])
+    np.testing.assert_array_equal(reproduced.get_ydata(), log.p_WE[:, 1])
+    demo_gain, k_star = axes[3].get_lines()
+    np.testing.assert_array_equal(demo_gain.get_ydata(), demos[0].gain)
+    np.testing.assert_array_equal(k_star.get_ydata(), log.k_star)
+
+
+def test_strokes_are_drawn_from_above_over_the_demonstrations():
+    line = np.array([[0.0, 0.1, 0.05], [0.1, 0.1, 0.05], [0.2, 0.15, 0.05]])
+    figure = plot_strokes([line, line[:, :2] + 0.01], demonstrated=[line])
+    axes = figure.axes[0]
+    demonstrated, first, second = axes.get_lines()
+    assert [each.get_label() for each in (demonstrated, first, second)] == [
+        "demonstrations", "stroke 1", "stroke 2"]
+    np.testing.assert_array_equal(first.get_xydata(), line[:, :2])
+    np.testing.assert_array_equal(second.get_xydata(), line[:, :2] + 0.01)
+    assert axes.get_aspect() == 1.0  # equal axes: the shapes are not distorted
+
+
+@pytest.mark.parametrize("stroke", [np.zeros(3), np.zeros((4, 1))])
+def test_strokes_bad_shape(stroke):
+    with pytest.raises(ValueError, match=r"a stroke must have shape \(k, 2 or 3\)"):
+        plot_strokes([stroke])
