@@ -106,12 +106,10 @@ class Clik(LeafSystem):
         self._n = nq
         # Columns of the full-plant Jacobian that belong to the arm.
         self._v_columns = velocity_columns(plant, model_instance)
-        lower = plant.GetPositionLowerLimits()
-        upper = plant.GetPositionUpperLimits()
-        all_positions = np.arange(plant.num_positions())
-        q_columns = plant.GetPositionsFromArray(model_instance, all_positions).astype(int)
-        self._q_lower = lower[q_columns] + limit_margin
-        self._q_upper = upper[q_columns] - limit_margin
+        lower = plant.GetPositionsFromArray(model_instance, plant.GetPositionLowerLimits())
+        upper = plant.GetPositionsFromArray(model_instance, plant.GetPositionUpperLimits())
+        self._q_lower = lower + limit_margin
+        self._q_upper = upper - limit_margin
         self._v_max = plant.GetVelocityUpperLimits()[self._v_columns]
         self._zeros = np.zeros(self._n)
 
