@@ -23,7 +23,6 @@ from pathlib import Path
 import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import ConstantVectorSource
 
 from hemg_drake.diagrams.slave import add_logger, add_slave, build_with_viewers
 from hemg_drake.emg.calibration import EmgCalibration
@@ -226,11 +225,7 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
     connect(variable_gain.get_gain_output_port(), gain_hold.u_input)
     connect(gain_hold.y_output, slave.gain_input)
 
-    f_WE = (
-        slave.f_WE_output
-        if task_scene is not None
-        else add("no_contact", ConstantVectorSource(np.zeros(3))).get_output_port()
-    )
+    f_WE = slave.f_WE_output
     if scenario.feedback.mode == "force":
         connect(f_WE, force_feedback.GetInputPort("f_WE"))
     else:

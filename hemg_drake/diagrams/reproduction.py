@@ -290,11 +290,7 @@ def build_reproduction_diagram(
     connect(goal_source.get_output_port(), tracking.GetInputPort("x_goal"))
     builder.ExportOutput(tracking.GetOutputPort("F_tr"), "tracking_force")
 
-    f_WE = (
-        slave.f_WE_output
-        if task_scene is not None
-        else add("no_contact", ConstantVectorSource(np.zeros(3))).get_output_port()
-    )
+    f_WE = slave.f_WE_output
     sources = {
         "x_star": reproducer.GetOutputPort("x_star"),
         "xdot_star": reproducer.GetOutputPort("xdot_star"),

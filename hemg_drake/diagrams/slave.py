@@ -13,7 +13,7 @@ from pydrake.multibody.plant import AddMultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.geometry import MeshcatVisualizer
 from pydrake.systems.framework import LeafSystem
-from pydrake.systems.primitives import LogVectorOutput, Multiplexer
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, Multiplexer
 
 from hemg_drake.control.clik import Clik, velocity_columns
 from hemg_drake.control.pd import VariableGainPd
@@ -122,8 +122,8 @@ class Slave:
     clik, pd, tool_point : the subsystems ``clik``, ``pd``, ``tool_point``.
     p_WE_desired_input : CLIK's input port, left for the caller to drive.
     gain_input : the PD's gain input port, left for the caller to drive.
-    f_WE_output : output port of the scene's force on the tool point (N, W); None in free
-        space.
+    f_WE_output : output port of the scene's force on the tool point (N, W); in free
+        space that of a zero source, the subsystem ``no_contact``.
     """
 
     plant: object
@@ -183,8 +183,12 @@ def add_slave(builder, scenario, *, start, positions=None, scene=True):
     builder.Connect(clik.GetOutputPort("q_desired"), pd.q_desired_input)
     builder.Connect(clik.GetOutputPort("v_desired"), pd.v_desired_input)
     builder.Connect(pd.torque_output, plant.get_actuation_input_port(arm.model_instance))
-    # Wires the scene's own systems (the pin's detent) as well as its force sensor.
-    f_WE = task_scene.force_output_port(builder) if task_scene is not None else None
+    if task_scene is not None:
+        # Wires the scene's own systems (the pin's detent) as well as its force sensor.
+        f_WE = task_scene.force_output_port(builder)
+    else:
+        no_contact = builder.AddNamedSystem("no_contact", ConstantVectorSource(np.zeros(3)))
+        f_WE = no_contact.get_output_port()
     return Slave(
         plant=plant,
         scene_graph=scene_graph,
