@@ -57,6 +57,30 @@ def add_emg_gain_chain(
     return rms, gain
 
 
+def held_samples(values):
+    """A source holding ``values[k]`` around each 200 Hz sample instant t_k = k / 200 s.
+
+    Its breaks sit a quarter period before each sample instant, away from the sources'
+    updates (t_k) and the envelope's (t_k + T/2), so every system of the chain reads
+    ``values[k]`` for sample k whatever the rounding of k * T.
+
+    Parameters
+    ----------
+    values : array-like, shape (n_samples,) or (n_samples, size)
+
+    Returns
+    -------
+    TrajectorySource
+        Its output has size 1, or ``size``; after the last sample it holds the last row.
+    """
+    values = np.asarray(values, dtype=float)
+    if values.ndim == 1:
+        values = values[:, None]
+    breaks = np.concatenate([[0.0], (np.arange(1, len(values) + 1) - 0.25) * MYO_PERIOD])
+    knots = np.vstack([values, values[-1:]]).T
+    return TrajectorySource(PiecewisePolynomial.ZeroOrderHold(breaks, knots))
+
+
 def run_emg_chain(
     source,
     n_samples,
@@ -107,11 +131,7 @@ def run_emg_chain(
             raise ValueError(
                 f"activation must be {n_samples} numbers without NaN, got shape {values.shape}"
             )
-        # Breaks a quarter period before each sample instant, away from the sources' updates
-        # (t_k) and the envelope's (t_k + T/2), so sample k reads values[k] whatever rounding.
-        breaks = np.concatenate([[0.0], (np.arange(1, n_samples + 1) - 0.25) * MYO_PERIOD])
-        knots = np.append(values, values[-1])[None, :]
-        held = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(breaks, knots)))
+        held = builder.AddSystem(held_samples(values))
         builder.Connect(held.get_output_port(), source.get_activation_input_port())
     rms, gain = add_emg_gain_chain(
         builder,
