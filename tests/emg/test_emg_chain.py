@@ -80,6 +80,14 @@ def test_chain_takes_window_and_form_from_calibration(builder):
     rms, _ = add_emg_gain_chain(builder, source.get_emg_output_port(), calibration=calibration)
     assert isinstance(rms, RmsEnvelope)
     assert (rms.window, rms.per_channel) == (7, True)
+    # And the chain computes that envelope: per-channel RMS over 7 samples.
+    profile = np.linspace(0.0, 1.0, 50)
+    result = run_emg_chain(
+        SyntheticEmgSource(seed=3), len(profile), activation=profile, calibration=calibration
+    )
+    expected = moving_rms(synthesize_emg(profile, 3), 7, per_channel=True)
+    np.testing.assert_allclose(result["envelope"], expected, atol=1e-12)
+    assert not np.allclose(expected, moving_rms(synthesize_emg(profile, 3), 20))
 
 
 def test_run_emg_chain_matches_the_numpy_twins_sample_for_sample(calibration):
