@@ -32,6 +32,12 @@ def test_strokes_are_the_runs_of_contact():
     assert ink_strokes(times, p_WP, np.zeros(len(times), bool)) == []
 
 
+@pytest.mark.parametrize("min_points", [0, -2])
+def test_bad_min_points_is_refused(min_points):
+    with pytest.raises(ValueError, match="min_points must be >= 1"):
+        ink_strokes(*_trace("0110"), min_points=min_points)
+
+
 def test_in_contact_thresholds_the_force_norm():
     f = np.array([[0, 0, 0], [0, 0, CONTACT_THRESHOLD * 1.01], [0.03, 0.03, 0.03], [0, 0, 0.04]])
     np.testing.assert_array_equal(in_contact(f), [False, True, True, False])
