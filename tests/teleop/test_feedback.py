@@ -114,3 +114,8 @@ def test_bad_parameters_are_named(mapping, kwargs, message):
 def test_nan_force_is_rejected(mapping):
     with pytest.raises(ValueError, match="f_WE"):
         motor_force(ForceFeedback(mapping=mapping), f_WE=[0.0, np.nan, 0.0])
+    system = ForceFeedback(mapping=mapping, mode="position_error")
+    finite = dict(p_WE=[0.7, -0.2, 0.3], v_WE=np.zeros(3), p_MS=np.zeros(3), v_MS=np.zeros(3))
+    for name in finite:
+        with pytest.raises(ValueError, match=f"{name} must be finite"):
+            motor_force(system, **{**finite, name: [0.0, 0.0, np.nan]})

@@ -125,3 +125,5 @@ def test_bad_parameters_are_named(parameters, message):
 def test_nan_input_is_rejected():
     with pytest.raises(ValueError, match="hand_force"):
         run_master([np.nan, 0.0, 0.0], duration=0.01)
+    with pytest.raises(ValueError, match="motor_force must be finite"):
+        run_master([0.0, 0.0, 0.0], motor_force=[0.0, np.inf, 0.0], duration=0.01)

@@ -155,3 +155,14 @@ def test_bad_parameters_are_named(kwargs, message):
 def test_nan_feedback_force_is_rejected():
     with pytest.raises(ValueError, match="feedback_force"):
         run_operator(feedback_force=[np.nan, 0.0, 0.0], duration=0.01)
+
+
+@pytest.mark.parametrize("name", ["p_MS", "v_MS"])
+def test_nan_stylus_input_is_rejected(name):
+    system = SimulatedOperator(plan=PLAN, mapping=MAPPING)
+    context = system.CreateDefaultContext()
+    for port in ("p_MS", "v_MS", "feedback_force"):
+        system.GetInputPort(port).FixValue(context, np.zeros(3))
+    system.GetInputPort(name).FixValue(context, [0.0, np.nan, 0.0])
+    with pytest.raises(ValueError, match=f"{name} must be finite"):
+        system.GetOutputPort("hand_force").Eval(context)
