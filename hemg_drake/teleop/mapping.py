@@ -119,10 +119,14 @@ class WorkspaceMap(LeafSystem):
         LeafSystem.__init__(self)
         if not isinstance(mapping, WorkspaceMapping):
             raise ValueError(f"mapping must be a WorkspaceMapping, got {type(mapping).__name__}")
-        if int(delay_steps) != delay_steps or delay_steps < 0:
-            raise ValueError(f"delay_steps must be a non-negative integer, got {delay_steps}")
+        try:
+            steps = int(delay_steps)
+        except (TypeError, ValueError, OverflowError):  # None, "two", NaN, inf
+            steps = -1
+        if steps != delay_steps or steps < 0:
+            raise ValueError(f"delay_steps must be a non-negative integer, got {delay_steps!r}")
         self.mapping = mapping
-        self.delay_steps = int(delay_steps)
+        self.delay_steps = steps
         self._p_MS_input = self.DeclareVectorInputPort("p_MS", 3)
         self._v_MS_input = self.DeclareVectorInputPort("v_MS", 3)
         if self.delay_steps == 0:

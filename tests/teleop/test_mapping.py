@@ -145,7 +145,18 @@ def test_bad_mapping_is_named(kwargs, message):
         WorkspaceMapping(**kwargs)
 
 
-@pytest.mark.parametrize("delay_steps", [-1, 1.5])
+@pytest.mark.parametrize("delay_steps", [-1, 1.5, float("nan"), float("inf"), "two", None])
 def test_bad_delay_is_named(delay_steps):
-    with pytest.raises(ValueError, match="delay_steps"):
+    with pytest.raises(ValueError, match="delay_steps must be a non-negative integer"):
         WorkspaceMap(mapping=WorkspaceMapping(), delay_steps=delay_steps)
+
+
+@pytest.mark.parametrize("name", ["p_MS", "v_MS"])
+def test_nan_input_to_the_delay_is_rejected(name):
+    system = WorkspaceMap(mapping=WorkspaceMapping(), delay_steps=2)
+    context = system.CreateDefaultContext()
+    system.GetInputPort("p_MS").FixValue(context, np.zeros(3))
+    system.GetInputPort("v_MS").FixValue(context, np.zeros(3))
+    system.GetInputPort(name).FixValue(context, [np.nan, 0.0, 0.0])
+    with pytest.raises(ValueError, match=f"{name} must be finite"):
+        system.EvalUniquePeriodicDiscreteUpdate(context)
