@@ -24,7 +24,7 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
-from hemg_drake.diagrams.slave import add_logger, add_slave, build_with_viewers
+from hemg_drake.diagrams.slave import add_logger, add_slave, build_with_viewers, split_log
 from hemg_drake.emg.calibration import EmgCalibration
 from hemg_drake.emg.chain import add_emg_gain_chain
 from hemg_drake.emg.sources import MYO_RATE, SyntheticEmgSource, synthesize_emg
@@ -256,13 +256,8 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
 
 def demonstration_from_log(log, seed):
     """The :class:`Demonstration` held by the logger's log (a ``VectorLog``)."""
-    data = log.data()
-    fields, row = {}, 0
-    for name in LOGGED_FIELDS:
-        width = FIELD_WIDTHS[name]
-        block = data[row : row + width].T
-        fields[name] = block[:, 0] if width == 1 else block
-        row += width
+    blocks = split_log(log, {name: FIELD_WIDTHS[name] for name in LOGGED_FIELDS})
+    fields = {name: block[:, 0] if block.shape[1] == 1 else block for name, block in blocks.items()}
     return Demonstration(seed=seed, time=log.sample_times(), **fields)
 
 

@@ -44,7 +44,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, Saturation
 
-from hemg_drake.diagrams.slave import add_logger, add_slave, build_with_viewers
+from hemg_drake.diagrams.slave import add_logger, add_slave, build_with_viewers, split_log
 from hemg_drake.fileio import save_npz_atomic
 from hemg_drake.learning.systems import HsmmGmrReproducer, TrackingForce
 from hemg_drake.robots.baxter import FLOOR_Z
@@ -127,11 +127,8 @@ class ReproductionDiagram:
     def log(self, context):
         """The :class:`ReproductionLog` recorded so far in the diagram's ``context``."""
         log = self.logger.FindLog(context)
-        data, fields, row = log.data(), {}, 0
-        for name, width in _log_widths(self.n_states).items():
-            block = data[row : row + width].T
-            fields[name] = block[:, 0] if name == "k_star" else block
-            row += width
+        fields = split_log(log, _log_widths(self.n_states))
+        fields["k_star"] = fields["k_star"][:, 0]
         return ReproductionLog(time=log.sample_times(), **fields)
 
 

@@ -217,6 +217,19 @@ def add_logger(builder, sources, period):
     return logger
 
 
+def split_log(log, widths):
+    """The columns of a ``VectorLog`` written by :func:`add_logger`, split by source.
+
+    ``widths`` maps each source's name to its size, in the logger's order; returns name ->
+    array of shape (T, size).
+    """
+    data, fields, row = log.data(), {}, 0
+    for name, width in widths.items():
+        fields[name] = data[row : row + width].T
+        row += width
+    return fields
+
+
 def build_with_viewers(builder, scene_graph, name, *, meshcat=None, recorder=None):
     """Add a live Meshcat view and/or a replay recorder, then build the diagram ``name``."""
     if meshcat is not None:
