@@ -2,8 +2,8 @@
 
 Diagram: two ``TrajectorySource`` (q_d(t) and its derivative) -> ``VariableGainPd`` (fixed
 K, gravity compensation) -> the arm's ``MultibodyPlant`` (1 ms step), whose state feeds back
-to the PD; a ``ReplayRecorder`` records the scene. ``hemg-drake demo`` calls
-:func:`run_arm_demo`.
+to the PD; a ``ReplayRecorder`` records the scene. ``benchmarks/bench_arm.py`` times it;
+``hemg-drake demo`` is the full pipeline (:mod:`hemg_drake.pipeline`), not this tour.
 """
 
 from pathlib import Path
