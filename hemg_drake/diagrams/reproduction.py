@@ -48,6 +48,8 @@ from hemg_drake.diagrams.slave import add_logger, add_slave, build_with_viewers,
 from hemg_drake.fileio import save_npz_atomic
 from hemg_drake.learning.systems import HsmmGmrReproducer, TrackingForce
 from hemg_drake.robots.baxter import FLOOR_Z
+from hemg_drake.viz.ink import add_ink_to_recording, in_contact
+from hemg_drake.viz.recording import ReplayRecorder
 
 # Table I's K_pm = K_dm = 50, for eq. 23's K_ptr (N/m) and K_dtr (N s/m).
 TRACKING_GAINS = (50.0, 50.0)
@@ -357,11 +359,7 @@ def run_reproduction(
     duration = scenario.duration if duration is None else float(duration)
     if not (np.isfinite(duration) and duration > 0):
         raise ValueError(f"duration must be a positive number of seconds, got {duration}")
-    recorder = None
-    if replay_path is not None:
-        from hemg_drake.viz.recording import ReplayRecorder
-
-        recorder = ReplayRecorder(floor_z=FLOOR_Z)
+    recorder = None if replay_path is None else ReplayRecorder(floor_z=FLOOR_Z)
     built = build_reproduction_diagram(
         scenario,
         model,
@@ -382,19 +380,16 @@ def run_reproduction(
     log = built.log(context)
     if recorder is not None:
         if scene and scenario.task == "drawing":
-            from hemg_drake.viz.ink import add_ink_to_recording, in_contact
-
             # Just above the sheet: the tip's own heights are inside the compliant paper.
             height = built.scene.paper_height + 5e-4
             touching = in_contact(log.f_WE)
             add_ink_to_recording(recorder.meshcat, log.time, log.p_WE, touching, height=height)
         recorder.stop_and_export(replay_path)
-    result = ReproductionResult(log=log)
-    if scene and scenario.task == "cotter_pin":
-        plant_context = built.plant.GetMyContextFromRoot(context)
-        result = ReproductionResult(
-            log=log,
-            pin_displacement=built.scene.pin_displacement(plant_context),
-            pin_out=bool(built.scene.pin_out(plant_context)),
-        )
-    return result
+    if not (scene and scenario.task == "cotter_pin"):
+        return ReproductionResult(log=log)
+    plant_context = built.plant.GetMyContextFromRoot(context)
+    return ReproductionResult(
+        log=log,
+        pin_displacement=built.scene.pin_displacement(plant_context),
+        pin_out=bool(built.scene.pin_out(plant_context)),
+    )
