@@ -32,8 +32,7 @@ from pydrake.systems.primitives import ConstantVectorSource
 from hemg_drake.control.clik import velocity_columns
 from hemg_drake.diagrams.demonstration import build_demonstration_diagram
 from hemg_drake.diagrams.slave import SCENE_BUILDERS, solve_arm_positions
-from hemg_drake.robots.baxter import add_baxter_arm
-from hemg_drake.robots.baxter import FLOOR_Z
+from hemg_drake.robots.baxter import FLOOR_Z, add_baxter_arm
 from hemg_drake.scenario import load_scenario
 from hemg_drake.viz.recording import ReplayRecorder
 
@@ -92,12 +91,12 @@ def profile_by_system(scenario):
     simulator.Initialize()
     profile = cProfile.Profile()
     profile.runcall(simulator.AdvanceTo, WINDOW)
+    stats = pstats.Stats(profile).stats
     shares = {}
-    for (filename, _, name), row in pstats.Stats(profile).stats.items():
+    for (filename, _, name), row in stats.items():
         if name.startswith(("_calc", "_update")) and "hemg_drake" in filename:
             module = Path(filename).stem
             shares[f"{module}.{name}"] = row[3] / WINDOW  # cumulative time
-    stats = pstats.Stats(profile).stats
     return shares, sum(row[2] for row in stats.values()) / WINDOW
 
 
