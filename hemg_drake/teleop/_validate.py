@@ -25,7 +25,7 @@ def as_scalar(name, value, *, minimum=0.0, strict=True):
 
 
 def as_seed(seed):
-    """Return ``seed`` as a non-negative int (numpy integers too, not bools), or raise ValueError."""
+    """``seed`` as a non-negative int (numpy integers too, not bools), or raise ValueError."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     return int(seed)
