@@ -6,7 +6,7 @@ import numpy as np
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import LeafSystem
 
-from hemg_drake.teleop._validate import as_scalar, as_vector
+from hemg_drake._validate import as_scalar, as_vector
 
 CLIK_METHODS = ("transpose", "dls")
 

@@ -27,7 +27,7 @@ import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from hemg_drake.control.clik import velocity_columns
-from hemg_drake.teleop._validate import as_scalar
+from hemg_drake._validate import as_scalar
 
 # Per-joint stiffness per unit of K (N m/rad per unit gain), s0 s1 e0 e1 w0 w1 w2. At
 # Table I's K = 50 the shoulder holds 1000 N m/rad (1 cm at 1 m reach under 10 N m), the

@@ -8,7 +8,8 @@ first sample rather than being undefined.
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
-from hemg_drake.emg.sources import MYO_CHANNELS, MYO_PERIOD, _check_period
+from hemg_drake._validate import as_scalar
+from hemg_drake.emg.sources import MYO_CHANNELS, MYO_PERIOD
 
 
 def _check_window(window):
@@ -122,7 +123,7 @@ class RmsEnvelope(LeafSystem):
         self._window = _check_window(window)
         self._per_channel = bool(per_channel)
         self._columns = MYO_CHANNELS if per_channel else 1
-        period = _check_period(period)
+        period = as_scalar("period", period)
         self._emg_input = self.DeclareVectorInputPort("emg", MYO_CHANNELS)
         # Layout: ring of squares (window x columns, row-major), running sum
         # (columns), index of the oldest row.

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
+from hemg_drake._validate import as_scalar, as_seed
 from hemg_drake.fileio import load_npz, save_npz_atomic, write_text_atomic
 
 MYO_CHANNELS = 8
@@ -29,23 +30,11 @@ DEFAULT_REST_STD = 2.0
 NPZ_KEY = "emg"
 
 
-def _check_seed(seed):
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    return int(seed)
-
-
-def _check_period(period):
-    if isinstance(period, (int, float, np.number)) and np.isfinite(period) and period > 0:
-        return float(period)
-    raise ValueError(f"period must be a positive number of seconds, got {period!r}")
-
-
 class _NoiseModel:
     """The synthetic source's law, shared by the system and its numpy twin."""
 
     def __init__(self, seed, channel_gains, rest_std, exponent):
-        self.seed = _check_seed(seed)
+        self.seed = as_seed(seed)
         self.gains = np.asarray(channel_gains, dtype=float)
         if self.gains.shape != (MYO_CHANNELS,) or not np.all(
             np.isfinite(self.gains) & (self.gains >= 0)
@@ -129,7 +118,7 @@ class _SampledSource(LeafSystem):
         self._emg_state = self.DeclareDiscreteState(MYO_CHANNELS)
         self._count_state = self.DeclareDiscreteState(1)
         self.DeclarePeriodicDiscreteUpdateEvent(
-            period_sec=_check_period(period), offset_sec=0.0, update=self._update_sample
+            period_sec=as_scalar("period", period), offset_sec=0.0, update=self._update_sample
         )
         self._emg_output = self.DeclareStateOutputPort("emg", self._emg_state)
 

@@ -45,7 +45,7 @@ from pydrake.systems.framework import LeafSystem
 from hemg_drake.robots.baxter import MODELS_DIR, make_parser
 from hemg_drake.tasks.plan import TaskPlan
 from hemg_drake.tasks.sensors import BushingForceSensor
-from hemg_drake.teleop._validate import as_scalar, as_vector
+from hemg_drake._validate import as_scalar, as_vector
 
 COTTER_PIN_MODEL = MODELS_DIR / "cotter_pin.sdf"
 # The pin slides out along world +z (the model's z, welded without rotation).

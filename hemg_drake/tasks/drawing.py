@@ -32,7 +32,7 @@ from pydrake.multibody.plant import CoulombFriction
 from hemg_drake.robots.baxter import MODELS_DIR, make_parser
 from hemg_drake.tasks.plan import TaskPlan
 from hemg_drake.tasks.sensors import ContactForceSensor
-from hemg_drake.teleop._validate import as_scalar, as_vector
+from hemg_drake._validate import as_scalar, as_vector
 
 DRAWING_MODEL = MODELS_DIR / "drawing.sdf"
 # A4, as in the model file: (x, y) extent of the sheet (m).

@@ -12,7 +12,7 @@ from pydrake.systems.primitives import TrajectorySource
 
 from hemg_drake.control.clik import Clik
 from hemg_drake.control.pd import VariableGainPd
-from hemg_drake.teleop._validate import as_scalar
+from hemg_drake._validate import as_scalar
 
 
 def add_plan_follower(builder, *, plant, arm, plan, gain, sample_period=0.005):

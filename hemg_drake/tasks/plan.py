@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from hemg_drake.teleop._validate import as_scalar, as_seed
+from hemg_drake._validate import as_scalar, as_seed
 
 SEGMENT_KINDS = ("free", "forceful")
 _FIELDS = ("times", "points", "kinds", "pen_down", "effort")

@@ -2,7 +2,7 @@
 
 from pydrake.systems.framework import LeafSystem
 
-from hemg_drake.teleop._validate import all_finite, as_scalar
+from hemg_drake._validate import all_finite, as_scalar
 from hemg_drake.teleop.mapping import WorkspaceMapping
 from hemg_drake.teleop.master import TOUCH_X_PEAK_FORCE, saturate_norm
 

@@ -6,7 +6,7 @@ import numpy as np
 from pydrake.math import RotationMatrix
 from pydrake.systems.framework import LeafSystem
 
-from hemg_drake.teleop._validate import as_scalar, as_vector
+from hemg_drake._validate import as_scalar, as_vector
 
 # The operator stands behind the robot and faces the way it faces, so the device's
 # right (+x_M) is the robot's right (-y_W), up (+y_M) is up (+z_W), and towards the

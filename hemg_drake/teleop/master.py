@@ -10,7 +10,7 @@ import numpy as np
 from pydrake.systems.framework import LeafSystem
 from scipy.linalg import expm
 
-from hemg_drake.teleop._validate import all_finite, as_scalar, as_vector
+from hemg_drake._validate import all_finite, as_scalar, as_vector
 
 # Touch X figures (shared/facts/touch_x.md); all are constructor parameters.
 TOUCH_X_MASS = 0.045  # kg, apparent mass at the tip (data sheet, unverified)

@@ -6,7 +6,7 @@ import numpy as np
 from pydrake.systems.framework import LeafSystem
 
 from hemg_drake.tasks.plan import TaskPlan
-from hemg_drake.teleop._validate import all_finite, as_scalar
+from hemg_drake._validate import all_finite, as_scalar
 from hemg_drake.teleop.mapping import WorkspaceMapping
 from hemg_drake.teleop.master import saturate_norm
 

@@ -1,4 +1,4 @@
-"""Argument checks shared by the teleoperation systems: clear ValueErrors at the door."""
+"""Argument checks shared across the package: clear ValueErrors, naming the argument."""
 
 import math
 
@@ -17,7 +17,10 @@ def as_vector(name, value, size):
 
 def as_scalar(name, value, *, minimum=0.0, strict=True):
     """Return ``value`` as a finite float > ``minimum`` (>= if not ``strict``)."""
-    number = float(value)
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
     if not math.isfinite(number) or number < minimum or (strict and number == minimum):
         bound = ">" if strict else ">="
         raise ValueError(f"{name} must be finite and {bound} {minimum}, got {value}")
