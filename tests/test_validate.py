@@ -12,7 +12,9 @@ def test_a_non_number_is_named(value):
         as_scalar("period", value)
 
 
-@pytest.mark.parametrize("value, strict", [(0.0, True), (-1.0, False), (np.nan, False), (np.inf, True)])
+@pytest.mark.parametrize(
+    "value, strict", [(0.0, True), (-1.0, False), (np.nan, False), (np.inf, True)]
+)
 def test_scalar_bounds(value, strict):
     with pytest.raises(ValueError, match="gain must be finite and"):
         as_scalar("gain", value, strict=strict)
