@@ -24,6 +24,7 @@ from pydrake.math import RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlantConfig
 
 from hemg_drake.control.clik import CLIK_METHODS
+from hemg_drake.emg.sources import MYO_RATE
 from hemg_drake.tasks.cotter_pin import default_cotter_pin_plan
 from hemg_drake.tasks.drawing import default_drawing_plan
 from hemg_drake.tasks.plan import TaskPlan
@@ -387,6 +388,12 @@ def _check_values(scenario):
         raise ValueError(
             f"key 'plant.time_step' must be at most 0.001 s (the PD and the master are tuned "
             f"for 1 ms), got {scenario.plant.time_step}"
+        )
+    calibration_samples = int(round(scenario.emg.calibration_duration * MYO_RATE))
+    if calibration_samples < scenario.emg.window:
+        raise ValueError(
+            f"key 'emg.calibration_duration' gives {calibration_samples} samples, fewer than "
+            f"the window 'emg.window' = {scenario.emg.window}: no envelope to calibrate"
         )
     if not scenario.emg.k_min < scenario.emg.k_max:
         raise ValueError(

@@ -24,6 +24,7 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
+from hemg_drake._validate import as_seed
 from hemg_drake.diagrams.slave import add_logger, add_slave, build_with_viewers, split_log
 from hemg_drake.emg.calibration import EmgCalibration
 from hemg_drake.emg.chain import add_emg_gain_chain
@@ -122,12 +123,8 @@ def emg_calibration(scenario):
     ``scenario.seed`` (rest: seed, MVC: seed + 1), not per demonstration: one calibration
     per session, as a person would do once before demonstrating.
     """
+    # At least one RMS window long: load_scenario checks it.
     samples = int(round(scenario.emg.calibration_duration * MYO_RATE))
-    if samples < scenario.emg.window:
-        raise ValueError(
-            f"emg.calibration_duration gives {samples} samples, fewer than the window "
-            f"{scenario.emg.window}"
-        )
     return EmgCalibration.from_recordings(
         synthesize_emg(np.zeros(samples), scenario.seed),
         synthesize_emg(np.ones(samples), scenario.seed + 1),
@@ -155,9 +152,7 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
     -------
     DemonstrationDiagram
     """
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    seed = int(seed)
+    seed = as_seed(seed)
     operator_config = scenario.operator
     task_plan = scenario.task_plan()
     plan = task_plan.perturbed(
