@@ -256,7 +256,8 @@ def reproduce(
     _write_figures(scenario.task, demos, result.log, out_dir)
     write_text_atomic(out_dir / "metrics.json", json.dumps(metrics, indent=2) + "\n")
     progress(format_metrics({scenario.task: metrics}))
-    progress(f"wrote {out_dir}/: reproduction (.html, .npz), figures, metrics.json")
+    written = "(.html, .npz)" if replay else "(.npz)"
+    progress(f"wrote {out_dir}/: reproduction {written}, figures, metrics.json")
     return metrics
 
 
