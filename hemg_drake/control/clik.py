@@ -7,6 +7,7 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import LeafSystem
 
 from hemg_drake._validate import as_scalar, as_vector
+from hemg_drake.control._kernels import limited_step_into, transpose_step_into
 
 CLIK_METHODS = ("transpose", "dls")
 
@@ -112,6 +113,10 @@ class Clik(LeafSystem):
         self._q_upper = upper - limit_margin
         self._v_max = plant.GetVelocityUpperLimits()[self._v_columns]
         self._zeros = np.zeros(self._n)
+        # For the compiled step: column indices, the limits in its argument order, buffers.
+        self._columns = np.arange(plant.num_velocities())[self._v_columns]
+        self._limits = (self._v_max, self._q_lower, self._q_upper, self._period)
+        self._q_next, self._v_next = np.zeros(self._n), np.zeros(self._n)
 
         self._p_desired = self.DeclareVectorInputPort("p_WE_desired", 3)
         self._state = self.DeclareVectorInputPort("state", 2 * self._n)
@@ -160,14 +165,20 @@ class Clik(LeafSystem):
             # Hold the reference rather than integrate a NaN into it.
             self._set(discrete_state, q_d, self._zeros)
             return
-        qdot = self.qdot(q_d, p_desired)
-        # Uniform scaling keeps the direction of the step within the velocity limits.
-        ratio = (np.abs(qdot) / self._v_max).max()
-        if ratio > 1.0:
-            qdot = qdot / ratio
-        # np.minimum/np.maximum rather than np.clip: the same numbers, at half the cost.
-        q_next = np.minimum(np.maximum(q_d + self._period * qdot, self._q_lower), self._q_upper)
-        self._set(discrete_state, q_next, (q_next - q_d) / self._period)
+        q_next, v_next = self._q_next, self._v_next
+        # The sums of qdot() and of the limits below in compiled calls (tests compare them).
+        if self._method == "transpose":
+            e = p_desired - self.p_WE(q_d)
+            world = self._plant.world_frame()
+            J = self._plant.CalcJacobianTranslationalVelocity(
+                self._plant_context, JacobianWrtVariable.kV, self._frame_E, self._p_EoE_E, world, world
+            )
+            transpose_step_into(
+                q_next, v_next, q_d, J, self._columns, e, self._gain, *self._limits
+            )
+        else:
+            limited_step_into(q_next, v_next, q_d, self.qdot(q_d, p_desired), *self._limits)
+        self._set(discrete_state, q_next, v_next)
 
 
 def velocity_columns(plant, model_instance):

@@ -26,6 +26,7 @@ import math
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
+from hemg_drake.control._kernels import pd_torque_into
 from hemg_drake.control.clik import velocity_columns
 from hemg_drake._validate import as_scalar
 
@@ -143,9 +144,11 @@ class VariableGainPd(LeafSystem):
         self._gravity_compensation = bool(gravity_compensation)
         self._effort_limit = np.asarray(arm.effort_limit, dtype=float)
         # The arm's joints among all the plant's velocities (M and g are full size).
-        self._velocity_indices = velocity_columns(plant, self._model)
+        self._columns = np.arange(plant.num_velocities())[velocity_columns(plant, self._model)]
         self._n = n
         self._zeros = np.zeros(n)
+        self._no_gravity = np.zeros(0)
+        self._torque = np.zeros(n)
 
         self.q_desired_input = self.DeclareVectorInputPort("q_desired", n)
         self.v_desired_input = self.DeclareVectorInputPort("v_desired", n)
@@ -159,9 +162,7 @@ class VariableGainPd(LeafSystem):
         )
 
     def _calc_torque(self, context, output):
-        n = self._n
         x = self.state_input.Eval(context)
-        q, v = x[:n], x[n:]
         q_desired = self.q_desired_input.Eval(context)
         v_desired = (
             self.v_desired_input.Eval(context)
@@ -174,25 +175,31 @@ class VariableGainPd(LeafSystem):
             else self._default_gain
         )
         _check_gain(gain, "gain input")
-        if not all(map(math.isfinite, q_desired.tolist() + v_desired.tolist())):
-            raise ValueError("VariableGainPd: q_desired/v_desired contain NaN or inf")
-
         # M and g from one position update of the controller's plant context.
-        self._plant.SetPositions(self._plant_context, self._model, q)
-        mass_diagonal = self._plant.CalcMassMatrix(self._plant_context).diagonal()
-        kp, kd = pd_gains(
-            gain,
+        self._plant.SetPositions(self._plant_context, self._model, x[: self._n])
+        M = self._plant.CalcMassMatrix(self._plant_context)
+        g = (
+            self._plant.CalcGravityGeneralizedForces(self._plant_context)
+            if self._gravity_compensation
+            else self._no_gravity
+        )
+        # pd_gains and pd_torque in one compiled call (the same sums; tests compare them).
+        finite = pd_torque_into(
+            self._torque,
+            x,
+            q_desired,
+            v_desired,
+            float(gain),
             self._stiffness_scale,
-            mass_diagonal[self._velocity_indices],
             self._damping_ratio,
+            M,
+            g,
+            self._columns,
+            self._effort_limit,
         )
-        gravity_torque = 0.0
-        if self._gravity_compensation:
-            g = self._plant.CalcGravityGeneralizedForces(self._plant_context)
-            gravity_torque = -g[self._velocity_indices]
-        output.SetFromVector(
-            pd_torque(q, v, q_desired, v_desired, kp, kd, self._effort_limit, gravity_torque)
-        )
+        if not finite:
+            raise ValueError("VariableGainPd: q_desired/v_desired contain NaN or inf")
+        output.SetFromVector(self._torque)
 
 
 def _check_gain(gain, name):

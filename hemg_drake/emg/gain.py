@@ -11,6 +11,8 @@ K = (K_max - K_min) (a - a_rest) / (a_mvc - a_rest) + K_min: the strongest
 contraction gives K_max, a stiffer slave.
 """
 
+import math
+
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
@@ -121,12 +123,18 @@ class VariableGain(LeafSystem):
             raise ValueError(f"calibration must be an EmgCalibration or None, got {calibration!r}")
         self._calibration = EmgCalibration() if calibration is None else calibration
         self._A_emg = float(A_emg)
+        self._expm1_A = math.expm1(self._A_emg)
         self._k_min, self._k_max = float(k_min), float(k_max)
         self._envelope_input = self.DeclareVectorInputPort("envelope", 1)
+        # A function of the envelope alone: recomputed when it changes (200 Hz), not at
+        # every time step.
+        envelope_only = {self._envelope_input.ticket()}
         self._activation_output = self.DeclareVectorOutputPort(
-            "activation", 1, self._calc_activation
+            "activation", 1, self._calc_activation, prerequisites_of_calc=envelope_only
         )
-        self._gain_output = self.DeclareVectorOutputPort("gain", 1, self._calc_gain)
+        self._gain_output = self.DeclareVectorOutputPort(
+            "gain", 1, self._calc_gain, prerequisites_of_calc=envelope_only
+        )
 
     def get_envelope_input_port(self):
         return self._envelope_input
@@ -138,12 +146,13 @@ class VariableGain(LeafSystem):
         return self._gain_output
 
     def _activation(self, context):
-        u = self._calibration.normalise(self._envelope_input.Eval(context)[0])
-        return 0.0 if np.isnan(u) else float(activation(u, self._A_emg))
+        u = float(self._calibration.normalise(self._envelope_input.Eval(context)[0]))
+        return 0.0 if math.isnan(u) else math.expm1(self._A_emg * u) / self._expm1_A
 
     def _calc_activation(self, context, output):
         output.SetAtIndex(0, self._activation(context))
 
     def _calc_gain(self, context, output):
-        K = gain_from_activation(self._activation(context), k_min=self._k_min, k_max=self._k_max)
-        output.SetAtIndex(0, float(K))
+        # gain_from_activation's law on plain floats (a is in [0, 1], so K needs no clip).
+        a = self._activation(context)
+        output.SetAtIndex(0, (self._k_max - self._k_min) * a + self._k_min)

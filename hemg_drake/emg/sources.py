@@ -28,6 +28,8 @@ DEFAULT_CHANNEL_GAINS = (40.0, 34.0, 26.0, 20.0, 20.0, 26.0, 34.0, 40.0)
 # Standard deviation at rest (electrode and amplifier noise), in MYO units.
 DEFAULT_REST_STD = 2.0
 NPZ_KEY = "emg"
+# Samples whose noise is drawn from one generator (one second at 200 Hz).
+NOISE_BLOCK = 200
 
 
 class _NoiseModel:
@@ -49,17 +51,28 @@ class _NoiseModel:
             raise ValueError(f"exponent must be finite and > 0, got {exponent!r}")
         self.rest_std = float(rest_std)
         self.exponent = float(exponent)
+        self._block, self._noise = None, None
 
     def sample(self, activation, k):
         """Sample number ``k`` for a muscle activation in [0, 1]: shape (8,), integers."""
         std = self.rest_std + self.gains * activation**self.exponent
-        # One generator per (seed, sample index): sample k is a pure function of
-        # both, so the system and the twin agree exactly whatever the step sizes.
-        # (What default_rng((seed, k)) builds, without its argument dispatch.)
-        generator = np.random.Generator(np.random.PCG64(np.random.SeedSequence((self.seed, k))))
-        noise = generator.standard_normal(MYO_CHANNELS)
         # np.minimum/np.maximum rather than np.clip: the same numbers, at less cost.
-        return np.minimum(np.maximum(np.round(std * noise), INT8_MIN), INT8_MAX)
+        return np.minimum(np.maximum(np.round(std * self.noise(k)), INT8_MIN), INT8_MAX)
+
+    def noise(self, k):
+        """Unit Gaussian noise of sample ``k``, shape (8,): a pure function of (seed, k).
+
+        Drawn a block of ``NOISE_BLOCK`` samples at a time from
+        ``np.random.default_rng((seed, k // NOISE_BLOCK))`` and cached, so that the system
+        and its twin agree exactly whatever the step sizes, without building a generator
+        per sample (which cost more than the rest of the 200 Hz chain).
+        """
+        block, row = divmod(k, NOISE_BLOCK)
+        if block != self._block:
+            generator = np.random.default_rng((self.seed, block))
+            self._noise = generator.standard_normal((NOISE_BLOCK, MYO_CHANNELS))
+            self._block = block
+        return self._noise[row]
 
 
 def synthesize_emg(
@@ -159,8 +172,9 @@ class SyntheticEmgSource(_SampledSource):
 
     Timing: a periodic discrete update at 200 Hz (offset 0) reads the input and
     draws sample k at t = k / 200; the output holds it until the next update.
-    Sample k's noise comes from ``np.random.default_rng((seed, k))``, so the
-    same seed gives the same samples, and ``synthesize_emg`` with the input
+    Sample k's noise is row k mod 200 of 200 x 8 normals drawn from
+    ``np.random.default_rng((seed, k // 200))``, so the same seed gives the same
+    samples, and ``synthesize_emg`` with the input
     sampled at the same instants gives exactly the same samples.
 
     Parameters

@@ -92,7 +92,9 @@ class ForceFeedback(LeafSystem):
 
     def _calc_motor_force(self, context, output):
         if self.mode == "force":
-            force = self.gain * self.mapping.force_to_master(self._input(context, "f_WE"))
+            force = self.mapping.force_to_master_floats(
+                self._input(context, "f_WE").tolist(), self.gain
+            )
         else:
             error = self.mapping.slave_to_master(self._input(context, "p_WE")) - self._input(
                 context, "p_MS"
@@ -100,5 +102,5 @@ class ForceFeedback(LeafSystem):
             error_rate = self.mapping.velocity_to_master(
                 self._input(context, "v_WE")
             ) - self._input(context, "v_MS")
-            force = self.stiffness * error + self.damping * error_rate
-        output.SetFromVector(saturate_norm(force.tolist(), self.peak_force))
+            force = (self.stiffness * error + self.damping * error_rate).tolist()
+        output.SetFromVector(saturate_norm(force, self.peak_force))

@@ -56,6 +56,10 @@ class WorkspaceMapping:
         object.__setattr__(self, "R_WM", RotationMatrix(R))
         object.__setattr__(self, "_R", R)  # numpy copy: the maps run at 1 kHz
         object.__setattr__(self, "p_WMo", as_vector("p_WMo", self.p_WMo, 3))
+        # Plain-float copies for the *_floats maps, which run once per 1 kHz sample.
+        object.__setattr__(self, "_R_rows", R.tolist())
+        object.__setattr__(self, "_RT_rows", R.T.tolist())
+        object.__setattr__(self, "_p_WMo_list", self.p_WMo.tolist())
 
     def _rotate_to_world(self, vectors_M):
         return np.asarray(vectors_M, dtype=float) @ self._R.T
@@ -82,6 +86,25 @@ class WorkspaceMapping:
     def force_to_master(self, f_W):
         """Slave force in W (N) -> force felt on the stylus, in M (N): R_WM^T f_W / scale."""
         return self._rotate_to_master(f_W) / self.scale
+
+    def master_to_slave_floats(self, p_MS):
+        """:meth:`master_to_slave` on a list of 3 floats, returning one (equal to rounding).
+
+        Plain floats: at 1 kHz numpy's per-call overhead on 3-vectors costs more than the
+        arithmetic.
+        """
+        x, y, z = p_MS
+        scale = self.scale
+        return [
+            o + scale * (r0 * x + r1 * y + r2 * z)
+            for o, (r0, r1, r2) in zip(self._p_WMo_list, self._R_rows)
+        ]
+
+    def force_to_master_floats(self, f_W, gain=1.0):
+        """``gain`` times :meth:`force_to_master` on a list of 3 floats, returning one."""
+        x, y, z = f_W
+        factor = gain / self.scale
+        return [factor * (r0 * x + r1 * y + r2 * z) for r0, r1, r2 in self._RT_rows]
 
     def force_to_slave(self, f_M):
         """Stylus force in M (N) -> the slave force in W that maps onto it (N)."""
@@ -165,7 +188,7 @@ class WorkspaceMap(LeafSystem):
 
     def _calc_p_WE_desired(self, context, output):
         p_MS = self._master_sample(context, self._p_MS_input, slice(0, 3))
-        output.SetFromVector(self.mapping.master_to_slave(p_MS))
+        output.SetFromVector(self.mapping.master_to_slave_floats(p_MS.tolist()))
 
     def _calc_v_WE_desired(self, context, output):
         v_MS = self._master_sample(context, self._v_MS_input, slice(3, 6))

@@ -66,6 +66,8 @@ class OperatorModel:
             raise ValueError(f"mapping must be a WorkspaceMapping, got {type(mapping).__name__}")
         self.plan = plan
         self.mapping = mapping
+        # The plan mapped into M once (the map is affine), rather than every sample.
+        self._plan_M = plan.in_frame(mapping.slave_to_master(plan.points))
         self.hand_stiffness = as_scalar("hand_stiffness", hand_stiffness, strict=False)
         self.hand_damping = as_scalar("hand_damping", hand_damping, strict=False)
         self.max_hand_force = as_scalar("max_hand_force", max_hand_force, strict=False)
@@ -95,8 +97,7 @@ class OperatorModel:
 
     def hand_force_floats(self, t, p_MS, v_MS):
         """:meth:`hand_force` with ``p_MS``, ``v_MS`` and the result as lists of 3 floats."""
-        p_target = self.mapping.slave_to_master(self.plan.position(t)).tolist()
-        v_target = self.mapping.velocity_to_master(self.plan.velocity(t)).tolist()
+        p_target, v_target = self._plan_M.position_velocity_floats(t)
         k, d = self.hand_stiffness, self.hand_damping
         force = [
             k * (pt - p) + d * (vt - v) for pt, p, vt, v in zip(p_target, p_MS, v_target, v_MS)

@@ -24,10 +24,22 @@ def _run_synthetic(builder, simulate, held_signal, activation, seed, **kwargs):
 
 
 def test_synthetic_system_equals_twin_sample_for_sample(builder, simulate, held_signal):
-    activation = np.concatenate([np.full(40, 0.1), np.linspace(0.1, 1.0, 60), np.full(20, 0.8)])
+    # 450 samples cross two of the blocks in which the noise is drawn (NOISE_BLOCK = 200).
+    activation = np.concatenate([np.full(40, 0.1), np.linspace(0.1, 1.0, 390), np.full(20, 0.8)])
     emg = _run_synthetic(builder, simulate, held_signal, activation, seed=11)
     np.testing.assert_array_equal(emg, synthesize_emg(activation, 11))
     assert np.all(emg == np.round(emg)) and emg.min() >= -128 and emg.max() <= 127
+
+
+def test_sample_noise_is_a_function_of_seed_and_index():
+    # Sample k's noise does not depend on which samples were drawn before it.
+    activation = np.full(450, 0.5)
+    whole = synthesize_emg(activation, 7)
+    model = SyntheticEmgSource(seed=7)._model
+    for k in (449, 3, 201, 199, 200, 0):
+        np.testing.assert_array_equal(model.sample(0.5, k), whole[k])
+    blocks = [model.noise(k) for k in (0, 200, 400)]
+    assert not np.array_equal(blocks[0], blocks[1]) and not np.array_equal(blocks[1], blocks[2])
 
 
 def test_same_seed_same_samples_different_seed_different():

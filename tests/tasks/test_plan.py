@@ -42,6 +42,23 @@ def test_velocity_is_the_derivative_of_position(plan):
         np.testing.assert_allclose(plan.velocity(t_k - 1e-9), plan.velocity(t_k + 1e-9), atol=1e-6)
 
 
+def test_float_path_equals_the_array_methods_to_the_bit(plan):
+    for t in np.linspace(plan.start_time - 0.5, plan.end_time + 0.5, 97).tolist():
+        position, velocity = plan.position_velocity_floats(t)
+        assert position == plan.position(t).tolist()
+        assert velocity == plan.velocity(t).tolist()
+
+
+def test_plan_mapped_by_its_waypoints_is_the_mapped_plan(plan):
+    R = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    offset, scale = np.array([0.6, -0.8, 0.2]), 2.0
+    mapped = plan.in_frame((plan.points - offset) @ R / scale)
+    t = np.linspace(plan.start_time, plan.end_time, 50)
+    np.testing.assert_allclose(mapped.position(t), (plan.position(t) - offset) @ R / scale, atol=1e-15)
+    np.testing.assert_allclose(mapped.velocity(t), plan.velocity(t) @ R / scale, atol=1e-15)
+    assert mapped.kinds == plan.kinds and np.array_equal(mapped.times, plan.times)
+
+
 def test_holds_end_points_outside_the_plan(plan):
     np.testing.assert_array_equal(plan.position(-1.0), plan.points[0])
     np.testing.assert_array_equal(plan.position(10.0), plan.points[-1])

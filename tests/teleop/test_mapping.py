@@ -63,6 +63,19 @@ def test_scale_and_rotation_act_as_stated(mapping):
     np.testing.assert_allclose(mapping.force_to_master(f_W), R.T @ f_W / 2.5)
 
 
+def test_float_maps_equal_the_array_maps(mapping):
+    rng = np.random.default_rng(3)
+    for p, f in zip(rng.normal(0.0, 0.1, (20, 3)), rng.normal(0.0, 10.0, (20, 3))):
+        np.testing.assert_allclose(
+            mapping.master_to_slave_floats(p.tolist()), mapping.master_to_slave(p), atol=1e-15
+        )
+        np.testing.assert_allclose(
+            mapping.force_to_master_floats(f.tolist(), 0.3),
+            0.3 * mapping.force_to_master(f),
+            rtol=1e-14,
+        )
+
+
 def test_system_without_delay_is_the_mapping(mapping):
     system = WorkspaceMap(mapping=mapping)
     context = system.CreateDefaultContext()
