@@ -1,5 +1,7 @@
 """Cotter pin through Drake: a high constant gain pulls the pin out, a low one does not."""
 
+import itertools
+
 import numpy as np
 import pytest
 from pydrake.common.yaml import yaml_load_typed
@@ -15,6 +17,7 @@ from hemg_drake.tasks.cotter_pin import (
     add_cotter_pin_scene,
     default_cotter_pin_plan,
     detent_force,
+    pin_resistance_force,
 )
 from hemg_drake.tasks.follow import add_plan_follower
 
@@ -119,13 +122,16 @@ def test_detent_system_matches_its_twin():
     context = detent.CreateDefaultContext()
     index = scene.pin_joint.velocity_start()
     law = dict(hold_force=50.0, detent_length=0.003, detent_stiffness=3e4)
-    # Spring, saturated spring, released, pushed back in from a slight overshoot.
-    for x, by_hand in ((0.0005, -15.0), (0.002, -50.0), (0.004, 0.0), (-0.0001, 3.0)):
-        detent.pin_state_input.FixValue(context, [x, 0.0])
+    # Spring, saturated spring, released, pushed back in from a slight overshoot; at rest
+    # and sliding out at 0.1 m/s against 20 N s/m of friction.
+    cases = ((0.0005, -15.0), (0.002, -50.0), (0.004, 0.0), (-0.0001, 3.0))
+    for (x, by_hand), xdot in itertools.product(cases, (0.0, 0.1)):
+        detent.pin_state_input.FixValue(context, [x, xdot])
         tau = detent.generalized_force_output.Eval(context)
         assert tau.shape == (plant.num_velocities(),)
-        assert tau[index] == pytest.approx(by_hand)
-        assert tau[index] == pytest.approx(detent_force(x, **law))
+        assert tau[index] == pytest.approx(by_hand - 20.0 * xdot)
+        assert tau[index] == pytest.approx(detent_force(x, **law) - 20.0 * xdot)
+        assert tau[index] == pin_resistance_force(x, xdot, **law, sliding_damping=20.0)
         assert np.count_nonzero(np.delete(tau, index)) == 0
 
 
