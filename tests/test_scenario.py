@@ -30,6 +30,13 @@ def test_partial_sections_keep_the_other_defaults():
     assert scenario.mapping.offset == Scenario().mapping.offset
 
 
+def test_plant_defaults_to_live_output_ports_and_yaml_can_sample_them():
+    plant = parse_scenario("").plant
+    assert plant.time_step == 1e-3 and not plant.use_sampled_output_ports
+    sampled = parse_scenario("plant: {use_sampled_output_ports: true}\n").plant
+    assert sampled.use_sampled_output_ports and sampled.time_step == 1e-3
+
+
 def test_yaml_round_trip():
     scenario = parse_scenario("task: drawing\nseed: 7\noperator: {path_std: [0.001, 0.002, 0]}\n")
     again = parse_scenario(scenario.to_yaml())

@@ -34,8 +34,11 @@ class ContactForceSensor(LeafSystem):
     hydroelastic contacts (``F_Ac_W`` acts on the body of geometry M). Moments are dropped:
     the force is what the operator feels at the end-effector point.
 
-    Timing: stateless, direct feedthrough of the contact results, which a discrete plant
-    computes once per step (sampled output ports), so the force lags the state by one step.
+    Timing: stateless, direct feedthrough of the contact results. With a discrete plant's
+    live output ports (``use_sampled_output_ports=False``, the scenarios' default) they are
+    the contacts of the step about to be taken, computed once from the current state and
+    inputs and reused by the step itself; with sampled ports (Drake's default) they are
+    the last step's, so the force lags the state by one step.
 
     Parameters
     ----------
