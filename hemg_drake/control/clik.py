@@ -98,6 +98,7 @@ class Clik(LeafSystem):
         self._plant_context = plant.CreateDefaultContext()
         self._model = model_instance
         self._frame_E = frame_E
+        self._world = plant.world_frame()
         self._method = method
 
         nq = plant.num_positions(model_instance)
@@ -142,17 +143,25 @@ class Clik(LeafSystem):
         """Tool-point position for arm configuration ``q`` (m), by forward kinematics."""
         self._plant.SetPositions(self._plant_context, self._model, q)
         return self._plant.CalcPointsPositions(
-            self._plant_context, self._frame_E, self._p_EoE_E, self._plant.world_frame()
+            self._plant_context, self._frame_E, self._p_EoE_E, self._world
         ).ravel()
+
+    def _jacobian(self):
+        """The plant's (3, nv) translational Jacobian of E in W, at the last p_WE() positions."""
+        return self._plant.CalcJacobianTranslationalVelocity(
+            self._plant_context,
+            JacobianWrtVariable.kV,
+            self._frame_E,
+            self._p_EoE_E,
+            self._world,
+            self._world,
+        )
 
     def qdot(self, q, p_WE_desired):
         """The CLIK joint velocity of eq. 21 at ``q`` (rad/s), before limits."""
         # The Jacobian reuses the forward kinematics that p_WE cached in the plant context.
         e = np.asarray(p_WE_desired, float) - self.p_WE(q)
-        world = self._plant.world_frame()
-        J = self._plant.CalcJacobianTranslationalVelocity(
-            self._plant_context, JacobianWrtVariable.kV, self._frame_E, self._p_EoE_E, world, world
-        )[:, self._v_columns]
+        J = self._jacobian()[:, self._v_columns]
         if self._method == "transpose":
             return self._gain * J.T @ e
         JJt = J @ J.T + self._damping**2 * np.eye(3)
@@ -169,12 +178,8 @@ class Clik(LeafSystem):
         # The sums of qdot() and of the limits below in compiled calls (tests compare them).
         if self._method == "transpose":
             e = p_desired - self.p_WE(q_d)
-            world = self._plant.world_frame()
-            J = self._plant.CalcJacobianTranslationalVelocity(
-                self._plant_context, JacobianWrtVariable.kV, self._frame_E, self._p_EoE_E, world, world
-            )
             transpose_step_into(
-                q_next, v_next, q_d, J, self._columns, e, self._gain, *self._limits
+                q_next, v_next, q_d, self._jacobian(), self._columns, e, self._gain, *self._limits
             )
         else:
             limited_step_into(q_next, v_next, q_d, self.qdot(q_d, p_desired), *self._limits)

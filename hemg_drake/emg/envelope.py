@@ -5,6 +5,8 @@ window length, so the first ``window - 1`` envelope values ramp up from the
 first sample rather than being undefined.
 """
 
+import math
+
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
@@ -151,20 +153,26 @@ class RmsEnvelope(LeafSystem):
         return self._envelope_output
 
     def _update_envelope(self, context, discrete_state):
-        state = context.get_discrete_state(self._ring_state).CopyToVector()
-        n = self._window * self._columns
-        ring = state[:n].reshape(self._window, self._columns)
-        total = state[n : n + self._columns]
+        # Plain floats: numpy's per-call overhead on a few numbers costs more than the sums,
+        # which are the same (exact for integer samples, as moving_rms's).
+        state = context.get_discrete_state(self._ring_state).value().tolist()
+        emg = self._emg_input.Eval(context).tolist()
+        window, columns = self._window, self._columns
+        squares = [x * x for x in emg] if self._per_channel else [sum(emg) ** 2]
         oldest = int(state[-1])
-        emg = self._emg_input.Eval(context).reshape(1, MYO_CHANNELS)
-        square = _squares(emg, self._per_channel)[0]
-        total += square - ring[oldest]
-        ring[oldest] = square
-        oldest = (oldest + 1) % self._window
+        row = oldest * columns
+        totals = state[window * columns : -1]
+        totals = [t + q - r for t, q, r in zip(totals, squares, state[row : row + columns])]
+        state[row : row + columns] = squares
+        oldest = (oldest + 1) % window
         if oldest == 0:
-            total[:] = ring.sum(axis=0)
+            totals = [sum(state[c : window * columns : columns]) for c in range(columns)]
+        state[window * columns : -1] = totals
         state[-1] = oldest
         discrete_state.set_value(self._ring_state, state)
         # Rounding of non-integer input must not push a zero sum below zero.
-        envelope = _combine(np.maximum(total, 0.0) / self._window)
+        if columns == 1:
+            envelope = math.sqrt(max(totals[0], 0.0) / window)
+        else:
+            envelope = float(_combine(np.maximum(totals, 0.0) / window))
         discrete_state.set_value(self._envelope_state, [envelope])

@@ -52,12 +52,16 @@ class _NoiseModel:
         self.rest_std = float(rest_std)
         self.exponent = float(exponent)
         self._block, self._noise = None, None
+        self._gain_list = self.gains.tolist()
 
     def sample(self, activation, k):
-        """Sample number ``k`` for a muscle activation in [0, 1]: shape (8,), integers."""
-        std = self.rest_std + self.gains * activation**self.exponent
-        # np.minimum/np.maximum rather than np.clip: the same numbers, at less cost.
-        return np.minimum(np.maximum(np.round(std * self.noise(k)), INT8_MIN), INT8_MAX)
+        """Sample number ``k`` for a muscle activation in [0, 1]: 8 integer-valued floats."""
+        level = activation**self.exponent
+        # Plain floats (200 Hz, 8 numbers); round() rounds half to even, as np.round does.
+        return [
+            min(max(float(round((self.rest_std + gain * level) * noise)), INT8_MIN), INT8_MAX)
+            for gain, noise in zip(self._gain_list, self.noise(k).tolist())
+        ]
 
     def noise(self, k):
         """Unit Gaussian noise of sample ``k``, shape (8,): a pure function of (seed, k).
