@@ -2,10 +2,11 @@
 
 The model is ``models/baxter_right_arm.urdf``, written from the shared facts (joint origins,
 axes, limits, inertials of Rethink's ``baxter_description``). It is found from this package's
-location, never from the current directory, and parsed with the package map entry
-``package://hemg_drake_models/``.
+location (or the installed copy, see :func:`find_models_dir`), never from the current
+directory, and parsed with the package map entry ``package://hemg_drake_models/``.
 """
 
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,8 +14,28 @@ import numpy as np
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.tree import Frame, ModelInstanceIndex
 
-# models/ sits beside the package in the repository (installed editable).
-MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
+
+def find_models_dir(candidates=None):
+    """The project's ``models/`` folder: the first candidate that holds its ``package.xml``.
+
+    By default: beside the package (a source checkout, or an editable install), then the copy
+    that a regular ``pip install`` puts under ``<prefix>/share/hemg-drake/models`` (the
+    ``data-files`` of pyproject.toml). If neither holds the models, the first candidate is
+    returned and loading a model raises ``FileNotFoundError`` naming the missing file.
+    """
+    if candidates is None:
+        candidates = (
+            Path(__file__).resolve().parents[2] / "models",
+            Path(sys.prefix) / "share" / "hemg-drake" / "models",
+        )
+    candidates = [Path(candidate) for candidate in candidates]
+    for candidate in candidates:
+        if (candidate / "package.xml").is_file():
+            return candidate
+    return candidates[0]
+
+
+MODELS_DIR = find_models_dir()
 PACKAGE_NAME = "hemg_drake_models"
 BAXTER_URDF = MODELS_DIR / "baxter_right_arm.urdf"
 

@@ -151,6 +151,39 @@ def test_cotter_pin_stays_in_with_a_constant_low_gain():
     assert np.ptp(workspace_mapping(scenario).master_to_slave(demo.p_MS)[:, 2]) > 0.04
 
 
+def test_position_error_feedback_pulls_the_stylus_back_to_a_held_slave():
+    # The paper's master PD (Table I: K_pm = K_dm = 50) in the whole diagram: the pin holds
+    # the slave (K = 10), so the stylus that the operator pushed up is pulled back down.
+    scenario = parse_scenario(
+        "task: cotter_pin\nduration: 2.0\nmapping: {offset: [0.642, -0.837, 0.17]}\n"
+        "feedback: {mode: position_error}\nemg: {k_min: 10.0, k_max: 10.01}\n"
+    )
+    built = build_demonstration_diagram(scenario, seed=1)
+    simulator = Simulator(built.diagram)
+    simulator.AdvanceTo(scenario.duration)
+    root = simulator.get_context()
+    assert not built.scene.pin_out(built.plant.GetMyContextFromRoot(root))
+    diagram = built.diagram
+    feedback = diagram.GetSubsystemByName("force_feedback")
+    tool = diagram.GetSubsystemByName("tool_point")
+    master = diagram.GetSubsystemByName("master")
+
+    def port(system, name):
+        return system.GetOutputPort(name).Eval(system.GetMyContextFromRoot(root))
+
+    mapping = workspace_mapping(scenario)
+    gap = mapping.slave_to_master(port(tool, "p_WE")) - port(master, "p_MS")
+    gap_rate = mapping.velocity_to_master(port(tool, "v_WE")) - port(master, "v_MS")
+    expected = 50.0 * gap + 50.0 * gap_rate
+    assert gap[1] < -0.005  # the stylus is more than 5 mm above where the slave is held
+    motor_force = port(feedback, "motor_force")
+    limit = scenario.feedback.peak_force
+    np.testing.assert_allclose(
+        motor_force, expected * min(1.0, limit / np.linalg.norm(expected)), rtol=1e-9
+    )
+    assert motor_force[1] < -1.0  # downwards (+y_M is up), towards the held slave
+
+
 def test_drawing_inks_three_strokes_with_high_stiffness_on_the_paper():
     from hemg_drake.tasks.drawing import drawing_steps
     from hemg_drake.viz.ink import in_contact, ink_strokes

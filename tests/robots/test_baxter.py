@@ -8,7 +8,13 @@ from pydrake.common.eigen_geometry import Quaternion
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, CoulombFriction, MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
 
-from hemg_drake.robots.baxter import BAXTER_URDF, JOINT_NAMES, add_baxter_arm
+from hemg_drake.robots.baxter import (
+    BAXTER_URDF,
+    JOINT_NAMES,
+    MODELS_DIR,
+    add_baxter_arm,
+    find_models_dir,
+)
 
 
 def _facts_rows(facts_dir, name):
@@ -132,3 +138,17 @@ def test_model_without_arm_joints_names_the_file(tmp_path):
     )
     with pytest.raises(ValueError, match="stub.urdf.*right_s0"):
         add_baxter_arm(MultibodyPlant(0.0), model_path=stub)
+
+
+def test_models_are_found_beside_the_package_or_in_the_installed_copy(tmp_path):
+    assert (MODELS_DIR / "package.xml").is_file() and (MODELS_DIR / "cotter_pin.sdf").is_file()
+    checkout, installed = tmp_path / "checkout" / "models", tmp_path / "share" / "models"
+    installed.mkdir(parents=True)
+    (installed / "package.xml").write_text("<package/>")
+    # A regular install: nothing beside the package, the data-files copy is used.
+    assert find_models_dir([checkout, installed]) == installed
+    checkout.mkdir(parents=True)
+    (checkout / "package.xml").write_text("<package/>")
+    assert find_models_dir([checkout, installed]) == checkout
+    # Neither: the first place, where loading a model then names the missing file.
+    assert find_models_dir([tmp_path / "a", tmp_path / "b"]) == tmp_path / "a"
