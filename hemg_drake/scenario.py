@@ -24,6 +24,7 @@ from pydrake.math import RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlantConfig
 
 from hemg_drake.control.clik import CLIK_METHODS
+from hemg_drake.control.pd import MAX_TIME_STEP
 from hemg_drake.emg.sources import MYO_RATE
 from hemg_drake.tasks.cotter_pin import default_cotter_pin_plan
 from hemg_drake.tasks.drawing import default_drawing_plan
@@ -390,10 +391,10 @@ def _check_values(scenario):
             raise ValueError(f"key '{key}' must be positive, got {value!r}")
         if key in _FRACTIONS and np.any(numbers > 1):
             raise ValueError(f"key '{key}' must lie in [0, 1], got {value!r}")
-    if scenario.plant.time_step > 1e-3:
+    if scenario.plant.time_step > MAX_TIME_STEP:
         raise ValueError(
-            f"key 'plant.time_step' must be at most 0.001 s (the PD and the master are tuned "
-            f"for 1 ms), got {scenario.plant.time_step}"
+            f"key 'plant.time_step' must be at most {MAX_TIME_STEP} s (the PD and the master "
+            f"are tuned for it), got {scenario.plant.time_step}"
         )
     calibration_samples = int(round(scenario.emg.calibration_duration * MYO_RATE))
     if calibration_samples < scenario.emg.window:

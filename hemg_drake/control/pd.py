@@ -37,6 +37,8 @@ from hemg_drake._validate import as_scalar
 STIFFNESS_SCALE = np.array([20.0, 20.0, 10.0, 10.0, 2.0, 2.0, 0.1])
 # Tested range of K at a 1 ms plant step.
 GAIN_RANGE = (5.0, 500.0)
+# Longest plant step the gains are checked at (the explicit PD's stability, module docstring).
+MAX_TIME_STEP = 1e-3
 
 
 def pd_gains(gain, stiffness_scale, mass_diagonal, damping_ratio):

@@ -15,7 +15,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from hemg_drake.control.pd import VariableGainPd
+from hemg_drake.control.pd import MAX_TIME_STEP, VariableGainPd
 from hemg_drake.robots.baxter import FLOOR_Z, HOME_POSITIONS, add_baxter_arm
 from hemg_drake.viz.recording import ReplayRecorder
 
@@ -30,8 +30,6 @@ WAYPOINTS = np.array(
         HOME_POSITIONS,
     ]
 )
-# Longest plant step the PD's gains are checked at (see hemg_drake.control.pd).
-MAX_TIME_STEP = 1e-3
 
 
 def waypoint_trajectory(waypoints, duration):
