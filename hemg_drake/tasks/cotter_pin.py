@@ -37,6 +37,7 @@ the tool, 18 N at K = 5, 34 N at K = 10 and 48 N at K = 15, leave the pin in
 K = 10 at rest and 100 at full contraction); ``docs/tasks.md`` lists the runs.
 """
 
+import copy
 import dataclasses as dc
 import functools
 
@@ -229,10 +230,8 @@ class CotterPinScene:
     pin_joint : PrismaticJoint, ``pin_slide``: position = withdrawal (m) along the pull axis.
     ring_frame : Frame, the ring's centre on the pin (the grasp point).
     bushing : LinearBushingRollPitchYaw, the grasp (frame A = ring, frame C = tool).
-    pull_axis_W : array, shape (3,), unit vector, world +z.
     pin_length : float, m; the pin is out once withdrawn this far.
-    hold_force : float, N, the detent's largest holding force.
-    params : CotterPinParams
+    params : CotterPinParams, the scene's own copy.
     """
 
     plant: object
@@ -240,10 +239,18 @@ class CotterPinScene:
     pin_joint: object
     ring_frame: object
     bushing: object
-    pull_axis_W: np.ndarray
     pin_length: float
-    hold_force: float
     params: CotterPinParams
+
+    @property
+    def pull_axis_W(self):
+        """The pin's pull axis in W, shape (3,): world +z."""
+        return PULL_AXIS_W.copy()
+
+    @property
+    def hold_force(self):
+        """The detent's largest holding force (N): ``params.hold_force``."""
+        return self.params.hold_force
 
     def pin_displacement(self, plant_context):
         """Withdrawal of the pin (m) in a context of the plant."""
@@ -360,10 +367,8 @@ def add_cotter_pin_scene(plant, arm, *, params=None):
         pin_joint=pin_joint,
         ring_frame=ring_frame,
         bushing=bushing,
-        pull_axis_W=PULL_AXIS_W.copy(),
         pin_length=pin_length(),
-        hold_force=params.hold_force,
-        params=params,
+        params=copy.deepcopy(params),  # the scene's own: later edits cannot change it
     )
 
 

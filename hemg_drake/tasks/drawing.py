@@ -22,6 +22,7 @@ the six steps I-VI of Fig. 10 (see :func:`drawing_steps`); pen-down segments put
 ``f_WE`` of a :class:`~hemg_drake.tasks.sensors.ContactForceSensor` on the hand.
 """
 
+import copy
 import dataclasses as dc
 
 import numpy as np
@@ -100,9 +101,13 @@ class DrawingScene:
     model_instance: object
     pen_body: object
     pen_tip_frame: object
-    paper_center: np.ndarray
     sheet_size: tuple
     params: DrawingParams
+
+    @property
+    def paper_center(self):
+        """Centre of the sheet's top surface in W (m), shape (3,): ``params.paper_center``."""
+        return self.params.paper_center.copy()
 
     @property
     def paper_height(self):
@@ -168,9 +173,8 @@ def add_drawing_scene(plant, arm, *, params=None):
         model_instance=model,
         pen_body=arm.hand_frame.body(),
         pen_tip_frame=arm.tool_frame,
-        paper_center=params.paper_center.copy(),
         sheet_size=SHEET_SIZE,
-        params=params,
+        params=copy.deepcopy(params),  # the scene's own: later edits cannot move the sheet
     )
 
 

@@ -125,7 +125,11 @@ def test_contact_force_is_the_pen_spring(run):
 
 
 def test_sheet_is_a4_at_the_paper_center_and_the_pen_tip_is_the_tool_point():
-    _, plant, scene_graph, arm, scene = _scene()
+    params = DrawingParams()
+    _, plant, scene_graph, arm, scene = _scene(params)
+    # The scene keeps its own parameters: editing the caller's afterwards moves nothing.
+    params.paper_center[2] += 0.5
+    scene.paper_center[2] += 0.5
     inspector = scene_graph.model_inspector()
     table = plant.GetBodyByName("table", scene.model_instance)
     (sheet,) = plant.GetCollisionGeometriesForBody(table)
