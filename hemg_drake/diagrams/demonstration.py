@@ -116,6 +116,17 @@ def workspace_mapping(scenario):
     )
 
 
+def operator_plan(scenario, seed):
+    """The plan the seeded operator follows: the task plan perturbed by ``seed``."""
+    config = scenario.operator
+    return scenario.task_plan().perturbed(
+        seed,
+        timing_std=config.timing_std,
+        path_std=config.path_std,
+        effort_std=config.effort_std,
+    )
+
+
 def emg_calibration(scenario):
     """Calibration of the synthetic armband: rest and maximum-contraction recordings.
 
@@ -155,12 +166,7 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
     seed = as_seed(seed)
     operator_config = scenario.operator
     task_plan = scenario.task_plan()
-    plan = task_plan.perturbed(
-        seed,
-        timing_std=operator_config.timing_std,
-        path_std=operator_config.path_std,
-        effort_std=operator_config.effort_std,
-    )
+    plan = operator_plan(scenario, seed)
     mapping = workspace_mapping(scenario)
     # Arm and stylus start at rest where the task is set up (the unperturbed plan's first
     # point, e.g. the pin's ring); the operator's own plan varies from there.
@@ -324,10 +330,16 @@ def record_demonstrations(scenario, out_dir, *, replays=True, progress=None):
         if replay is not None:
             written.append(replay)
         if progress is not None:
+            plan_end = operator_plan(scenario, seed).end_time
             progress(
                 f"demonstration {c}/{scenario.num_demonstrations} (seed {seed}): "
                 f"{scenario.duration:g} s simulated in {time.perf_counter() - start:.1f} s"
                 + (f", replay {replay}" if replay else "")
+                + (
+                    f"; cut short: the operator's plan ends at {plan_end:.2f} s"
+                    if plan_end > scenario.duration
+                    else ""
+                )
             )
     dataset = out_dir / "dataset.npz"
     metadata = dict(

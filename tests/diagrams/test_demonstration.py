@@ -237,6 +237,8 @@ def test_demonstrate_command_end_to_end(tmp_path, capsys):
     assert main([*argv, "--demos", "2", "--duration", "0.5"]) == 0
     printed = capsys.readouterr().out
     assert "demonstration 2/2 (seed 2)" in printed and "wrote" in printed
+    # 0.5 s is less than the operator's plan: each line says the run was cut short.
+    assert printed.count("cut short: the operator's plan ends at 3.") == 2
     names = ["dataset.npz", "demonstrations.png", "replay_1.html", "replay_2.html"]
     assert sorted(p.name for p in out.iterdir()) == names
     demos, metadata = load_dataset(out / "dataset.npz")
