@@ -184,7 +184,7 @@ class Scenario:
     # Live output ports: the contact force a sensor reads is that of the step about to be
     # taken, not the last one's, and the plant steps by a plain discrete update instead of
     # an unrestricted one that copies its sampled outputs; the demonstration diagram runs
-    # 15-25 % faster (benchmarks/bench_demonstration.py).
+    # 16-28 % faster (benchmarks/bench_demonstration.py).
     plant: MultibodyPlantConfig = dc.field(
         default_factory=lambda: MultibodyPlantConfig(
             time_step=1e-3, use_sampled_output_ports=False

@@ -14,12 +14,12 @@ What holds the pin (all along the joint, nothing collides):
   it pops the pin out. A position-only force: no stiction threshold to regularise, so it is
   deterministic and stable at a 1 ms step.
 - **sliding friction**, viscous: -``sliding_damping`` * xdot, in the same system (twin of
-  both: :func:`pin_resistance_force`). It
-  is explicit (sampled once per step, like the grasp bushing's damper) rather than the
-  joint's own damping: Drake's SAP solver then has no implicit term to solve for and the
-  scene's plant steps about 1.6x faster, while the explicit term stays far inside its
-  stability limit (see ``_STABILITY_MARGIN``). (A Coulomb term would need a velocity
-  regularisation stiff enough to chatter at 1 ms on a 0.1 kg pin.)
+  both: :func:`pin_resistance_force`). It is explicit (sampled once per step, like the grasp
+  bushing's damper) rather than the joint's own damping: Drake's SAP solver then has no
+  implicit term to solve for and the scene's plant steps about 1.6x faster, while the
+  explicit term stays far inside its stability limit (see ``_STABILITY_MARGIN``). (A
+  Coulomb term would need a velocity regularisation stiff enough to chatter at 1 ms on a
+  0.1 kg pin.)
 
 The **grasp** is a ``LinearBushingRollPitchYaw`` from the pin's ``ring`` frame (A) to the
 arm's tool frame (C), attached from the start: translational stiffness ``grasp_stiffness``
