@@ -9,7 +9,7 @@ from scipy.cluster.vq import kmeans2
 from hemg_drake.fileio import load_npz, save_npz_atomic
 from hemg_drake.learning import _kernels
 from hemg_drake.learning.gmr import gaussian_log_pdf
-from hemg_drake.learning.reproduce import ResidualForward
+from hemg_drake.learning.forward import ResidualForward
 
 # Version 2 added data_range_ (reproduction clips the stiffness to it).
 FORMAT_VERSION = 2

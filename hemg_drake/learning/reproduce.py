@@ -48,53 +48,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hemg_drake.learning import _kernels
+from hemg_drake.learning.forward import ResidualForward
 from hemg_drake.learning.gmr import Gmr, softmax
 
 WEIGHTINGS = ("temporal", "spatial", "forward")
 # A state moving slower than STILL ** 0.5 times the fastest state counts as half still.
 STILL = 0.05
-
-
-class ResidualForward:
-    """The residual-duration forward recursion of a fitted HSMM.
-
-    Parameters
-    ----------
-    model : HSMM
-        Fitted.
-    """
-
-    def __init__(self, model):
-        model._check_fitted()
-        self.durations = np.exp(model._log_durations())  # p_i(d), shape (N, d_max)
-        transmat = model.transmat_.copy()
-        final = transmat.sum(axis=1) == 0
-        transmat[final, final] = 1.0
-        self.transmat_T = np.ascontiguousarray(transmat.T)
-        self.startprob = model.startprob_
-
-    def initial(self):
-        """Predicted alpha before the first step, shape (N, d_max)."""
-        alpha = self.startprob[:, None] * self.durations
-        return alpha / alpha.sum()
-
-    def step(self, predicted, log_emission):
-        """Weigh the prediction by the observation; predict the next step.
-
-        Parameters
-        ----------
-        predicted : array, shape (N, d_max)
-        log_emission : array, shape (N,)
-            log-likelihood of the current observation under each state
-            (zeros: no observation).
-
-        Returns
-        -------
-        h : array, shape (N,)
-        predicted_next : array, shape (N, d_max)
-        """
-        return _kernels.residual_step(predicted, log_emission, self.transmat_T, self.durations)
 
 
 class HsmmGmrPolicy:
