@@ -1,7 +1,35 @@
-"""A Drake diagram drawn as SVG by Graphviz, every port shown."""
+"""A Drake diagram drawn as SVG by Graphviz, every port shown.
+
+``diagram_svg`` needs Graphviz's ``dot``; ``write_diagram_picture`` never fails for want of
+it: without ``dot`` it writes the diagram's Graphviz text (``.dot``) and says in one line how
+to turn it into the SVG.
+"""
 
 import shutil
 import subprocess
+from pathlib import Path
+
+from hemg_drake.fileio import write_text_atomic
+
+INSTALL_HINT = "install graphviz (apt-get install graphviz)"
+
+
+def _check_depth(max_depth):
+    if isinstance(max_depth, bool) or not isinstance(max_depth, int) or max_depth < 0:
+        raise ValueError(f"max_depth must be a non-negative integer, got {max_depth!r}")
+
+
+def _render_svg(dot, graphviz_text, timeout):
+    """SVG text from ``dot -Tsvg``; RuntimeError when dot fails or times out."""
+    try:
+        result = subprocess.run(
+            [dot, "-Tsvg"], input=graphviz_text, capture_output=True, text=True, timeout=timeout
+        )
+    except subprocess.TimeoutExpired:
+        raise RuntimeError(f"dot did not draw the diagram within {timeout} s") from None
+    if result.returncode != 0:
+        raise RuntimeError(f"dot failed to draw the diagram: {result.stderr.strip()}")
+    return result.stdout
 
 
 def diagram_svg(diagram, *, max_depth=1, timeout=60):
@@ -25,21 +53,63 @@ def diagram_svg(diagram, *, max_depth=1, timeout=60):
     ------
     FileNotFoundError
         Graphviz is not installed (Debian: ``apt-get install graphviz``).
+    RuntimeError
+        ``dot`` failed or took longer than ``timeout``.
     """
-    if isinstance(max_depth, bool) or not isinstance(max_depth, int) or max_depth < 0:
-        raise ValueError(f"max_depth must be a non-negative integer, got {max_depth!r}")
+    _check_depth(max_depth)
     dot = shutil.which("dot")
     if dot is None:
-        raise FileNotFoundError(
-            "Graphviz's 'dot' was not found on PATH; install graphviz (apt-get install graphviz)"
-        )
-    result = subprocess.run(
-        [dot, "-Tsvg"],
-        input=diagram.GetGraphvizString(max_depth=max_depth),
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-    )
-    if result.returncode != 0:
-        raise RuntimeError(f"dot failed to draw the diagram: {result.stderr.strip()}")
-    return result.stdout
+        raise FileNotFoundError(f"Graphviz's 'dot' was not found on PATH; {INSTALL_HINT}")
+    return _render_svg(dot, diagram.GetGraphvizString(max_depth=max_depth), timeout)
+
+
+def write_diagram_picture(diagram, path_without_suffix, *, max_depth=1, timeout=60):
+    """Write ``diagram`` as ``<path>.svg``, or as ``<path>.dot`` when Graphviz cannot draw it.
+
+    A picture is never worth failing a run over: without ``dot`` on PATH (or when ``dot``
+    fails) the diagram's Graphviz text is written instead, and the returned message says in
+    one line how to get the SVG. The file of the other kind left by an earlier run (an old
+    ``.svg`` beside a new ``.dot``, or the reverse) is removed, so the folder never shows a
+    picture of another run's diagram. Files are written atomically.
+
+    Parameters
+    ----------
+    diagram : pydrake.systems.framework.Diagram
+    path_without_suffix : path-like
+        E.g. ``runs/cotter_pin/demonstration_diagram``; a ``.svg`` or ``.dot`` suffix given
+        here is dropped (any other suffix is kept as part of the name).
+    max_depth : int
+        Levels of nested diagrams to expand.
+    timeout : float
+        Seconds to wait for ``dot``.
+
+    Returns
+    -------
+    (Path, str or None)
+        The file written, and None for an SVG or a one-line message for a ``.dot``.
+    """
+    _check_depth(max_depth)
+    stem = Path(path_without_suffix)
+    if stem.suffix.lower() in (".svg", ".dot"):
+        stem = stem.with_suffix("")
+    svg_path, dot_path = (stem.with_name(stem.name + suffix) for suffix in (".svg", ".dot"))
+    graphviz_text = diagram.GetGraphvizString(max_depth=max_depth)
+    dot = shutil.which("dot")
+    reason = "Graphviz's 'dot' is not on PATH"
+    if dot is not None:
+        try:
+            svg = _render_svg(dot, graphviz_text, timeout)
+        except (RuntimeError, OSError) as error:
+            reason = str(error).splitlines()[0] if str(error) else "dot failed"
+        else:
+            write_text_atomic(svg_path, svg)
+            dot_path.unlink(missing_ok=True)
+            return svg_path, None
+    write_text_atomic(dot_path, graphviz_text)
+    svg_path.unlink(missing_ok=True)
+    how = f"dot -Tsvg {dot_path} -o {svg_path}"
+    if dot is None:
+        how = f"{INSTALL_HINT}, then run: {how}"
+    else:
+        how = f"run: {how}"
+    return dot_path, f"{reason}: wrote {dot_path} instead of the SVG; to draw it, {how}"
