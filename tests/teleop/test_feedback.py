@@ -58,6 +58,33 @@ def test_force_mode_pushes_the_stylus_the_way_the_slave_is_pushed(mapping):
     assert np.dot(moved_W, f_WE) / (np.linalg.norm(moved_W) * 3.0) > 0.999
 
 
+def test_both_modes_by_hand_with_the_default_rotation():
+    # Operator behind the robot: x_M = -y_W, y_M = z_W, z_M = -x_W; scale 2.
+    mapping = WorkspaceMapping(scale=2.0, p_WMo=[0.7, -0.3, 0.2])
+    # Force mode, gain 1.5: f_W = [3, -1, 2] -> R^T f_W = [1, 2, -3] -> x 1.5 / 2.
+    feedback = ForceFeedback(mapping=mapping, gain=1.5)
+    np.testing.assert_allclose(
+        motor_force(feedback, f_WE=[3.0, -1.0, 2.0]), [0.75, 1.5, -2.25], rtol=1e-15
+    )
+    # Position error, K_pm = K_dm = 50: the slave at p_WMo + [-0.04, -0.04, 0.06] maps to
+    # p_MSdes = [0.04, 0.06, 0.04] / 2, so e = [0.02, 0.03, 0.02] - p_MS = [0.01, 0.01, -0.01];
+    # v_WE = [0.1, 0.2, -0.1] maps to [-0.2, -0.1, -0.1] / 2, so edot = [0, -0.05, 0.02].
+    feedback = ForceFeedback(mapping=mapping, mode="position_error")
+    force = motor_force(
+        feedback,
+        p_WE=[0.66, -0.34, 0.26],
+        v_WE=[0.1, 0.2, -0.1],
+        p_MS=[0.01, 0.02, 0.03],
+        v_MS=[-0.1, 0.0, -0.07],
+    )
+    np.testing.assert_allclose(force, [0.5, -2.0, 0.5], rtol=1e-12, atol=1e-14)
+    # Beyond 7.9 N: saturated in norm, direction kept (0.4 m off along -y_W: 10 N along x_M).
+    far = motor_force(
+        feedback, p_WE=[0.7, -0.7, 0.2], v_WE=np.zeros(3), p_MS=np.zeros(3), v_MS=np.zeros(3)
+    )
+    np.testing.assert_allclose(far, [7.9, 0.0, 0.0], rtol=1e-12, atol=1e-14)
+
+
 def test_position_error_mode_is_the_table_one_pd(mapping):
     feedback = ForceFeedback(mapping=mapping, mode="position_error", peak_force=1e3)
     p_WE, v_WE = np.array([0.75, -0.18, 0.33]), np.array([0.1, 0.0, -0.2])

@@ -76,6 +76,27 @@ def test_float_maps_equal_the_array_maps(mapping):
         )
 
 
+@pytest.mark.parametrize("delay_steps", [0, 3])
+def test_system_outputs_by_hand_with_the_default_rotation(delay_steps):
+    # Operator behind the robot, scale 2: p_WE = p_WMo + 2 [-z_M, -x_M, y_M].
+    mapping = WorkspaceMapping(scale=2.0, p_WMo=[0.7, -0.3, 0.2])
+    p_initial = [0.005, -0.01, 0.02]
+    system = WorkspaceMap(mapping=mapping, delay_steps=delay_steps, p_MS_initial=p_initial)
+    simulator = Simulator(system)
+    context = simulator.get_mutable_context()
+    system.GetInputPort("p_MS").FixValue(context, [0.01, 0.02, 0.03])
+    system.GetInputPort("v_MS").FixValue(context, [0.1, -0.2, 0.05])
+    p_WE, v_WE = system.GetOutputPort("p_WE_desired"), system.GetOutputPort("v_WE_desired")
+    if delay_steps:
+        # Until the n-th sample (at t = (n - 1) period): p_MS_initial at rest, mapped.
+        simulator.AdvanceTo((delay_steps - 1.5) * PERIOD)
+        np.testing.assert_allclose(p_WE.Eval(context), [0.66, -0.31, 0.18], rtol=1e-14)
+        np.testing.assert_array_equal(v_WE.Eval(context), np.zeros(3))
+        simulator.AdvanceTo((delay_steps - 0.5) * PERIOD)
+    np.testing.assert_allclose(p_WE.Eval(context), [0.64, -0.32, 0.24], rtol=1e-14)
+    np.testing.assert_allclose(v_WE.Eval(context), [-0.1, -0.2, -0.4], rtol=1e-14)
+
+
 def test_system_without_delay_is_the_mapping(mapping):
     system = WorkspaceMap(mapping=mapping)
     context = system.CreateDefaultContext()

@@ -1,4 +1,8 @@
-"""HapticMaster: exact mass-damper steps, motor saturation, soft walls, friction, errors."""
+"""HapticMaster: exact mass-damper steps, motor saturation, soft walls, friction, errors.
+
+The references are closed forms written here (the mass-damper, with Coulomb friction, and
+the damped spring of a wall), not the system's numpy twin, which shares its maths.
+"""
 
 import numpy as np
 import pytest
@@ -42,7 +46,95 @@ def test_step_force_matches_analytic_mass_damper():
     np.testing.assert_allclose(v, v_expected, rtol=1e-9, atol=1e-14)
 
 
+def test_friction_and_saturated_motor_match_the_analytic_slide():
+    # From rest under a constant net force F (hand + motor saturated in norm), the velocity
+    # stays along F, so Coulomb friction is -f_c F/|F| all along: the tip is a mass-damper
+    # pushed by (|F| - f_c) along F. Closed form, with tau = m / b.
+    mass, damping, friction, peak = 0.045, 0.3, 0.06, 0.1
+    hand = np.array([0.2, 0.03, -0.1])
+    motor = np.array([0.0, 0.3, 0.4])  # 0.5 N, saturated in norm to 0.1 N: [0, 0.06, 0.08]
+    total = hand + np.array([0.0, 0.06, 0.08])
+    times, p, v = run_master(
+        hand, motor, duration=0.05, friction=friction, damping=damping, peak_force=peak
+    )
+    net = np.linalg.norm(total) - friction
+    direction = total / np.linalg.norm(total)
+    tau = mass / damping
+    decay = np.exp(-times / tau)[:, None]
+    p_expected = net / damping * (times[:, None] - tau * (1.0 - decay)) * direction
+    v_expected = net / damping * (1.0 - decay) * direction
+    assert np.linalg.norm(p_expected[-1]) > 2e-3
+    np.testing.assert_allclose(p, p_expected, rtol=1e-9, atol=1e-14)
+    np.testing.assert_allclose(v, v_expected, rtol=1e-9, atol=1e-14)
+
+
+def test_friction_stops_a_coasting_tip_where_the_analytic_solution_does():
+    # m v' = -b v - f_c while v > 0: v(t) = (v0 + f_c/b) exp(-t/tau) - f_c/b, which reaches
+    # zero at t_stop = tau ln(1 + b v0 / f_c); then the tip sticks.
+    mass, damping, friction, v0 = 0.045, 0.3, 0.06, 0.02
+    builder = DiagramBuilder()
+    master = builder.AddSystem(HapticMaster(friction=friction, damping=damping))
+    zero = builder.AddSystem(ConstantVectorSource(np.zeros(3)))
+    builder.Connect(zero.get_output_port(), master.GetInputPort("hand_force"))
+    builder.Connect(zero.get_output_port(), master.GetInputPort("motor_force"))
+    p_log = LogVectorOutput(master.GetOutputPort("p_MS"), builder, publish_period=PERIOD)
+    v_log = LogVectorOutput(master.GetOutputPort("v_MS"), builder, publish_period=PERIOD)
+    simulator = Simulator(builder.Build())
+    context = master.GetMyMutableContextFromRoot(simulator.get_mutable_context())
+    context.get_mutable_discrete_state(1).SetFromVector([v0, 0.0, 0.0])  # group 1: v_MS
+    simulator.AdvanceTo(0.05)
+    times = p_log.FindLog(simulator.get_context()).sample_times()
+    p = p_log.FindLog(simulator.get_context()).data()[0]
+    v = v_log.FindLog(simulator.get_context()).data()[0]
+    tau = mass / damping
+    t_stop = tau * np.log(1.0 + damping * v0 / friction)
+    sliding = times <= t_stop
+    v_expected = (v0 + friction / damping) * np.exp(-times / tau) - friction / damping
+    p_expected = (v0 + friction / damping) * tau * (1.0 - np.exp(-times / tau)) - (
+        friction / damping
+    ) * times
+    assert 10 <= np.count_nonzero(sliding) < len(times) - 10
+    np.testing.assert_allclose(v[sliding], v_expected[sliding], rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(p[sliding], p_expected[sliding], rtol=1e-9, atol=1e-15)
+    # Stopped within the sample that holds t_stop, and stuck since.
+    p_stop = (v0 + friction / damping) * tau * (1.0 - np.exp(-t_stop / tau)) - (
+        friction / damping
+    ) * t_stop
+    np.testing.assert_allclose(v[~sliding], 0.0, atol=1e-15)
+    assert np.ptp(p[~sliding]) < 1e-15
+    assert p_stop <= p[-1] < p_stop + v_expected[sliding][-1] * PERIOD
+
+
+def test_wall_push_with_saturated_motor_is_the_analytic_damped_spring():
+    # Beyond the +x wall: m x'' + (b + c) x' + k (x - x_wall) = F, F = 2.1 N of hand plus a
+    # 20 N motor command saturated to 7.9 N. Underdamped (zeta = 20.1 / (2 sqrt(k m)) = 0.67)
+    # about x_eq = x_wall + F / k, from rest 1 mm beyond the wall: never back inside it.
+    mass, damping, k, c = 0.045, 0.1, 5000.0, 20.0
+    wall = 0.08
+    x0 = wall + 1e-3
+    times, p, v = run_master(
+        [2.1, 0.0, 0.0], [20.0, 0.0, 0.0], duration=0.1, p_MS_initial=[x0, 0.0, 0.0]
+    )
+    force = 2.1 + 7.9
+    omega = np.sqrt(k / mass)
+    zeta = (damping + c) / (2.0 * np.sqrt(k * mass))
+    omega_d = omega * np.sqrt(1.0 - zeta**2)
+    x_eq = wall + force / k
+    e0 = x0 - x_eq
+    envelope = np.exp(-zeta * omega * times)
+    cos, sin = np.cos(omega_d * times), np.sin(omega_d * times)
+    x_expected = x_eq + envelope * (e0 * cos + zeta * omega * e0 / omega_d * sin)
+    v_expected = -envelope * e0 * omega / np.sqrt(1.0 - zeta**2) * sin
+    assert zeta == pytest.approx(0.67, abs=0.01)
+    assert np.all(p[:, 0] > wall)  # the wall mode throughout
+    assert np.ptp(x_expected) > 1e-3
+    np.testing.assert_allclose(p[:, 0], x_expected, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(v[:, 0], v_expected, rtol=1e-8, atol=1e-12)
+    np.testing.assert_array_equal(p[:, 1:], 0.0)
+
+
 def test_system_matches_numpy_twin_with_friction():
+    # A wiring test only: the twin shares the maths (the tests above check the maths).
     parameters = dict(friction=0.06, damping=0.3)
     hand_force = np.array([0.2, 0.03, -0.1])
     times, p, v = run_master(hand_force, duration=0.05, **parameters)

@@ -87,7 +87,38 @@ def test_activation_is_an_exact_first_order_lag(nominal):
     np.testing.assert_allclose(a[early], expected, atol=1e-12)
 
 
+def test_hand_force_is_the_impedance_law_by_hand():
+    # At t = 0.3 s, half-way through the first segment (0.6 s), minimum jerk gives
+    # s = 0.5 and ds/dtau = 1.875: the plan in W is p0 + (p1 - p0) / 2 = [0.725, -0.25, 0.25]
+    # moving at 1.875 / 0.6 (p1 - p0) = [0.15625, -0.3125, 0] m/s. Into M (scale 3, offset
+    # p0, operator behind the robot: x_M = -y_W, y_M = z_W, z_M = -x_W), relative to p0:
+    p_plan = np.array([0.05, 0.0, -0.025]) / 3.0
+    v_plan = np.array([0.3125, 0.0, -0.15625]) / 3.0
+    system = SimulatedOperator(plan=PLAN, mapping=MAPPING)
+    context = system.CreateDefaultContext()
+    context.SetTime(0.3)
+    p_MS, v_MS = np.array([0.01, 0.002, -0.005]), np.array([0.05, 0.01, -0.02])
+    for name, value in (("p_MS", p_MS), ("v_MS", v_MS), ("feedback_force", np.zeros(3))):
+        system.GetInputPort(name).FixValue(context, value)
+    expected = 300.0 * (p_plan - p_MS) + 5.0 * (v_plan - v_MS)
+    assert 1.0 < np.linalg.norm(expected) < 15.0  # not saturated
+    hand_force = system.GetOutputPort("hand_force").Eval(context)
+    np.testing.assert_allclose(hand_force, expected, rtol=1e-12, atol=1e-15)
+    # Far from the plan: the same law saturated at 15 N, pointing the same way.
+    far = np.array([0.07, -0.05, 0.05])
+    system.GetInputPort("p_MS").FixValue(context, far)
+    system.GetInputPort("v_MS").FixValue(context, np.zeros(3))
+    unsaturated = 300.0 * (p_plan - far) + 5.0 * v_plan
+    np.testing.assert_allclose(
+        system.GetOutputPort("hand_force").Eval(context),
+        15.0 * unsaturated / np.linalg.norm(unsaturated),
+        rtol=1e-12,
+    )
+
+
 def test_system_matches_numpy_twin_and_saturates_the_hand():
+    # A wiring test: the twin shares the maths (test_hand_force_is_the_impedance_law_by_hand
+    # and the activation tests check it).
     system = SimulatedOperator(plan=PLAN, mapping=MAPPING)
     model = OperatorModel(plan=PLAN, mapping=MAPPING)
     context = system.CreateDefaultContext()
