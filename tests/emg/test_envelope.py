@@ -37,6 +37,31 @@ def _run_rms(builder, simulate, tmp_path, samples, **kwargs):
     return simulate(builder, {"rms": rms.get_envelope_output_port()}, len(samples))["rms"][:, 0]
 
 
+def brute_force_rms(samples, window, per_channel):
+    """Eqs. 1-2 one window at a time: zeros before the start, divided by L_win."""
+    rms = np.empty(len(samples))
+    for k in range(len(samples)):
+        rows = [samples[j] if j >= 0 else np.zeros(8) for j in range(k - window + 1, k + 1)]
+        if per_channel:
+            rms[k] = sum(
+                np.sqrt(sum(row[i] ** 2 for row in rows) / window) for i in range(8)
+            )
+        else:
+            rms[k] = np.sqrt(sum(sum(row) ** 2 for row in rows) / window)
+    return rms
+
+
+@pytest.mark.parametrize("window", [1, 7, 20])
+@pytest.mark.parametrize("per_channel", [False, True])
+def test_system_equals_a_brute_force_rms(builder, simulate, tmp_path, window, per_channel):
+    # 150 samples wrap the ring of 7 and of 20 several times.
+    rng = np.random.default_rng(window)
+    samples = rng.integers(-128, 128, size=(150, 8))
+    samples[60:90] //= 8  # a quieter stretch, so the window has something to follow
+    rms = _run_rms(builder, simulate, tmp_path, samples, window=window, per_channel=per_channel)
+    np.testing.assert_allclose(rms, brute_force_rms(samples, window, per_channel), rtol=1e-13)
+
+
 @pytest.mark.parametrize("window", [1, 7, 20])
 @pytest.mark.parametrize("per_channel", [False, True])
 def test_system_equals_offline_exactly(builder, simulate, tmp_path, window, per_channel):

@@ -23,7 +23,34 @@ def _run_synthetic(builder, simulate, held_signal, activation, seed, **kwargs):
     return simulate(builder, {"emg": source.get_emg_output_port()}, len(activation))["emg"]
 
 
+def test_synthetic_system_follows_its_documented_model(builder, simulate, held_signal):
+    # The model of the docstring, written here: sample k is
+    # clip(round((rest_std + g_i a_k^p) n_k), -128, 127), with n_k row k mod 200 of the
+    # 200 x 8 normals of default_rng((seed, k // 200)). Exponent 2, so a^p matters;
+    # 450 samples span three noise blocks, and full activation clips the widest channels.
+    gains = np.array([40.0, 34.0, 26.0, 20.0, 20.0, 26.0, 34.0, 40.0])
+    activation = np.concatenate([np.zeros(30), np.linspace(0.0, 1.0, 400), np.ones(20)])
+    emg = _run_synthetic(builder, simulate, held_signal, activation, seed=11, exponent=2.0)
+    expected = np.empty((len(activation), 8))
+    for k, a in enumerate(activation):
+        normals = np.random.default_rng((11, k // 200)).standard_normal((200, 8))[k % 200]
+        expected[k] = np.clip(np.round((2.0 + gains * a**2) * normals), -128, 127)
+    np.testing.assert_array_equal(emg, expected)
+    assert np.any(np.abs(expected) == 127) or np.any(expected == -128)
+
+
+def test_synthetic_system_has_the_documented_spread(builder, simulate, held_signal):
+    # At a constant activation the samples are zero-mean with per-channel standard
+    # deviation sqrt((rest_std + g_i a)^2 + 1/12) (rounding adds 1/12): 3000 samples.
+    a = 0.6
+    emg = _run_synthetic(builder, simulate, held_signal, np.full(3000, a), seed=4)
+    spread = 2.0 + np.array(DEFAULT_CHANNEL_GAINS) * a
+    np.testing.assert_allclose(emg.std(axis=0), np.sqrt(spread**2 + 1 / 12), rtol=0.05)
+    assert np.all(np.abs(emg.mean(axis=0)) < 4 * spread / np.sqrt(3000))
+
+
 def test_synthetic_system_equals_twin_sample_for_sample(builder, simulate, held_signal):
+    # A wiring test: the twin shares the model (the two tests above check the model).
     # 450 samples cross two of the blocks in which the noise is drawn (NOISE_BLOCK = 200).
     activation = np.concatenate([np.full(40, 0.1), np.linspace(0.1, 1.0, 390), np.full(20, 0.8)])
     emg = _run_synthetic(builder, simulate, held_signal, activation, seed=11)
