@@ -69,6 +69,51 @@ def test_pd_gains_by_hand():
     np.testing.assert_allclose(tau, [50.0, 0.1 * 5.0 - kd[1] + 1.0])
 
 
+@pytest.mark.parametrize("gravity_compensation, damping_ratio", [(True, 1.0), (False, 0.7)])
+def test_torque_is_the_documented_law_by_hand(gravity_compensation, damping_ratio):
+    # The module docstring's law, written here without pd_gains / pd_torque:
+    # k_j = K s_j, d_j = 2 zeta sqrt(k_j M_jj(q)), tau = k (q_d - q) + d (v_d - v) - g(q),
+    # clipped at the effort limits; M and g from Drake on a fresh context of the plant.
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
+    arm = add_baxter_arm(plant)
+    plant.Finalize()
+    pd = VariableGainPd(
+        plant=plant, arm=arm, gravity_compensation=gravity_compensation,
+        damping_ratio=damping_ratio,
+    )
+    q = arm.home_positions + np.array([0.01, -0.02, 0.015, 0.0, -0.01, 0.02, 0.03])
+    v = np.array([0.1, -0.05, 0.2, -0.1, 0.0, 0.3, -0.2])
+    q_desired = arm.home_positions + np.array([0.0, 0.0, 0.0, 0.3, 0.0, 0.0, 0.0])
+    v_desired = np.array([0.0, 0.1, 0.0, 0.0, -0.2, 0.0, 0.5])
+    K = 120.0
+    context = pd.CreateDefaultContext()
+    pd.state_input.FixValue(context, np.concatenate([q, v]))
+    pd.q_desired_input.FixValue(context, q_desired)
+    pd.v_desired_input.FixValue(context, v_desired)
+    pd.gain_input.FixValue(context, [K])
+    torque = pd.torque_output.Eval(context)
+
+    plant_context = plant.CreateDefaultContext()
+    plant.SetPositions(plant_context, q)
+    M_jj = np.diag(plant.CalcMassMatrix(plant_context))
+    g = plant.CalcGravityGeneralizedForces(plant_context)  # tau_g: the PD adds -tau_g
+    s = np.array([20.0, 20.0, 10.0, 10.0, 2.0, 2.0, 0.1])
+    limit = np.asarray(arm.effort_limit)
+    expected = np.empty(7)
+    for j in range(7):
+        k_j = K * s[j]
+        d_j = 2.0 * damping_ratio * np.sqrt(k_j * M_jj[j])
+        tau = k_j * (q_desired[j] - q[j]) + d_j * (v_desired[j] - v[j])
+        if gravity_compensation:
+            tau -= g[j]
+        expected[j] = min(max(tau, -limit[j]), limit[j])
+    # Joint e1 is 0.3 rad off at K s = 1200 N m/rad: saturated; the others are not.
+    assert expected[3] == limit[3]
+    assert np.all(np.abs(np.delete(expected, 3)) < np.delete(limit, 3))
+    np.testing.assert_allclose(torque, expected, rtol=1e-12, atol=1e-12)
+
+
 def test_system_matches_numpy_twin_with_gain_port():
     diagram, plant, arm, pd = _build(gain=50.0)
     rng = np.random.default_rng(3)

@@ -80,11 +80,16 @@ def test_activation_is_higher_in_forceful_segments(nominal):
 
 
 def test_activation_is_an_exact_first_order_lag(nominal):
-    # From rest (0.05) towards the free level (0.2) with tau = 40 ms, sampled exactly.
+    # From rest (0.05) towards the free level (0.2) with tau = 40 ms, sampled exactly: at
+    # each of the activation's own sample instants t_k = k period (the logger, at 1 ms,
+    # sees the value of k updates there), a = 0.2 - 0.15 exp(-t_k / tau).
+    period = OperatorModel(plan=PLAN, mapping=MAPPING).period
     t, a = nominal["t"], nominal["activation"]
-    early = t < 0.3
-    expected = 0.2 + (0.05 - 0.2) * np.exp(-t[early] / 0.04)
-    np.testing.assert_allclose(a[early], expected, atol=1e-12)
+    k = np.round(t / period)
+    instants = (t < 0.3) & np.isclose(t, k * period, rtol=0, atol=1e-9)
+    assert np.count_nonzero(instants) >= 50
+    expected = 0.2 + (0.05 - 0.2) * np.exp(-k[instants] * period / 0.04)
+    np.testing.assert_allclose(a[instants], expected, atol=1e-12)
 
 
 def test_hand_force_is_the_impedance_law_by_hand():
