@@ -35,6 +35,48 @@ def _logsumexp(values, n):
 
 
 @numba.njit(cache=True)
+def _support(log_duration):
+    """First and last duration index (0-based, inclusive) of each state with p_i(d) > 0."""
+    n_states, n_durations = log_duration.shape
+    first = np.zeros(n_states, dtype=np.int64)
+    last = np.full(n_states, -1, dtype=np.int64)
+    for i in range(n_states):
+        for d in range(n_durations):
+            if log_duration[i, d] > _NEG_INF:
+                if last[i] < 0:
+                    first[i] = d
+                last[i] = d
+    return first, last
+
+
+@numba.njit(cache=True)
+def _cumulative(log_emission):
+    """Per-state running sums, shape (N, T + 1): a segment's log-likelihood is a difference.
+
+    State-major, like the other arrays the duration loops read, so that they read
+    consecutive memory.
+    """
+    n_steps, n_states = log_emission.shape
+    total = np.zeros((n_states, n_steps + 1))
+    for i in range(n_states):
+        for t in range(n_steps):
+            total[i, t + 1] = total[i, t] + log_emission[t, i]
+    return total
+
+
+@numba.njit(cache=True)
+def _logsumexp_top(values, n, top):
+    """log(sum(exp(values[:n]))) given their maximum ``top``."""
+    if top == _NEG_INF:
+        return _NEG_INF
+    total = 0.0
+    for k in range(n):
+        if values[k] > top - _NEGLIGIBLE:
+            total += np.exp(values[k] - top)
+    return top + np.log(total)
+
+
+@numba.njit(cache=True)
 def forward(log_emission, log_startprob, log_transmat, log_duration):
     """Segment forward variables (eq. 11) of one sequence.
 
@@ -46,7 +88,8 @@ def forward(log_emission, log_startprob, log_transmat, log_duration):
     log_transmat : array, shape (N, N)
         log a_ji at [j, i].
     log_duration : array, shape (N, n_durations)
-        log p_i(d) at [i, d - 1].
+        log p_i(d) at [i, d - 1]; -inf outside a state's support, which the loops skip
+        (so the cost is O(T N w) for supports of w durations, not O(T N n_durations)).
 
     Returns
     -------
@@ -57,26 +100,32 @@ def forward(log_emission, log_startprob, log_transmat, log_duration):
     """
     n_steps, n_states = log_emission.shape
     n_durations = log_duration.shape[1]
+    first, last = _support(log_duration)
+    total = _cumulative(log_emission)
     log_alpha = np.empty((n_steps, n_states))
-    log_alpha_in = np.empty((n_steps, n_states))
+    alpha_in = np.empty((n_states, n_steps))  # log_alpha_in, state-major (see _cumulative)
     terms = np.empty(max(n_durations, n_states))
     for t in range(n_steps):
         for i in range(n_states):
             if t == 0:
-                log_alpha_in[t, i] = log_startprob[i]
+                alpha_in[i, t] = log_startprob[i]
             else:
                 for j in range(n_states):
                     terms[j] = log_alpha[t - 1, j] + log_transmat[j, i]
-                log_alpha_in[t, i] = _logsumexp(terms, n_states)
+                alpha_in[i, t] = _logsumexp(terms, n_states)
         for i in range(n_states):
-            n_terms = min(n_durations, t + 1)
-            segment = 0.0  # log-likelihood of xi_{t-d+1..t} under state i
-            for d in range(1, n_terms + 1):
-                segment += log_emission[t - d + 1, i]
-                terms[d - 1] = (
-                    log_alpha_in[t - d + 1, i] + log_duration[i, d - 1] + segment
-                )
-            log_alpha[t, i] = _logsumexp(terms, n_terms)
+            # Durations d = first + 1 .. min(last + 1, t + 1); segment xi_{t-d+1..t}.
+            n_terms = 0
+            top = _NEG_INF
+            end = total[i, t + 1]
+            for d in range(first[i] + 1, min(last[i] + 1, t + 1) + 1):
+                begin = t - d + 1
+                value = alpha_in[i, begin] + log_duration[i, d - 1] + end - total[i, begin]
+                terms[n_terms] = value
+                top = max(top, value)
+                n_terms += 1
+            log_alpha[t, i] = _logsumexp_top(terms, n_terms, top)
+    log_alpha_in = np.ascontiguousarray(alpha_in.T)
     return log_alpha, log_alpha_in
 
 
@@ -106,7 +155,9 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
     """
     n_steps, n_states = log_emission.shape
     n_durations = log_duration.shape[1]
-    log_beta = np.empty((n_steps, n_states))
+    first, last = _support(log_duration)
+    total = _cumulative(log_emission)
+    beta = np.empty((n_states, n_steps))  # log_beta, state-major (see _cumulative)
     log_beta_in = np.empty((n_steps, n_states))
     transition_counts = np.zeros((n_states, n_states))
     duration_counts = np.zeros((n_states, n_durations))
@@ -114,38 +165,40 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
     for s in range(n_steps - 1, -1, -1):
         for i in range(n_states):
             if s == n_steps - 1:
-                log_beta[s, i] = 0.0
+                beta[i, s] = 0.0
                 continue
             for j in range(n_states):
                 terms[j] = log_transmat[i, j] + log_beta_in[s + 1, j]
-            log_beta[s, i] = _logsumexp(terms, n_states)
-            if log_beta[s, i] == _NEG_INF:
+            beta[i, s] = _logsumexp(terms, n_states)
+            if beta[i, s] == _NEG_INF:
                 continue
             # p(segment of i ends at s, one of j starts at s + 1 | all).
             scale = log_alpha[s, i] - log_likelihood
             for j in range(n_states):
-                if terms[j] > log_beta[s, i] - _NEGLIGIBLE:
+                if terms[j] > beta[i, s] - _NEGLIGIBLE:
                     transition_counts[i, j] += np.exp(terms[j] + scale)
         for i in range(n_states):
-            n_terms = min(n_durations, n_steps - s)
-            segment = 0.0  # log-likelihood of xi_{s..s+d-1} under state i
+            # Durations d = first + 1 .. min(last + 1, T - s); segment xi_{s..s+d-1}.
+            low = first[i] + 1
+            high = min(last[i] + 1, n_steps - s)
             top = _NEG_INF
-            for d in range(1, n_terms + 1):
-                segment += log_emission[s + d - 1, i]
-                terms[d - 1] = log_duration[i, d - 1] + segment + log_beta[s + d - 1, i]
-                if terms[d - 1] > top:
-                    top = terms[d - 1]
+            start = total[i, s]
+            for d in range(low, high + 1):
+                value = log_duration[i, d - 1] + total[i, s + d] - start + beta[i, s + d - 1]
+                terms[d - low] = value
+                top = max(top, value)
             if top == _NEG_INF:
                 log_beta_in[s, i] = _NEG_INF
                 continue
-            total = 0.0
+            weights = 0.0
             scale = np.exp(top + log_alpha_in[s, i] - log_likelihood)
-            for d in range(n_terms):
-                if terms[d] > top - _NEGLIGIBLE:
-                    weight = np.exp(terms[d] - top)
-                    total += weight
-                    duration_counts[i, d] += weight * scale
-            log_beta_in[s, i] = top + np.log(total)
+            for d in range(low, high + 1):
+                if terms[d - low] > top - _NEGLIGIBLE:
+                    weight = np.exp(terms[d - low] - top)
+                    weights += weight
+                    duration_counts[i, d - 1] += weight * scale
+            log_beta_in[s, i] = top + np.log(weights)
+    log_beta = np.ascontiguousarray(beta.T)
     return log_beta, log_beta_in, transition_counts, duration_counts
 
 

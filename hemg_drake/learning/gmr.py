@@ -27,10 +27,19 @@ def _whitening(covariances):
     return np.linalg.solve(cholesky, eye), log_det
 
 
+# From this many samples on, one matrix product per component beats a batched product.
+_PER_COMPONENT = 64
+
+
 def _log_pdf_whitened(x, means, inverse_cholesky, log_det):
-    diff = x[:, None, :, None] - means[None, :, :, None]  # (T, N, D, 1)
-    white = inverse_cholesky @ diff
-    mahalanobis = np.square(white).sum(axis=(2, 3))
+    if len(x) >= _PER_COMPONENT:  # long batches (EM): a (T, D) @ (D, D) product per component
+        mahalanobis = np.empty((len(x), len(means)))
+        for i, (mean, inverse) in enumerate(zip(means, inverse_cholesky)):
+            white = (x - mean) @ inverse.T
+            mahalanobis[:, i] = np.einsum("td,td->t", white, white)
+    else:  # one query or a few (reproduction): one batched product
+        diff = x[:, None, :, None] - means[None, :, :, None]  # (T, N, D, 1)
+        mahalanobis = np.square(inverse_cholesky @ diff).sum(axis=(2, 3))
     return -0.5 * (mahalanobis + log_det + means.shape[1] * np.log(2.0 * np.pi))
 
 

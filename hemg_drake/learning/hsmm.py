@@ -14,6 +14,8 @@ from hemg_drake.learning.forward import ResidualForward
 # Version 2 added data_range_ (reproduction clips the stiffness to it).
 FORMAT_VERSION = 2
 INITS = ("kmeans", "time", "polyline")
+# Default floor on sigma_i^D, as a fraction of the initial segments' mean duration.
+DURATION_STD_FLOOR = 0.02
 _FITTED = (
     "startprob_", "transmat_", "means_", "covariances_",
     "duration_means_", "duration_stds_", "occupancy_", "data_range_",
@@ -179,9 +181,9 @@ class HSMM:
         *,
         max_duration=None,
         reg_covar=1e-2,
-        min_duration_std=1.0,
+        min_duration_std=None,
         n_iter=100,
-        tol=1e-4,
+        tol=1e-3,
         init="kmeans",
         n_init=5,
         n_position=None,
@@ -211,7 +213,7 @@ class HSMM:
             raise ValueError(f"max_duration must be an integer >= 1, got {self.max_duration!r}")
         if not self.reg_covar > 0:
             raise ValueError(f"reg_covar must be > 0, got {self.reg_covar!r}")
-        if not self.min_duration_std > 0:
+        if self.min_duration_std is not None and not self.min_duration_std > 0:
             raise ValueError(f"min_duration_std must be > 0, got {self.min_duration_std!r}")
         if not integer(self.n_iter) or self.n_iter < 1:
             raise ValueError(f"n_iter must be an integer >= 1, got {self.n_iter!r}")
@@ -279,16 +281,10 @@ class HSMM:
         self.data_range_ = np.stack([samples.min(axis=0), samples.max(axis=0)])
         scale = samples.std(axis=0)
         scale[scale == 0] = 1.0
-        lengths = [len(demo) for demo in demos]
-        if self.max_duration is None:
-            estimate = int(np.ceil(3.0 * np.mean(lengths) / self.n_states))
-            self.max_duration_ = max(1, min(estimate, max(lengths)))
-        else:
-            self.max_duration_ = int(self.max_duration)
-
         self._initialise(demos, samples, scale)
         self.log_likelihood_history_ = []
         self.converged_ = False
+        n_samples = len(samples)
         for self.n_iter_ in range(1, self.n_iter + 1):
             stats = self._expectation(demos)
             if not np.isfinite(stats["log_likelihood"]):
@@ -300,7 +296,7 @@ class HSMM:
             history = self.log_likelihood_history_
             history.append(stats["log_likelihood"])
             self._maximisation(stats, scale)
-            if len(history) > 1 and history[-1] - history[-2] < self.tol * abs(history[-1]):
+            if len(history) > 1 and history[-1] - history[-2] < self.tol * n_samples:
                 self.converged_ = True
                 break
         return self
@@ -347,7 +343,8 @@ class HSMM:
                 self.covariances_[i] = global_cov
             d = np.array(durations[i] or [np.mean([len(x) for x in demos]) / n], dtype=float)
             self.duration_means_[i] = d.mean()
-            self.duration_stds_[i] = max(d.std(), self.min_duration_std)
+            self.duration_stds_[i] = d.std()
+        self._set_duration_limits(demos)
         self.covariances_ = self._floor_covariances(self.covariances_, scale)
         if self.init == "kmeans":
             # k-means runs flicker; a small pseudo-count keeps every order reachable for EM.
@@ -357,6 +354,23 @@ class HSMM:
         self.transmat_ = self._normalise_rows(transitions, np.zeros((n, n)))
         self.startprob_ = starts / starts.sum()
         self.occupancy_ = np.bincount(flat, minlength=n) / len(flat)
+
+    def _set_duration_limits(self, demos):
+        """min_duration_std_ and max_duration_ from the initial segmentation's durations."""
+        means, stds = self.duration_means_, self.duration_stds_
+        if self.min_duration_std is None:
+            self.min_duration_std_ = max(1.0, DURATION_STD_FLOOR * float(np.mean(means)))
+        else:
+            self.min_duration_std_ = float(self.min_duration_std)
+        self.duration_stds_ = np.maximum(stds, self.min_duration_std_)
+        if self.max_duration is not None:
+            self.max_duration_ = int(self.max_duration)
+            return
+        # Room for EM to lengthen any state: its mean plus 4 spreads, the spread at least a
+        # quarter of the mean (so at least twice the longest initial segment).
+        spread = np.maximum(self.duration_stds_, 0.25 * means)
+        estimate = int(np.ceil(np.max(means + 4.0 * spread)))
+        self.max_duration_ = max(1, min(estimate, max(len(demo) for demo in demos)))
 
     def _kmeans_labels(self, demos, standardised):
         rng = np.random.default_rng(self.seed)
@@ -387,17 +401,26 @@ class HSMM:
         return floored * np.outer(scale, scale)
 
     def _log_durations(self):
+        """log p_i(d) for d = 1 .. d_max, shape (N, d_max); -inf beyond the support.
+
+        The support is |d - mu_i^D| <= 10 sigma_i^D (p below e^-50 of its peak is taken as
+        zero), so the recursions cost O(T N sigma) rather than O(T N d_max).
+        """
         d = np.arange(1, self.max_duration_ + 1)
         z = (d[None, :] - self.duration_means_[:, None]) / self.duration_stds_[:, None]
-        return -0.5 * z**2 - np.log(np.sqrt(2.0 * np.pi) * self.duration_stds_)[:, None]
+        log_p = -0.5 * z**2 - np.log(np.sqrt(2.0 * np.pi) * self.duration_stds_)[:, None]
+        return np.where(0.5 * z**2 <= _kernels._NEGLIGIBLE, log_p, -np.inf)
 
     def _log_parameters(self):
         return _log(self.startprob_), _log(self.transmat_), self._log_durations()
 
-    def _posteriors(self, demo, log_parameters):
-        """Forward-backward on one demo: log-likelihood, state posteriors and counts."""
+    def _posteriors(self, log_emission, log_parameters):
+        """Forward-backward on one demo's (T, N) emission log-likelihoods.
+
+        Returns the log-likelihood and a dict of state posteriors ``gamma`` (T, N) and the
+        expected ``starts``, ``transitions`` and ``durations`` counts (None if impossible).
+        """
         log_startprob, log_transmat, log_duration = log_parameters
-        log_emission = gaussian_log_pdf(demo, self.means_, self.covariances_)
         log_alpha, log_alpha_in = _kernels.forward(
             log_emission, log_startprob, log_transmat, log_duration
         )
@@ -410,10 +433,9 @@ class HSMM:
         starts = np.exp(log_alpha_in + log_beta_in - log_likelihood)
         ends = np.exp(log_alpha + log_beta - log_likelihood)
         # In state i at t: segments started at or before t minus those ended before t.
-        gamma = np.cumsum(starts, axis=0) - np.concatenate(
-            [np.zeros((1, self.n_states)), np.cumsum(ends[:-1], axis=0)]
-        )
-        gamma = np.clip(gamma, 0.0, 1.0)
+        gamma = np.cumsum(starts, axis=0)
+        gamma[1:] -= np.cumsum(ends[:-1], axis=0)
+        np.clip(gamma, 0.0, 1.0, out=gamma)
         return log_likelihood, {
             "gamma": gamma,
             "starts": starts[0],
@@ -421,29 +443,35 @@ class HSMM:
             "durations": duration_counts,
         }
 
+    def _emissions(self, demos):
+        """(T_c, N) emission log-likelihoods of each demo, computed in one batch."""
+        samples = demos[0] if len(demos) == 1 else np.concatenate(demos)
+        log_emission = gaussian_log_pdf(samples, self.means_, self.covariances_)
+        return np.split(log_emission, np.cumsum([len(d) for d in demos])[:-1])
+
     def _expectation(self, demos):
-        n, n_dims = self.means_.shape
+        n = self.n_states
         stats = {
             "log_likelihood": 0.0,
-            "weight": np.zeros(n),
-            "sum": np.zeros((n, n_dims)),
-            "outer": np.zeros((n, n_dims, n_dims)),
             "starts": np.zeros(n),
             "transitions": np.zeros((n, n)),
             "durations": np.zeros((n, self.max_duration_)),
         }
         log_parameters = self._log_parameters()
-        for demo in demos:
-            log_likelihood, post = self._posteriors(demo, log_parameters)
+        gammas = []
+        for log_emission in self._emissions(demos):
+            log_likelihood, post = self._posteriors(log_emission, log_parameters)
             stats["log_likelihood"] += log_likelihood
             if post is None:
                 return stats
-            gamma = post["gamma"]
-            stats["weight"] += gamma.sum(axis=0)
-            stats["sum"] += gamma.T @ demo
-            stats["outer"] += np.einsum("tn,td,te->nde", gamma, demo, demo, optimize=True)
+            gammas.append(post["gamma"])
             for key in ("starts", "transitions", "durations"):
                 stats[key] += post[key]
+        samples = demos[0] if len(demos) == 1 else np.concatenate(demos)
+        gamma = gammas[0] if len(gammas) == 1 else np.concatenate(gammas)
+        stats["weight"] = gamma.sum(axis=0)
+        stats["sum"] = gamma.T @ samples
+        stats["outer"] = np.einsum("tn,td,te->nde", gamma, samples, samples, optimize=True)
         return stats
 
     def _maximisation(self, stats, scale):
@@ -464,7 +492,7 @@ class HSMM:
         mean = counts[has] @ d / total[has]
         variance = (counts[has] * (d[None, :] - mean[:, None]) ** 2).sum(axis=1) / total[has]
         self.duration_means_[has] = mean
-        self.duration_stds_[has] = np.maximum(np.sqrt(variance), self.min_duration_std)
+        self.duration_stds_[has] = np.maximum(np.sqrt(variance), self.min_duration_std_)
         self.occupancy_ = weight / weight.sum()
 
     # -------------------------------------------------------------- inference
@@ -488,7 +516,8 @@ class HSMM:
         float (-inf if the model cannot produce the demo)
         """
         demo = self._check_demo(demo)
-        return float(self._posteriors(demo, self._log_parameters())[0])
+        log_emission = gaussian_log_pdf(demo, self.means_, self.covariances_)
+        return float(self._posteriors(log_emission, self._log_parameters())[0])
 
     def predict_states(self, demo):
         """Most likely state at each step (argmax of the smoothed posterior).
@@ -502,7 +531,8 @@ class HSMM:
         array of int, shape (T,)
         """
         demo = self._check_demo(demo)
-        log_likelihood, post = self._posteriors(demo, self._log_parameters())
+        log_emission = gaussian_log_pdf(demo, self.means_, self.covariances_)
+        log_likelihood, post = self._posteriors(log_emission, self._log_parameters())
         if post is None:
             raise ValueError("the model cannot produce this demo (log-likelihood is -inf)")
         return np.argmax(post["gamma"], axis=1)

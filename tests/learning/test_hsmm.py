@@ -140,11 +140,29 @@ def test_long_sequences_do_not_underflow(models):
     assert np.all(np.isfinite(h)) and np.allclose(h.sum(axis=1), 1.0)
 
 
-def test_default_max_duration_follows_the_data(models):
-    demos = models.smooth_demos(n_demos=2, n_steps=200, n_dims=3)
-    model = HSMM(5, n_iter=1).fit(demos)
-    mean_length = np.mean([len(d) for d in demos])
-    assert model.max_duration_ == int(np.ceil(3 * mean_length / 5))
+def test_default_duration_limits_follow_the_initial_segmentation(models):
+    demos = models.smooth_demos(n_demos=2, n_steps=2000, n_dims=3)
+    model = HSMM(5, n_iter=1, init="time").fit(demos)
+    # init="time" cuts demo c into 5 equal runs: lengths 400 (demo 0) and 404 (demo 1).
+    runs = np.array([400.0] * 5 + [404.0] * 5)
+    assert model.min_duration_std_ == pytest.approx(0.02 * runs.mean())
+    spread = max(runs.std(), 0.02 * runs.mean(), 0.25 * runs.mean())
+    assert model.max_duration_ == int(np.ceil(runs.mean() + 4 * spread))
+    # A given value wins; d_max never exceeds the longest demonstration.
+    assert HSMM(5, n_iter=1, max_duration=333, min_duration_std=2.0).fit(demos).max_duration_ == 333
+    assert HSMM(1, n_iter=1, init="time").fit(demos[:1]).max_duration_ == len(demos[0])
+
+
+def test_duration_support_is_ten_spreads_around_the_mean(models):
+    model = models.set_parameters(
+        means=np.zeros((2, 1)), covariances=np.ones((2, 1, 1)), startprob=[1.0, 0.0],
+        transmat=[[0.0, 1.0], [1.0, 0.0]], duration_means=[50.0, 10.0],
+        duration_stds=[2.0, 1.0], max_duration=100,
+    )  # fmt: skip
+    finite = np.isfinite(model._log_durations())
+    d = np.arange(1, 101)
+    np.testing.assert_array_equal(finite[0], np.abs(d - 50) <= 20)
+    np.testing.assert_array_equal(finite[1], np.abs(d - 10) <= 10)
 
 
 def test_save_and_load_round_trip(models, tmp_path):
