@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from hemg_drake.control.pd import STIFFNESS_SCALE
 from hemg_drake.emg.envelope import moving_rms
 from hemg_drake.emg.gain import (
     A_EMG,
@@ -20,6 +21,16 @@ from hemg_drake.emg.gain import (
 )
 from hemg_drake.emg.sources import MYO_RATE
 from hemg_drake.fileio import write_bytes_atomic
+
+# K is a gain: joint j of the slave's PD gets the stiffness k_j = K s_j N·m/rad, with s_j
+# from ``hemg_drake.control.pd.STIFFNESS_SCALE`` (20 at the shoulder ... 0.1 at the last wrist
+# roll). So K is the stiffness of a joint with s_j = 1, in N·m/rad.
+STIFFNESS_UNIT = "N·m/rad per unit s_j"
+STIFFNESS_LABEL = f"stiffness K\n({STIFFNESS_UNIT})"
+# Below the panel, for readers who do not know s_j.
+STIFFNESS_NOTE = "K sets joint j's PD stiffness to K·s_j N·m/rad, s = ({})".format(
+    ", ".join(f"{s:g}" for s in STIFFNESS_SCALE))
+ROMAN = ("I", "II", "III", "IV", "V", "VI")
 
 
 def save_figure(figure, path, *, dpi=150):
@@ -99,7 +110,7 @@ def plot_gain_law(A_emg_values=(A_EMG,), *, k_min=DEFAULT_K_MIN, k_max=DEFAULT_K
         activation_axes.plot(u, a, label=label)
         gain_axes.plot(u, gain_from_activation(a, k_min=k_min, k_max=k_max), label=label)
     activation_axes.set_ylabel("activation a(u)")
-    gain_axes.set_ylabel("gain K")
+    gain_axes.set_ylabel(f"gain K ({STIFFNESS_UNIT})")
     for axes in (activation_axes, gain_axes):
         axes.set_xlabel("normalised envelope u")
     activation_axes.legend(loc="lower right")
@@ -186,7 +197,7 @@ def plot_demonstrations(demos, *, task):
         figure = Figure(figsize=(8, 7), layout="constrained")
         grid = figure.subplots(4, 1, sharex=True)
         panels = [(grid[i], "p_WE", i, f"{axis} (m)") for i, axis in enumerate("xyz")]
-        panels.append((grid[3], "gain", None, "stiffness K"))
+        panels.append((grid[3], "gain", None, STIFFNESS_LABEL))
         bottom = grid[3:]
         title = "Demonstrations of drawing (Fig. 10): position and stiffness"
     for axes, field, column, label in panels:
@@ -245,50 +256,116 @@ def plot_reproductions(demos, reproductions):
         grid[axis].set_ylabel(f"{axis} (m)")
         grid[f"v{axis}"].set_ylabel(f"d{axis}/dt (m/s)")
         grid[f"v{axis}"].set_xlabel("time (s)")
-    grid["k"].set_ylabel("stiffness K")
+    grid["k"].set_ylabel(STIFFNESS_LABEL)
     grid["k"].set_xlabel("time (s)")
     grid["x"].legend(loc="best", fontsize="small")
     figure.suptitle("Demonstrations (grey) and HSMM-GMR reproductions")
     return figure
 
 
-def plot_state_activations(time, h, *, title="HSMM state activations h (eq. 12)"):
-    """State weights over time, one line per state: Fig. 8 (c).
+# Up to this many states are drawn as lines with a legend (matplotlib's 10-colour cycle
+# gives each its own colour); more become a heat map.
+MAX_STATE_LINES = 10
+
+
+def state_activations_title(task=None, along=None):
+    """The title of a state-activation plot: the paper's Fig. 8 (c) only for the cotter pin.
+
+    Parameters
+    ----------
+    task : {"cotter_pin", "drawing"} or None
+    along : str, optional
+        What the weights were computed on, e.g. ``"demonstration 1"`` or ``"the reproduction"``.
+    """
+    if task not in (None, "cotter_pin", "drawing"):
+        raise ValueError(f"task must be 'cotter_pin', 'drawing' or None, got {task!r}")
+    title = "HSMM state activations h"
+    if task is not None:
+        title += ", " + task.replace("_", " ")
+    if along:
+        title += f", on {along}"
+    # The paper plots the activations for the cotter pin only (Fig. 8 (c)).
+    return title + (" (Fig. 8 (c))" if task == "cotter_pin" else " (eq. 12)")
+
+
+def plot_state_activations(time, h, *, title=None, task=None, along=None):
+    """State weights over time: Fig. 8 (c) for the cotter pin.
+
+    Up to ``MAX_STATE_LINES`` states are drawn as one line each with a legend; more (the
+    drawing's N = 18) as a heat map, states up the side, with a colour bar for h_i, so no
+    two states share a colour.
 
     Parameters
     ----------
     time : array-like, shape (T,)
-        Seconds.
+        Seconds, increasing.
     h : array-like, shape (T, N)
         Weights in [0, 1], each row summing to 1 (``Reproduction.h``, ``forward_variable``).
+    title : str, optional
+        Wins over the title made from ``task`` and ``along`` by :func:`state_activations_title`.
+    task, along : see :func:`state_activations_title`.
 
     Returns
     -------
     figure : matplotlib.figure.Figure
     """
     time, h = np.asarray(time, dtype=float), np.asarray(h, dtype=float)
-    if time.ndim != 1 or h.ndim != 2 or len(h) != len(time):
+    if time.ndim != 1 or h.ndim != 2 or len(h) != len(time) or len(time) == 0:
         raise ValueError(f"need time (T,) and h (T, N), got {time.shape} and {h.shape}")
-    figure = Figure(figsize=(8, 2.8), layout="constrained")
-    axes = figure.subplots()
-    for i, weights in enumerate(h.T, start=1):
-        axes.plot(time, weights, linewidth=1.2, label=f"state {i}")
-    if h.shape[1] <= 10:
-        axes.legend(loc="center right", fontsize="small")
-    axes.set_ylim(-0.05, 1.05)
+    if title is None:
+        title = state_activations_title(task, along)
+    n_states = h.shape[1]
+    if n_states <= MAX_STATE_LINES:
+        figure = Figure(figsize=(8, 2.8), layout="constrained")
+        axes = figure.subplots()
+        for i, weights in enumerate(h.T, start=1):
+            axes.plot(time, weights, linewidth=1.2, label=f"state {i}")
+        axes.legend(loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize="small")
+        axes.set_ylim(-0.05, 1.05)
+        axes.set_ylabel("h_i")
+    else:
+        figure = Figure(figsize=(8, 0.6 + 0.17 * n_states), layout="constrained")
+        axes = figure.subplots()
+        # Cell edges halfway between samples, so each sample's column is centred on its time.
+        mid = (time[1:] + time[:-1]) / 2 if len(time) > 1 else np.array([])
+        step = time[1] - time[0] if len(time) > 1 else 1.0
+        edges = np.concatenate([[time[0] - step / 2], mid, [time[-1] + step / 2]])
+        mesh = axes.pcolormesh(edges, np.arange(n_states + 1) + 0.5, h.T, cmap="Blues",
+                               vmin=0.0, vmax=1.0, shading="flat")
+        colorbar = figure.colorbar(mesh, ax=axes, pad=0.01)
+        colorbar.set_label("h_i")
+        axes.set_yticks(np.arange(1, n_states + 1, 1 if n_states <= 20 else 2))
+        axes.tick_params(axis="y", labelsize="small")
+        axes.set_ylabel("state i")
     axes.set_xlabel("time (s)")
-    axes.set_ylabel("h_i")
     axes.set_title(title)
     return figure
 
 
-def plot_gmr_field(model, demos=(), *, plane=(0, 2), grid=15):
+# The GMR field is drawn within this many standard deviations of some state.
+NEAR_STD = 3.0
+# With equal axes, the shorter side of the field's region is at least this fraction of the
+# longer one.
+MIN_SIDE_RATIO = 0.3
+# Longest arrow, in grid spacings (the extrapolated field far from the data is clipped).
+MAX_ARROW = 1.2
+
+
+def plot_gmr_field(model, demos=(), *, plane=(0, 2), grid=15, equal_aspect=True):
     """The GMR velocity field of a fitted HSMM on a plane of positions (eqs. 14-17).
 
     At each grid point x the arrow is xdot*(x) = sum_i h_i(x) [mu_i^xdot + S_i^{xdot x}
     (S_i^xx)^-1 (x - mu_i^x)] with the spatial weights h_i of eq. 14; the position
     coordinates off the plane are held at the data's mean. Each state's position Gaussian
     is drawn as its one-standard-deviation ellipse, with the demonstrations' paths.
+
+    The two axes share one scale (``equal_aspect``), so a pull that moves 2.5 mm sideways
+    over 24 cm looks like the straight line it is; the region is then the data's box with
+    its shorter side widened to at least ``MIN_SIDE_RATIO`` of the longer, and the figure
+    takes its shape. Arrows are drawn only within ``NEAR_STD`` standard deviations of some state (in
+    the plane), where the model has data: far from every state GMR only extrapolates the
+    nearest state's linear term. They share one scale: the fastest is 0.9 grid spacings long,
+    and a key gives a round speed.
 
     Parameters
     ----------
@@ -300,6 +377,9 @@ def plot_gmr_field(model, demos=(), *, plane=(0, 2), grid=15):
         The two position coordinates spanning the plane (0 x, 1 y, 2 z).
     grid : int
         Arrows per side, >= 2.
+    equal_aspect : bool
+        One length scale on both axes (default); False fits each axis to the data alone,
+        which magnifies a small spread along one of them.
 
     Returns
     -------
@@ -324,21 +404,57 @@ def plot_gmr_field(model, demos=(), *, plane=(0, 2), grid=15):
     # The plotted region: the states' 2-sigma boxes and the demonstrations' paths.
     spread = 2 * np.sqrt(np.diagonal(covariances, axis1=1, axis2=2))
     points = [means - spread, means + spread] + [demo.p_WE for demo in demos]
-    low = np.min([p.min(axis=0) for p in points], axis=0)
-    high = np.max([p.max(axis=0) for p in points], axis=0)
-    margin = 0.05 * np.maximum(high - low, 1e-6)
-    u = np.linspace(low[a] - margin[a], high[a] + margin[a], grid)
-    v = np.linspace(low[b] - margin[b], high[b] + margin[b], grid)
+    low = np.min([p.min(axis=0) for p in points], axis=0)[[a, b]]
+    high = np.max([p.max(axis=0) for p in points], axis=0)[[a, b]]
+    half = 0.55 * np.maximum(high - low, 1e-6)  # 5 % margin each side
+    middle = (low + high) / 2
+    if equal_aspect:
+        # Square cells, ``grid`` arrows along the longer side; the shorter side is widened to
+        # at least MIN_SIDE_RATIO of the longer, so a thin path still has room around it.
+        long_side = int(np.argmax(half))
+        half[1 - long_side] = max(half[1 - long_side], MIN_SIDE_RATIO * half[long_side])
+        spacing = 2 * half[long_side] / (grid - 1)
+        counts = [grid, grid]
+        short = max(2, int(np.ceil(2 * half[1 - long_side] / spacing - 1e-9)) + 1)
+        counts[1 - long_side] = short + 1 - short % 2  # odd: a middle column through the data
+        half[1 - long_side] = (counts[1 - long_side] - 1) * spacing / 2
+    else:
+        counts = [grid, grid]
+    u = np.linspace(middle[0] - half[0], middle[0] + half[0], counts[0])
+    v = np.linspace(middle[1] - half[1], middle[1] + half[1], counts[1])
     U, V = np.meshgrid(u, v)
     queries = np.tile(centre, (U.size, 1))
     queries[:, a], queries[:, b] = U.ravel(), V.ravel()
     velocity = policy.gmr.predict(queries)[0][:, : policy.n_position]
 
+    # Far from every state the field is GMR's extrapolation (the nearest state's linear
+    # term grows without bound): no arrows there, and the arrows' length scale comes from
+    # the field at the states' means, where the model has data.
+    offsets = np.column_stack([U.ravel(), V.ravel()])[:, None, :] - means[None][:, :, [a, b]]
+    inverse = np.linalg.inv(covariances[:, [a, b]][:, :, [a, b]])
+    distance2 = np.einsum("qni,nij,qnj->qn", offsets, inverse, offsets).min(axis=1)
+    near = distance2 <= NEAR_STD**2
+    at_means = policy.gmr.predict(means)[0][:, [a, b]]
+    typical = float(np.max(np.hypot(*at_means.T))) if np.isfinite(at_means).all() else 0.0
+    spacing = min(u[1] - u[0], v[1] - v[0])
+    scale = typical / (0.9 * spacing) if typical > 0 else None
+    planar = velocity[:, [a, b]]
+    if scale is not None:  # an arrow is at most MAX_ARROW grid spacings long
+        speed = np.hypot(*planar.T)
+        longest = MAX_ARROW * spacing * scale
+        planar = planar * np.minimum(1.0, longest / np.maximum(speed, 1e-300))[:, None]
+
     labels = "xyz"
-    figure = Figure(figsize=(6.5, 5.5), layout="constrained")
+    if equal_aspect:  # the figure takes the region's shape
+        ratio = half[1] / half[0]
+        size = (6.5, 1.6 + 5.0 * ratio) if ratio <= 1 else (2.0 + 6.0 / ratio, 7.5)
+    else:
+        size = (6.5, 6.3)
+    figure = Figure(figsize=(max(size[0], 5.5), size[1]), layout="constrained")
     axes = figure.subplots()
-    axes.quiver(U.ravel(), V.ravel(), velocity[:, a], velocity[:, b], color="tab:blue",
-                alpha=0.7, label="GMR velocity xdot*(x)")
+    style = dict(angles="xy", scale_units="xy", scale=scale)
+    axes.quiver(U.ravel()[near], V.ravel()[near], *planar[near].T, color="tab:blue",
+                alpha=0.8, label="GMR velocity xdot*(x)", **style)
     for demo in demos:
         axes.plot(demo.p_WE[:, a], demo.p_WE[:, b], color="0.4", linewidth=0.8)
     for i, (mean, covariance) in enumerate(zip(means, covariances, strict=True), start=1):
@@ -347,10 +463,18 @@ def plot_gmr_field(model, demos=(), *, plane=(0, 2), grid=15):
         width, height = 2 * np.sqrt(np.maximum(values[::-1], 0.0))
         axes.add_patch(Ellipse((mean[a], mean[b]), width, height, angle=angle, fill=False,
                                color="tab:red", linewidth=1.2))
-        axes.annotate(str(i), (mean[a], mean[b]), color="tab:red", ha="center", va="center")
-    axes.set_xlabel(f"{labels[a]} (m)")
+        axes.annotate(str(i), (mean[a], mean[b]), color="tab:red", ha="center", va="center",
+                      xytext=(6, 0), textcoords="offset points")
+    step = 0.5 * spacing  # the outer arrows' tails sit on the region's edge
+    axes.set_xlim(u[0] - step, u[-1] + step)
+    axes.set_ylim(v[0] - step, v[-1] + step)
+    if equal_aspect:
+        axes.set_aspect("equal", adjustable="box")
+    arrow_scale = f"\narrows: one grid spacing = {spacing * scale:.3g} m/s" if scale else ""
+    axes.set_xlabel(f"{labels[a]} (m){arrow_scale}")
     axes.set_ylabel(f"{labels[b]} (m)")
-    axes.set_title("GMR field (arrows), states (red, 1 std), demonstrations (grey)")
+    axes.set_title(f"GMR velocity field xdot*(x) within {NEAR_STD:g} std of a state (blue),\n"
+                   "states (red, 1 std), demonstrations (grey)", loc="left", fontsize="medium")
     return figure
 
 
@@ -363,19 +487,28 @@ def _demos_and_reproduction(axes, demos, log, demo_values, log_values):
 
 
 def plot_pin_reproduction(demos, log):
-    """Fig. 8 (d)-(f): reproduced position, velocity and tracking force of the cotter pin.
+    """Fig. 8 (d)-(f): reproduced position, velocity, tracking force and stiffness of the pin.
 
     Parameters
     ----------
-    demos : sequence of Demonstration (grey).
-    log : ReproductionLog (red): ``p_WE``, ``v_WE``, ``F_tr`` against ``time``.
+    demos : sequence of Demonstration (grey): ``p_WE``, ``v_WE``, ``gain``.
+    log : ReproductionLog (red): ``p_WE``, ``v_WE``, ``F_tr``, ``k_star`` against ``time``.
 
     Returns
     -------
-    figure : matplotlib.figure.Figure, 3 x 3 axes: position, velocity, force along x, y, z.
+    figure : matplotlib.figure.Figure
+        ``figure.axes[:9]``, 3 x 3 row by row: position, velocity, tracking force along x, y,
+        z; ``figure.axes[9]``, across the width: the stiffness k* the arm was given against
+        the demonstrated gain K.
     """
-    figure = Figure(figsize=(10, 7), layout="constrained")
-    grid = figure.subplots(3, 3, sharex=True)
+    figure = Figure(figsize=(10, 9), layout="constrained")
+    layout = figure.add_gridspec(4, 3)
+    grid = np.empty((3, 3), dtype=object)
+    for row in range(3):
+        for i in range(3):
+            share = grid[0, 0] if (row, i) != (0, 0) else None
+            grid[row, i] = figure.add_subplot(layout[row, i], sharex=share)
+    stiffness = figure.add_subplot(layout[3, :], sharex=grid[0, 0])
     for i, axis in enumerate("xyz"):
         _demos_and_reproduction(grid[0, i], demos, log, lambda d, i=i: d.p_WE[:, i],
                                 lambda r, i=i: r.p_WE[:, i])
@@ -386,34 +519,101 @@ def plot_pin_reproduction(demos, log):
         grid[1, i].set_ylabel(f"d{axis}/dt (m/s)")
         grid[2, i].set_ylabel(f"F_tr,{axis} (N)")
         grid[2, i].set_xlabel("time (s)")
+    _demos_and_reproduction(stiffness, demos, log, lambda d: d.gain, lambda r: r.k_star)
+    stiffness.set_ylabel(STIFFNESS_LABEL)
+    stiffness.set_xlabel(f"time (s)          {STIFFNESS_NOTE}")
+    stiffness.set_title("stiffness: reproduced k* (red) against the demonstrated gain K (grey)",
+                        fontsize="medium")
     grid[0, 0].legend(loc="best", fontsize="small")
-    figure.suptitle("Cotter pin: reproduced position (d), velocity (e), tracking force (f)")
+    figure.suptitle("Cotter pin: reproduced position (d), velocity (e), tracking force (f) "
+                    "and stiffness")
     return figure
 
 
-def plot_drawing_reproduction(demos, log):
+def steps_from_contact(time, f_WE, *, min_gap=0.25):
+    """Boundaries of the drawing's steps I-VI (s), shape (7,), from a logged pen force.
+
+    The pen-down stretches are the runs of samples whose force exceeds the ink's contact
+    threshold; runs less than ``min_gap`` seconds apart are one stroke (a bounce is not a
+    pen lift). Step I runs from the log's start to the end of stroke 1, II to the start of
+    stroke 2, III to its end, and so on, VI to the log's end (as ``drawing_steps`` does on a
+    plan).
+
+    Returns
+    -------
+    array, shape (7,), or None when the log does not show exactly three strokes.
+    """
+    from hemg_drake.viz.ink import in_contact
+
+    time = np.asarray(time, dtype=float)
+    down = in_contact(f_WE)
+    if time.shape != down.shape:
+        raise ValueError(f"time must have shape {down.shape} (one per force), got {time.shape}")
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], down.astype(int), [0]])))
+    runs = [[time[start], time[end - 1]] for start, end in zip(edges[0::2], edges[1::2])]
+    strokes = []
+    for run in runs:
+        if strokes and run[0] - strokes[-1][1] < min_gap:
+            strokes[-1][1] = run[1]
+        else:
+            strokes.append(run)
+    if len(strokes) != 3:
+        return None
+    (s1, e1), (s2, e2), (s3, e3) = strokes
+    return np.array([time[0], e1, s2, e2, s3, e3, time[-1]])
+
+
+def mark_steps(axes_list, steps):
+    """Dashed lines at the inner boundaries of steps I-VI, their numerals above the first axis."""
+    steps = np.asarray(steps, dtype=float)
+    if steps.shape != (7,) or not np.all(np.diff(steps) >= 0):
+        raise ValueError(f"steps must be 7 increasing times (s), got {steps!r}")
+    for axes in axes_list:
+        for boundary in steps[1:-1]:
+            axes.axvline(boundary, color="0.3", linestyle="--", linewidth=0.8)
+    top = axes_list[0]
+    for numeral, (start, end) in zip(ROMAN, zip(steps[:-1], steps[1:]), strict=True):
+        top.text((start + end) / 2, 1.02, numeral, transform=top.get_xaxis_transform(),
+                 ha="center", va="bottom", fontsize="medium", fontweight="bold")
+
+
+def plot_drawing_reproduction(demos, log, *, steps=None):
     """Fig. 10: x, y, z and stiffness of the drawing demonstrations (grey) and reproduction (red).
 
     Parameters
     ----------
-    demos : sequence of Demonstration: ``p_WE``, ``gain``.
-    log : ReproductionLog: ``p_WE``, ``k_star``.
+    demos : sequence of Demonstration: ``p_WE``, ``gain``, ``f_WE`` (for the steps).
+    log : ReproductionLog: ``p_WE``, ``k_star``, ``f_WE`` (for the steps).
+    steps : array of 7 times (s), None or False
+        The boundaries of steps I-VI (``drawing_steps(plan)``), marked on every axis. None
+        (default): from the reproduction's own pen force (:func:`steps_from_contact`), else
+        from the first demonstration that shows three strokes; False: no marks.
 
     Returns
     -------
     figure : matplotlib.figure.Figure, four axes sharing time.
     """
-    figure = Figure(figsize=(8, 8), layout="constrained")
+    demos = list(demos)
+    figure = Figure(figsize=(8, 8.5), layout="constrained")
     grid = figure.subplots(4, 1, sharex=True)
     for i, axis in enumerate("xyz"):
         _demos_and_reproduction(grid[i], demos, log, lambda d, i=i: d.p_WE[:, i],
                                 lambda r, i=i: r.p_WE[:, i])
         grid[i].set_ylabel(f"{axis} (m)")
     _demos_and_reproduction(grid[3], demos, log, lambda d: d.gain, lambda r: r.k_star)
-    grid[3].set_ylabel("stiffness K")
-    grid[3].set_xlabel("time (s)")
+    grid[3].set_ylabel(STIFFNESS_LABEL)
+    grid[3].set_xlabel(f"time (s)\n{STIFFNESS_NOTE}")
     grid[0].legend(loc="best", fontsize="small")
-    figure.suptitle("Drawing: demonstrations and reproduction (Fig. 10)")
+    title = "Drawing: demonstrations and reproduction (Fig. 10)"
+    if steps is None:
+        logged = [r for r in [log, *demos] if getattr(r, "f_WE", None) is not None]
+        steps = next((found for found in (steps_from_contact(r.time, r.f_WE) for r in logged)
+                      if found is not None), None)
+        if steps is None:
+            title += "; steps I-VI not marked: no log shows three strokes"
+    if steps is not None and steps is not False:
+        mark_steps(list(grid), steps)
+    figure.suptitle(title)
     return figure
 
 
