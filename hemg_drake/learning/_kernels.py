@@ -244,3 +244,65 @@ def residual_step(predicted, log_emission, transmat_T, durations):
             predicted_next[i, d] = weight[i] * predicted[i, d + 1] + starts[i] * durations[i, d]
         predicted_next[i, n_durations - 1] = starts[i] * durations[i, n_durations - 1]
     return h / total, predicted_next / predicted_next.sum()
+
+
+@numba.njit(cache=True)
+def viterbi(log_emission, log_startprob, log_transmat, log_duration):
+    """Segmental Viterbi: the most likely segmentation of one sequence.
+
+    The max-product version of :func:`forward` (a complete segment ends the sequence).
+
+    Parameters
+    ----------
+    log_emission, log_startprob, log_transmat, log_duration : arrays
+        As for :func:`forward`.
+
+    Returns
+    -------
+    log_probability : float
+        log p(xi, best segmentation); -inf if no segmentation is possible.
+    states : array of int, shape (T,)
+        The state active at each step (all -1 if impossible).
+    """
+    n_steps, n_states = log_emission.shape
+    first, last = _support(log_duration)
+    total = _cumulative(log_emission)
+    best = np.empty((n_steps, n_states))  # a segment of i ends at t
+    best_in = np.empty((n_states, n_steps))  # a segment of i starts at t, state-major
+    previous = np.full((n_steps, n_states), -1, dtype=np.int64)  # state before that segment
+    length = np.zeros((n_steps, n_states), dtype=np.int64)  # its duration
+    for t in range(n_steps):
+        for i in range(n_states):
+            if t == 0:
+                best_in[i, t] = log_startprob[i]
+                continue
+            top = _NEG_INF
+            for j in range(n_states):
+                value = best[t - 1, j] + log_transmat[j, i]
+                if value > top:
+                    top = value
+                    previous[t, i] = j
+            best_in[i, t] = top
+        for i in range(n_states):
+            top = _NEG_INF
+            end = total[i, t + 1]
+            for d in range(first[i] + 1, min(last[i] + 1, t + 1) + 1):
+                begin = t - d + 1
+                value = best_in[i, begin] + log_duration[i, d - 1] + end - total[i, begin]
+                if value > top:
+                    top = value
+                    length[t, i] = d
+            best[t, i] = top
+    states = np.full(n_steps, -1, dtype=np.int64)
+    state = np.argmax(best[n_steps - 1])
+    log_probability = best[n_steps - 1, state]
+    if log_probability == _NEG_INF:
+        return log_probability, states
+    t = n_steps - 1
+    while t >= 0:
+        begin = t - length[t, state] + 1
+        states[begin : t + 1] = state
+        state_before = previous[begin, state]
+        t = begin - 1
+        state = state_before
+    return log_probability, states

@@ -1,5 +1,6 @@
 """Hidden semi-Markov model with explicit Gaussian durations, trained by EM (eqs. 4-11)."""
 
+import inspect
 import json
 from pathlib import Path
 
@@ -16,6 +17,10 @@ FORMAT_VERSION = 2
 INITS = ("kmeans", "time", "polyline")
 # Default floor on sigma_i^D, as a fraction of the initial segments' mean duration.
 DURATION_STD_FLOOR = 0.02
+PARAMETERS = (
+    "n_states", "max_duration", "reg_covar", "min_duration_std", "n_iter", "tol", "init",
+    "n_init", "n_position", "seed",
+)  # fmt: skip
 _FITTED = (
     "startprob_", "transmat_", "means_", "covariances_",
     "duration_means_", "duration_stds_", "occupancy_", "data_range_",
@@ -103,6 +108,36 @@ def check_demos(demos, n_dims=None):
                 f"demo {c} has D = {demo.shape[1]} dimensions, {where} is D = {expected}"
             )
     return demos
+
+
+def split_sequences(X, lengths=None):
+    """hmmlearn's form to a list: X of shape (sum(lengths), D) cut into ``lengths`` rows.
+
+    Parameters
+    ----------
+    X : array, shape (n_samples, D), or list of arrays (T_c, D)
+        With ``lengths=None`` a 2-D array is one sequence and a list is taken as it is.
+    lengths : sequence of int, optional
+        Sequence lengths, summing to ``len(X)``.
+
+    Returns
+    -------
+    list of arrays (T_c, D)
+    """
+    if lengths is None:
+        return [X] if isinstance(X, np.ndarray) and X.ndim == 2 else list(X)
+    X = np.asarray(X, dtype=float)
+    lengths = np.asarray(lengths)
+    if X.ndim != 2:
+        raise ValueError(f"X must have shape (n_samples, D) with lengths, got {X.shape}")
+    if (
+        lengths.ndim != 1 or lengths.size == 0 or not np.issubdtype(lengths.dtype, np.integer)
+        or np.any(lengths < 1) or lengths.sum() != len(X)
+    ):  # fmt: skip
+        raise ValueError(
+            f"lengths must be integers >= 1 summing to len(X) = {len(X)}, got {lengths.tolist()}"
+        )
+    return np.split(X, np.cumsum(lengths)[:-1])
 
 
 class HSMM:
@@ -201,6 +236,43 @@ class HSMM:
         self.seed = seed
         self._check_parameters()
 
+    def get_params(self, deep=True):
+        """The constructor's parameters by name (scikit-learn's estimator protocol).
+
+        Parameters
+        ----------
+        deep : bool
+            Ignored (no parameter is an estimator); kept for scikit-learn.
+
+        Returns
+        -------
+        dict
+        """
+        return {name: getattr(self, name) for name in PARAMETERS}
+
+    def set_params(self, **params):
+        """Set constructor parameters by name; checked as in the constructor. Returns self."""
+        unknown = sorted(set(params) - set(PARAMETERS))
+        if unknown:
+            raise ValueError(f"unknown HSMM parameter(s) {unknown}; valid: {list(PARAMETERS)}")
+        previous = self.get_params()
+        for name, value in params.items():
+            setattr(self, name, value)
+        try:
+            self._check_parameters()
+        except ValueError:
+            for name, value in previous.items():
+                setattr(self, name, value)
+            raise
+        return self
+
+    def __repr__(self):
+        changed = {
+            name: value for name, value in self.get_params().items()
+            if name == "n_states" or value != _DEFAULTS[name]
+        }  # fmt: skip
+        return "HSMM(" + ", ".join(f"{name}={value!r}" for name, value in changed.items()) + ")"
+
     def _check_parameters(self):
         def integer(value):
             return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
@@ -258,20 +330,24 @@ class HSMM:
         return p
 
     # -------------------------------------------------------------------- fit
-    def fit(self, demos):
+    def fit(self, X, lengths=None):
         """Estimate the model from demonstrations by EM.
 
         Parameters
         ----------
-        demos : list of arrays, shape (T_c, D)
-            C demonstrations of possibly different lengths T_c >= n_states.
+        X : list of arrays, shape (T_c, D), or array, shape (n_samples, D)
+            C demonstrations of possibly different lengths T_c >= n_states; or, as in
+            hmmlearn, their concatenation with ``lengths`` (a 2-D array without ``lengths``
+            is one demonstration).
+        lengths : sequence of int, optional
+            T_c of each demonstration in ``X``.
 
         Returns
         -------
         self
         """
         self._check_parameters()
-        demos = check_demos(demos)
+        demos = check_demos(split_sequences(X, lengths))
         for c, demo in enumerate(demos):
             if len(demo) < self.n_states:
                 raise ValueError(
@@ -537,6 +613,126 @@ class HSMM:
             raise ValueError("the model cannot produce this demo (log-likelihood is -inf)")
         return np.argmax(post["gamma"], axis=1)
 
+    def score(self, X, lengths=None):
+        """Total log-likelihood of one or more sequences (hmmlearn's ``score``).
+
+        Parameters
+        ----------
+        X : array, shape (n_samples, D), or list of arrays (T_c, D)
+        lengths : sequence of int, optional
+            As for :meth:`fit`.
+
+        Returns
+        -------
+        float
+            sum_c log p(sequence c | lambda) (-inf if one cannot be produced).
+        """
+        return float(sum(self.log_likelihood(demo) for demo in self._sequences(X, lengths)))
+
+    def _sequences(self, X, lengths):
+        self._check_fitted()
+        return check_demos(split_sequences(X, lengths), n_dims=self.means_.shape[1])
+
+    def decode(self, X, lengths=None):
+        """Most likely state sequence, by segmental Viterbi (hmmlearn's ``decode``).
+
+        The best segmentation (states and durations) jointly, not the per-step argmax of
+        :meth:`predict_states`. With no self-transitions, each run of one state in the
+        result is one segment: :func:`segments` gives (state, start, duration).
+
+        Parameters
+        ----------
+        X : array, shape (n_samples, D), or list of arrays (T_c, D)
+        lengths : sequence of int, optional
+            As for :meth:`fit`.
+
+        Returns
+        -------
+        log_probability : float
+            sum over sequences of log p(xi, best segmentation).
+        states : array of int, shape (n_samples,)
+            All sequences' states, concatenated.
+
+        Raises
+        ------
+        ValueError
+            If a sequence cannot be produced by the model.
+        """
+        log_parameters = self._log_parameters()
+        total, states = 0.0, []
+        for c, demo in enumerate(self._sequences(X, lengths)):
+            log_emission = gaussian_log_pdf(demo, self.means_, self.covariances_)
+            log_probability, path = _kernels.viterbi(log_emission, *log_parameters)
+            if not np.isfinite(log_probability):
+                raise ValueError(f"the model cannot produce sequence {c} (probability 0)")
+            total += log_probability
+            states.append(path)
+        return float(total), np.concatenate(states)
+
+    def sample(self, n_samples, seed=0):
+        """Draw one sequence from the model (hmmlearn's ``sample``).
+
+        The first state from pi, each duration from p_i(d) normalised over its support,
+        observations from N(mu_i, Sigma_i), the next state from row i of A (a state whose
+        row is zero, never left in training, continues). The last segment is cut at
+        ``n_samples``.
+
+        Parameters
+        ----------
+        n_samples : int >= 1
+        seed : int or numpy.random.Generator
+
+        Returns
+        -------
+        X : array, shape (n_samples, D)
+        states : array of int, shape (n_samples,)
+        """
+        self._check_fitted()
+        if not isinstance(n_samples, (int, np.integer)) or n_samples < 1:
+            raise ValueError(f"n_samples must be an integer >= 1, got {n_samples!r}")
+        rng = np.random.default_rng(seed)
+        durations = np.exp(self._log_durations())
+        durations /= durations.sum(axis=1, keepdims=True)
+        states = np.empty(n_samples, dtype=int)
+        state, t = rng.choice(self.n_states, p=self.startprob_), 0
+        while t < n_samples:
+            duration = 1 + rng.choice(self.max_duration_, p=durations[state])
+            states[t : t + duration] = state
+            t += duration
+            row = self.transmat_[state]
+            if row.sum() > 0:
+                state = rng.choice(self.n_states, p=row / row.sum())
+        X = np.empty((n_samples, self.means_.shape[1]))
+        factors = np.linalg.cholesky(self.covariances_)
+        noise = rng.standard_normal(X.shape)
+        for i in range(self.n_states):
+            rows = states == i
+            X[rows] = self.means_[i] + noise[rows] @ factors[i].T
+        return X, states
+
+    @property
+    def n_parameters_(self):
+        """Free parameters, counted as hmmlearn does (every entry of A free).
+
+        (N - 1) for pi, N (N - 2) for A (each row: N - 1 off-diagonal entries summing to
+        1; N = 1 has none), N D means, N D (D + 1) / 2 covariances, 2 N durations (mean and
+        spread). Zeros of A kept by a left-to-right initialisation are counted as free.
+        """
+        n, n_dims = self.n_states, self.n_dims_
+        return int(
+            (n - 1) + n * max(n - 2, 0) + n * n_dims + n * n_dims * (n_dims + 1) // 2 + 2 * n
+        )
+
+    def bic(self, X, lengths=None):
+        """Bayesian information criterion: -2 log L + n_parameters_ log(n_samples). Lower is better."""
+        demos = self._sequences(X, lengths)
+        n_samples = sum(len(demo) for demo in demos)
+        return -2.0 * self.score(demos) + self.n_parameters_ * np.log(n_samples)
+
+    def aic(self, X, lengths=None):
+        """Akaike information criterion: -2 log L + 2 n_parameters_. Lower is better."""
+        return -2.0 * self.score(self._sequences(X, lengths)) + 2.0 * self.n_parameters_
+
     def _log_emission(self, demo_or_n_steps, observe):
         """(T, N) emission log-likelihoods, zeros when not observing."""
         if observe:
@@ -596,18 +792,7 @@ class HSMM:
     def save(self, path):
         """Write the fitted model to ``path`` (NPZ with a format version), atomically."""
         self._check_fitted()
-        settings = {
-            "n_states": self.n_states,
-            "max_duration": self.max_duration,
-            "reg_covar": self.reg_covar,
-            "min_duration_std": self.min_duration_std,
-            "n_iter": self.n_iter,
-            "tol": self.tol,
-            "init": self.init,
-            "n_init": self.n_init,
-            "n_position": self.n_position,
-            "seed": self.seed,
-        }
+        settings = self.get_params()
         save_npz_atomic(
             path,
             format_version=np.array(FORMAT_VERSION),
@@ -674,3 +859,59 @@ class HSMM:
             raise ValueError(f"{path}: damaged HSMM model file, data_range_ minimum > maximum")
         if np.any(self.duration_stds_ <= 0) or self.max_duration_ < 1:
             raise ValueError(f"{path}: damaged HSMM model file, bad duration parameters")
+
+
+_DEFAULTS = {
+    name: parameter.default
+    for name, parameter in inspect.signature(HSMM.__init__).parameters.items()
+    if name in PARAMETERS
+}
+
+
+def segments(states):
+    """The runs of a state sequence: arrays ``state``, ``start``, ``duration`` (steps).
+
+    With no self-transitions in the model, each run of :meth:`HSMM.decode` is one segment.
+    """
+    states = np.asarray(states)
+    if states.ndim != 1 or states.size == 0:
+        raise ValueError(f"states must be a non-empty 1-D array, got shape {states.shape}")
+    start = np.concatenate([[0], np.flatnonzero(np.diff(states)) + 1])
+    duration = np.diff(np.concatenate([start, [len(states)]]))
+    return states[start], start, duration
+
+
+def select_n_states(X, candidates, *, lengths=None, criterion="bic", **parameters):
+    """Fit an HSMM for each number of states and keep the one with the lowest BIC or AIC.
+
+    Parameters
+    ----------
+    X : list of arrays (T_c, D), or array (n_samples, D)
+    candidates : iterable of int
+        Numbers of states to try.
+    lengths : sequence of int, optional
+        As for :meth:`HSMM.fit`.
+    criterion : {"bic", "aic"}
+    **parameters
+        Other :class:`HSMM` parameters (the same for every candidate).
+
+    Returns
+    -------
+    best : HSMM
+        Fitted, the lowest criterion.
+    scores : dict
+        Criterion value per number of states.
+    """
+    if criterion not in ("bic", "aic"):
+        raise ValueError(f"criterion must be 'bic' or 'aic', got {criterion!r}")
+    candidates = list(candidates)
+    if not candidates:
+        raise ValueError("candidates is empty: give the numbers of states to try")
+    demos = check_demos(split_sequences(X, lengths))
+    scores, best = {}, None
+    for n_states in candidates:
+        model = HSMM(n_states, **parameters).fit(demos)
+        scores[n_states] = float(getattr(model, criterion)(demos))
+        if best is None or scores[n_states] < scores[best.n_states]:
+            best = model
+    return best, scores
