@@ -631,7 +631,8 @@ def plot_strokes(strokes, *, demonstrated=(), title="Drawn strokes seen from abo
     """
     figure = Figure(figsize=(5, 6), layout="constrained")
     axes = figure.subplots()
-    lines = [(s, "0.7", 1.0, "demonstrations" if i == 0 else None) for i, s in enumerate(demonstrated)]
+    lines = [(s, "0.7", 1.0, "demonstrations" if i == 0 else None)
+             for i, s in enumerate(demonstrated)]
     lines += [(s, None, 2.0, f"stroke {i}") for i, s in enumerate(strokes, start=1)]
     for stroke, color, width, label in lines:
         stroke = np.asarray(stroke, dtype=float)

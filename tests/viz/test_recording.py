@@ -1,5 +1,6 @@
 """Meshcat replays: one self-contained HTML, no servers left behind, rendered by Chromium."""
 
+import base64
 import gc
 import os
 import re
@@ -7,15 +8,16 @@ import socket
 import threading
 
 import matplotlib.image
+import msgpack
 import numpy as np
 import pytest
-from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from hemg_drake.robots.baxter import FLOOR_Z, add_baxter_arm
 from hemg_drake.viz import screenshot
-from hemg_drake.viz.recording import ReplayRecorder
+from hemg_drake.viz.recording import RIGHT_SHOULDER_W, ReplayRecorder, camera_framing, frame_task
 from hemg_drake.viz.screenshot import render_html_to_png
 
 # Network references that would make a browser fetch something to render the page.
@@ -33,13 +35,19 @@ def _os_threads():
     return len(os.listdir("/proc/self/task"))
 
 
-def _record_arm(path, duration=0.3):
+# A task at the arm's front right (the cotter pin's ring and its pull), and the shoulder.
+PLAN_POINTS = np.array([[0.64, -0.84, 0.12], [0.64, -0.84, 0.22]])
+TASK_POINTS = np.vstack([RIGHT_SHOULDER_W, PLAN_POINTS])
+TITLE = "cotter pin: demonstration 2 <seed 101> & co"
+
+
+def _record_arm(path, duration=0.3, **recorder_options):
     """Record the bare arm falling under gravity from its home pose; return the server's port."""
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
     add_baxter_arm(plant)  # starts at home
     plant.Finalize()
-    recorder = ReplayRecorder(floor_z=FLOOR_Z)
+    recorder = ReplayRecorder(floor_z=FLOOR_Z, **recorder_options)
     recorder.add_to_builder(builder, scene_graph)
     port = recorder.meshcat.port()
     simulator = Simulator(builder.Build())
@@ -52,8 +60,77 @@ def _record_arm(path, duration=0.3):
 @pytest.fixture(scope="module")
 def replay(tmp_path_factory):
     path = tmp_path_factory.mktemp("replay") / "replay.html"
-    _record_arm(path)
+    _record_arm(path, title=TITLE, view=frame_task(PLAN_POINTS))
     return path
+
+
+def _commands(html):
+    """Meshcat's commands embedded in a static page (base64 msgpack), in order."""
+    return [msgpack.unpackb(base64.b64decode(data), raw=False, strict_map_key=False)
+            for data in re.findall(r"data:application/octet-binary;base64,([A-Za-z0-9+/=]+)",
+                                   html)]
+
+
+def _to_three(p_W):
+    """Drake's z-up world to three.js's y-up frame, written out here: (x, z, -y)."""
+    return [p_W[0], p_W[2], -p_W[1]]
+
+
+def test_replay_has_its_title(replay):
+    html = replay.read_text(encoding="utf-8")
+    titles = re.findall(r"<title>(.*?)</title>", html, re.DOTALL)
+    assert titles == ["cotter pin: demonstration 2 &lt;seed 101&gt; &amp; co"]
+    assert "Drake MeshCat" not in html
+
+
+def test_replay_opens_on_the_framed_camera(replay):
+    camera, target = camera_framing(TASK_POINTS)
+    commands = _commands(replay.read_text(encoding="utf-8"))
+    positions = [c["value"] for c in commands if c["type"] == "set_property"
+                 and c["path"] == "/Cameras/default/rotated/<object>"
+                 and c["property"] == "position"]
+    targets = [c["value"] for c in commands if c["type"] == "set_target"]
+    np.testing.assert_allclose(positions[-1], _to_three(camera))
+    np.testing.assert_allclose(targets[-1], _to_three(target))
+
+
+def test_frame_task_includes_the_shoulder_where_the_plant_has_it():
+    plant = MultibodyPlant(0.0)
+    add_baxter_arm(plant)
+    plant.Finalize()
+    shoulder = plant.GetBodyByName("right_upper_shoulder").EvalPoseInWorld(
+        plant.CreateDefaultContext()).translation()
+    np.testing.assert_allclose(RIGHT_SHOULDER_W, shoulder, atol=1e-6)
+    for got, expected in zip(frame_task(PLAN_POINTS), camera_framing(TASK_POINTS), strict=True):
+        np.testing.assert_array_equal(got, expected)
+    with pytest.raises(ValueError, match="points_W"):
+        frame_task([0.0, 0.0, 0.0])
+
+
+def test_framing_puts_every_point_in_the_view_cone():
+    camera, target = camera_framing(TASK_POINTS, margin=1.15)
+    np.testing.assert_allclose(target, (TASK_POINTS.min(0) + TASK_POINTS.max(0)) / 2)
+    axis = (target - camera) / np.linalg.norm(target - camera)
+    for point in TASK_POINTS:
+        ray = point - camera
+        angle = np.degrees(np.arccos(ray @ axis / np.linalg.norm(ray)))
+        assert angle < 37.5 / 1.15  # inside the vertical half-angle, with the margin
+    # The camera looks from the front left and above, not from below or behind the robot.
+    assert camera[0] > target[0] and camera[1] > target[1] and camera[2] > target[2]
+    # Tighter than the old default camera, which stood 2 m from a point below the task.
+    assert np.linalg.norm(camera - target) < 1.2
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [({"points_W": np.zeros((0, 3))}, "points_W"), ({"points_W": [[0.0, 0.0]]}, "points_W"),
+     ({"points_W": [[np.nan, 0, 0]]}, "NaN"), ({"view_from": (0, 0, 0)}, "view_from"),
+     ({"fov_deg": 0.0}, "fov_deg"), ({"margin": 0.5}, "margin")],
+)
+def test_framing_bad_input(kwargs, message):
+    kwargs = {"points_W": TASK_POINTS, **kwargs}
+    with pytest.raises(ValueError, match=message):
+        camera_framing(**kwargs)
 
 
 def _network_references(html):
@@ -92,6 +169,13 @@ def test_recorder_errors(tmp_path):
         ReplayRecorder(publish_period=0.0)
     with pytest.raises(ValueError, match="camera_in_world"):
         ReplayRecorder(camera_in_world=(1.0, 2.0))
+    with pytest.raises(ValueError, match="differ"):
+        ReplayRecorder(camera_in_world=(1.0, 2.0, 3.0), target_in_world=(1.0, 2.0, 3.0))
+    with pytest.raises(ValueError, match="not both"):
+        ReplayRecorder(view=camera_framing(TASK_POINTS), camera_in_world=(1.0, 2.0, 3.0))
+    for title in ("", "two\nlines", None):
+        with pytest.raises(ValueError, match="title"):
+            ReplayRecorder(title=title)
     builder = DiagramBuilder()
     _, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
     recorder.add_to_builder(builder, scene_graph)
@@ -131,3 +215,14 @@ def test_blank_page_has_no_arm(chromium, tmp_path):
     page.write_text("<!DOCTYPE html><html><body style='background:#ccc'></body></html>")
     png = render_html_to_png(page, tmp_path / "blank.png", size=(400, 300))
     assert _arm_pixels(png) == 0
+
+
+@pytest.mark.browser
+def test_framed_replay_shows_the_arm_near_the_centre(replay, chromium, tmp_path):
+    png = render_html_to_png(replay, tmp_path / "framed.png", size=(800, 600))
+    rgb = matplotlib.image.imread(png)[..., :3]
+    red = (rgb[..., 0] > 0.5) & (rgb[..., 1] < 0.25) & (rgb[..., 2] < 0.25)
+    rows, columns = np.nonzero(red)
+    assert len(rows) > 2000  # closer than the old default view (0.3-0.8 % of the picture)
+    # The red arm's centroid lies in the middle half of the picture both ways.
+    assert abs(columns.mean() - 400) < 200 and abs(rows.mean() - 300) < 150
