@@ -1,54 +1,166 @@
 """hemg-drake: demonstrate, learn and reproduce teleoperated tasks in Drake.
 
-Sub-commands import their modules lazily so that ``hemg-drake --help`` is instant.
+Every mistake is answered in one line on stderr with exit status 2 (a bad value, a missing
+or unwritable file); Ctrl-C stops with one line and exit status 130, leaving no partial
+output. Sub-commands import their modules lazily so that ``hemg-drake --help`` is instant.
 """
 
 import argparse
+import math
+import os
 import sys
+import tempfile
+from pathlib import Path
+
+SET_HELP = (
+    "override a scenario key, in YAML value syntax (repeatable), e.g. --set emg.k_max=150 "
+    "--set scene.position=[0.65,-0.80,0.12]"
+)
+# emg-figure's synthetic recording: at most this long (s); a longer one takes minutes and
+# gigabytes to plot for no more insight.
+MAX_EMG_FIGURE_DURATION = 600.0
+
+
+def _print(line):
+    """Print, and keep working if the reader went away (``| head``)."""
+    try:
+        print(line, flush=True)
+    except BrokenPipeError:
+        # Later lines go nowhere; the job itself carries on and finishes its files.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+
+
+def _positive_int(name):
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a whole number, got {text!r}")
+        if value < 1:
+            raise argparse.ArgumentTypeError(f"{name} must be at least 1, got {value}")
+        return value
+
+    return parse
+
+
+def _non_negative_int(name):
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a whole number, got {text!r}")
+        if value < 0:
+            raise argparse.ArgumentTypeError(f"{name} must not be negative, got {value}")
+        return value
+
+    return parse
+
+
+def _finite_float(name, *, positive=False, maximum=math.inf):
+    def parse(text):
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}")
+        if not math.isfinite(value) or (positive and value <= 0) or value > maximum:
+            bound = f" and at most {maximum:g}" if math.isfinite(maximum) else ""
+            kind = "a positive number" if positive else "a finite number"
+            raise argparse.ArgumentTypeError(f"{name} must be {kind}{bound}, got {text}")
+        return value
+
+    return parse
+
+
+def check_output_folder(path):
+    """Raise ValueError unless ``path`` is (or can be made) a writable folder; make it.
+
+    Checked before any simulation, so a bad ``--out`` costs nothing.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{path}: exists and is not a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path):
+            pass
+    except OSError as error:
+        raise ValueError(f"{path}: cannot write there ({error.strerror or error})") from None
+    return path
+
+
+def check_output_file(path):
+    """Raise ValueError unless a file can be written at ``path`` (not a folder)."""
+    path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{path}: is a folder; give a file name, e.g. {path / 'fig6.png'}")
+    check_output_folder(path.parent if str(path.parent) else Path("."))
+    return path
+
+
+def _scenario_path(name):
+    """A scenario file, or the name of a shipped one (``cotter_pin``, ``drawing``)."""
+    from hemg_drake.scenario import TASKS, shipped_scenario
+
+    if name in TASKS and not Path(name).exists():
+        return shipped_scenario(name)
+    return Path(name)
 
 
 def _demo(args):
     from hemg_drake.pipeline import run_demo
 
-    run_demo(args.out, tasks=args.tasks, replays=not args.no_replay)
+    check_output_folder(args.out)
+    run_demo(
+        args.out, tasks=args.tasks, overrides=args.set, replays=not args.no_replay, progress=_print
+    )
+
+
+def _demonstrate(args):
+    from hemg_drake.pipeline import demonstrate
+    from hemg_drake.scenario import load_scenario
+
+    overrides = list(args.set)
+    if args.demos is not None:
+        overrides.append(f"num_demonstrations={args.demos}")
+    if args.duration is not None:
+        overrides.append(f"duration={args.duration}")
+    if args.seed is not None:
+        overrides.append(f"seed={args.seed}")
+    scenario = load_scenario(_scenario_path(args.scenario), overrides=overrides)
+    check_output_folder(args.out)
+    count = scenario.num_demonstrations
+    _print(
+        f"{scenario.task}: {count} demonstration{'s' if count != 1 else ''} of "
+        f"{scenario.duration:g} s into {args.out}"
+    )
+    for path in demonstrate(scenario, args.out, replays=not args.no_replay, progress=_print):
+        _print(f"wrote {path}")
 
 
 def _learn(args):
     from hemg_drake.pipeline import learn
 
-    learn(args.run, n_iter=args.iterations)
+    learn(args.run, overrides=args.set, n_iter=args.iterations, progress=_print)
 
 
 def _reproduce(args):
-    from hemg_drake.pipeline import DEFAULT_WEIGHTING, RESTORING_GAIN, reproduce
+    from hemg_drake.pipeline import reproduce
 
+    overrides = list(args.set)
+    if args.weighting is not None:
+        overrides.append(f"reproduction.weighting={args.weighting}")
+    if args.restoring_gain is not None:
+        overrides.append(f"reproduction.restoring_gain={args.restoring_gain}")
+    if args.out is not None:
+        check_output_folder(args.out)
     reproduce(
         args.run,
+        overrides=overrides,
         start_offset=args.start_offset,
-        weighting=args.weighting or DEFAULT_WEIGHTING,
-        restoring_gain=RESTORING_GAIN if args.restoring_gain is None else args.restoring_gain,
         out_dir=args.out,
         replay=not args.no_replay,
+        progress=_print,
     )
-
-
-def _demonstrate(args):
-    from hemg_drake.diagrams.demonstration import record_demonstrations
-    from hemg_drake.scenario import load_scenario
-
-    scenario = load_scenario(args.scenario)
-    changes = {}
-    if args.demos is not None:
-        changes["num_demonstrations"] = args.demos
-    if args.duration is not None:
-        changes["duration"] = args.duration
-    scenario = scenario.replaced(source="--demos/--duration", **changes)
-    print(
-        f"{scenario.task}: {scenario.num_demonstrations} demonstrations of "
-        f"{scenario.duration:g} s into {args.out}"
-    )
-    for path in record_demonstrations(scenario, args.out, progress=print):
-        print(f"wrote {path}")
 
 
 def _emg_figure(args):
@@ -57,94 +169,167 @@ def _emg_figure(args):
     from hemg_drake.emg.sources import MYO_RATE, load_emg_recording, synthesize_emg
     from hemg_drake.viz.figures import plot_emg_envelopes, save_figure
 
+    check_output_file(args.output)
     if args.input:
         samples = load_emg_recording(args.input)
+        source = f"{args.input} ({len(samples)} samples)"
     else:
-        if not args.duration * MYO_RATE >= 1:
+        if args.duration * MYO_RATE < 1:
             raise ValueError(f"--duration must be at least one sample (5 ms), got {args.duration}")
         # Two contractions rising from rest and relaxing, 2.5 s each, then rest.
         time = np.arange(int(args.duration * MYO_RATE)) / MYO_RATE
         activation = 0.05 + 0.9 * np.clip(np.sin(np.pi * time / 2.5), 0.0, None) ** 2
         samples = synthesize_emg(activation, args.seed)
+        source = f"a synthetic recording of {len(samples)} samples"
+    too_long = [w for w in args.windows if w > len(samples)]
+    if too_long:
+        raise ValueError(
+            f"--windows {too_long} longer than {source}: a window must be at most the "
+            f"recording's length"
+        )
     figure = plot_emg_envelopes(samples, args.windows, per_channel=args.per_channel)
     save_figure(figure, args.output)
-    print(f"wrote {args.output}")
+    _print(f"wrote {args.output}")
+
+
+def _version():
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("hemg-drake")
+    except PackageNotFoundError:
+        import hemg_drake
+
+        return hemg_drake.__version__
+
+
+class _Formatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Show defaults, but not for flags and options whose default is None."""
+
+    def _get_help_string(self, action):
+        if action.default in (None, False) or action.default == []:
+            return action.help
+        return super()._get_help_string(action)
 
 
 def build_parser():
-    parser = argparse.ArgumentParser(prog="hemg-drake", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog="hemg-drake",
+        description="Demonstrate, learn and reproduce teleoperated tasks in Drake.",
+        formatter_class=_Formatter,
+    )
+    parser.add_argument("--version", action="version", version=f"hemg-drake {_version()}")
     commands = parser.add_subparsers(dest="command", required=True)
 
-    demo = commands.add_parser(
-        "demo", help="the main job (make demo): demonstrate, learn, reproduce both tasks"
-    )
+    def command(name, help):
+        return commands.add_parser(name, help=help, description=help, formatter_class=_Formatter)
+
+    def add_set(sub):
+        sub.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help=SET_HELP)
+
+    demo = command("demo", "the main job (make demo): demonstrate, learn, reproduce both tasks")
     demo.add_argument("--out", default="runs", help="output folder (one sub-folder per task)")
     demo.add_argument(
-        "--tasks", nargs="+", default=["cotter_pin", "drawing"], help="tasks to run"
-    )
+        "--tasks", nargs="+", default=["cotter_pin", "drawing"],
+        choices=["cotter_pin", "drawing"], help="tasks to run",
+    )  # fmt: skip
     demo.add_argument("--no-replay", action="store_true", help="write no HTML replays")
+    add_set(demo)
     demo.set_defaults(func=_demo)
 
-    learn = commands.add_parser("learn", help="fit the HSMM of a run folder's dataset")
+    demonstrate = command(
+        "demonstrate", "record teleoperated demonstrations: dataset.npz, HTML replays, plots"
+    )
+    demonstrate.add_argument(
+        "scenario", help="scenario YAML file, or a shipped one: cotter_pin, drawing"
+    )
+    demonstrate.add_argument("--out", required=True, help="output folder, e.g. runs/pin/")
+    demonstrate.add_argument(
+        "--demos", type=_positive_int("--demos"), help="number of demonstrations C"
+    )
+    demonstrate.add_argument(
+        "--duration", type=_finite_float("--duration", positive=True),
+        help="seconds per demonstration",
+    )  # fmt: skip
+    demonstrate.add_argument(
+        "--seed", type=_non_negative_int("--seed"), help="seed of the first demonstration"
+    )
+    demonstrate.add_argument("--no-replay", action="store_true", help="write no HTML replays")
+    add_set(demonstrate)
+    demonstrate.set_defaults(func=_demonstrate)
+
+    learn = command("learn", "fit the HSMM of a run folder's dataset")
     learn.add_argument("run", help="run folder holding dataset.npz, e.g. runs/cotter_pin/")
-    learn.add_argument("--iterations", type=int, default=100, help="EM iterations at most")
+    learn.add_argument(
+        "--iterations", type=_positive_int("--iterations"),
+        help="EM iterations at most (default: the scenario's learning.n_iter)",
+    )  # fmt: skip
+    add_set(learn)
     learn.set_defaults(func=_learn)
 
-    reproduce = commands.add_parser(
-        "reproduce", help="simulate the learnt task; write replay, figures, metrics"
-    )
+    reproduce = command("reproduce", "simulate the learnt task; write replay, figures, metrics")
     reproduce.add_argument("run", help="run folder holding dataset.npz and model.npz")
     reproduce.add_argument(
-        "--start-offset", type=float, nargs=3, default=[0.0, 0.0, 0.0],
-        metavar=("DX", "DY", "DZ"), help="start this far from the demonstrations' start (m)",
+        "--start-offset", type=_finite_float("--start-offset"), nargs=3,
+        default=[0.0, 0.0, 0.0], metavar=("DX", "DY", "DZ"),
+        help="start this far from the demonstrations' start (m, scene frame)",
     )  # fmt: skip
     reproduce.add_argument(
         "--weighting", choices=["temporal", "spatial", "forward"],
-        help="HSMM state weighting (default: the pipeline's, temporal)",
+        help="HSMM state weighting (default: the scenario's reproduction.weighting)",
     )  # fmt: skip
     reproduce.add_argument(
-        "--restoring-gain", type=float, metavar="KAPPA",
-        help="pull back to the demonstrated path at this rate (1/s; 0: none; default 2)",
+        "--restoring-gain", type=_finite_float("--restoring-gain"), metavar="KAPPA",
+        help="pull back to the demonstrated path at this rate (1/s; 0: none; default: the "
+        "scenario's reproduction.restoring_gain)",
     )  # fmt: skip
     reproduce.add_argument("--out", help="output folder (default: the run folder)")
     reproduce.add_argument("--no-replay", action="store_true", help="write no HTML replay")
+    add_set(reproduce)
     reproduce.set_defaults(func=_reproduce)
 
-    demonstrate = commands.add_parser(
-        "demonstrate",
-        help="record teleoperated demonstrations: dataset.npz, HTML replays, a plot",
-    )
-    demonstrate.add_argument("scenario", help="scenario YAML file (see scenarios/)")
-    demonstrate.add_argument("--out", required=True, help="output folder, e.g. runs/pin/")
-    demonstrate.add_argument("--demos", type=int, help="number of demonstrations C")
-    demonstrate.add_argument("--duration", type=float, help="seconds per demonstration")
-    demonstrate.set_defaults(func=_demonstrate)
-
-    emg = commands.add_parser(
-        "emg-figure", help="Fig. 6: summed sEMG and its moving-RMS envelopes"
-    )
+    emg = command("emg-figure", "Fig. 6: summed sEMG and its moving-RMS envelopes")
     emg.add_argument(
-        "input", nargs="?", help="recording (CSV: 8 integer columns; or NPZ); synthetic if omitted"
-    )
-    emg.add_argument("--windows", type=int, nargs="+", default=[10, 20, 30], help="L_win values")
+        "input", nargs="?",
+        help="recording (CSV: 8 integer columns; or NPZ); a synthetic one if omitted",
+    )  # fmt: skip
+    emg.add_argument(
+        "--windows", type=_positive_int("--windows"), nargs="+", default=[10, 20, 30],
+        help="L_win values (samples)",
+    )  # fmt: skip
     emg.add_argument("--per-channel", action="store_true", help="per-channel RMS summed")
-    emg.add_argument("--seed", type=int, default=0, help="seed of the synthetic recording")
     emg.add_argument(
-        "--duration", type=float, default=10.0, help="synthetic recording length (s)"
-    )
+        "--seed", type=_non_negative_int("--seed"), default=0,
+        help="seed of the synthetic recording",
+    )  # fmt: skip
+    emg.add_argument(
+        "--duration",
+        type=_finite_float("--duration", positive=True, maximum=MAX_EMG_FIGURE_DURATION),
+        default=10.0, help="synthetic recording length (s)",
+    )  # fmt: skip
     emg.add_argument("-o", "--output", default="fig6.png", help="image file (.png, .svg, .pdf)")
     emg.set_defaults(func=_emg_figure)
-
     return parser
+
+
+def _one_line(error):
+    if isinstance(error, OSError) and error.filename is not None:
+        reason = error.strerror or type(error).__name__
+        return f"{error.filename}: {reason}"
+    text = str(error).strip() or type(error).__name__
+    return text.splitlines()[0]
 
 
 def main(argv=None):
     args = build_parser().parse_args(argv)
     try:
         args.func(args)
-    except (ValueError, FileNotFoundError) as error:
-        # Bad input is reported in one line, not as a traceback.
-        print(f"hemg-drake {args.command}: error: {error}", file=sys.stderr)
+    except KeyboardInterrupt:
+        print(f"hemg-drake {args.command}: interrupted; no partial output kept", file=sys.stderr)
+        return 130
+    except (ValueError, OSError) as error:
+        # Bad input and unwritable or missing files are reported in one line.
+        print(f"hemg-drake {args.command}: error: {_one_line(error)}", file=sys.stderr)
         return 2
     return 0
 

@@ -1,18 +1,27 @@
-"""Scenarios: everything a demonstration run needs, as dataclasses read from YAML.
+"""Scenarios: everything a run depends on, as data: dataclasses read from YAML.
 
 A scenario file is one YAML mapping whose keys are the fields of :class:`Scenario` (nested
-sections for the sub-dataclasses); every key may be left out to take its default. It is read
-with Drake's ``yaml_load_typed``; :func:`load_scenario` adds what that does not check (the
-YAML key path of a wrongly typed value, vector sizes, finite and non-negative numbers, the
-task name) and reports every problem as one ``ValueError`` naming the file and the key::
+sections for the sub-dataclasses); every key may be left out to take its default. Every
+default exists once: a section that configures a system of this package takes its defaults
+from that system's own signature (``_default``), so ``Scenario()`` builds exactly the
+systems the library builds with its defaults. The plant and the simulator are configured
+by Drake's own ``MultibodyPlantConfig`` and ``SimulatorConfig``; the scene's physics by the
+task modules' ``CotterPinParams`` and ``DrawingParams``.
 
-    scenario = load_scenario("scenarios/cotter_pin.yaml")
-    plan = scenario.task_plan()
+It is read with Drake's ``yaml_load_typed`` (which refuses unknown keys and wrong types);
+:func:`load_scenario` adds what that does not check (the key path of a wrongly typed value,
+vector sizes, finite and non-negative numbers, choices) and reports every problem as one
+``ValueError`` naming the file and the key. Any key can be overridden with
+``overrides=["emg.k_max=150", "scene.position=[0.65, -0.80, 0.12]"]`` (YAML value syntax;
+the CLI's ``--set``)::
 
-The plant's settings are Drake's own ``MultibodyPlantConfig`` (key ``plant``).
+    scenario = load_scenario("scenarios/cotter_pin.yaml", overrides=["scene.yaw_deg=20"])
+    plan = scenario.task_plan()          # in the world, where the scene stands
 """
 
 import dataclasses as dc
+import importlib.resources
+import inspect
 import math
 import typing
 from pathlib import Path
@@ -22,18 +31,73 @@ import yaml
 from pydrake.common.yaml import yaml_dump_typed, yaml_load, yaml_load_typed
 from pydrake.math import RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlantConfig
+from pydrake.systems.analysis import SimulatorConfig
 
-from hemg_drake.control.clik import CLIK_METHODS
+from hemg_drake.control.clik import CLIK_METHODS, Clik
 from hemg_drake.control.pd import MAX_TIME_STEP
+from hemg_drake.emg.envelope import RmsEnvelope
+from hemg_drake.emg.gain import VariableGain
 from hemg_drake.emg.sources import MYO_RATE
-from hemg_drake.tasks.cotter_pin import default_cotter_pin_plan
-from hemg_drake.tasks.drawing import default_drawing_plan
+from hemg_drake.learning.hsmm import HSMM, INITS as HSMM_INITS
+from hemg_drake.learning.reproduce import WEIGHTINGS, reproduce
+from hemg_drake.tasks import cotter_pin, drawing
+from hemg_drake.tasks.cotter_pin import CotterPinParams
+from hemg_drake.tasks.drawing import DrawingParams
+from hemg_drake.tasks.placement import scene_pose, to_world
 from hemg_drake.tasks.plan import TaskPlan
 from hemg_drake.teleop.feedback import MODES as FEEDBACK_MODES
+from hemg_drake.teleop.feedback import ForceFeedback
+from hemg_drake.teleop.mapping import WorkspaceMap, WorkspaceMapping
+from hemg_drake.teleop.master import MasterDynamics
+from hemg_drake.teleop.operator import OperatorModel
 
-# Each task's default plan, used when a scenario gives none.
-DEFAULT_PLANS = {"cotter_pin": default_cotter_pin_plan, "drawing": default_drawing_plan}
-TASKS = tuple(DEFAULT_PLANS)
+TASKS = ("cotter_pin", "drawing")
+# Where each task's scene stands by default (scene frame T's origin, m, in W).
+DEFAULT_POSITIONS = {"cotter_pin": cotter_pin.DEFAULT_POSITION, "drawing": drawing.DEFAULT_POSITION}
+# The scenarios shipped with the package (hemg_drake/scenarios/<name>.yaml).
+SCENARIOS = importlib.resources.files("hemg_drake") / "scenarios"
+
+
+def _default(function, name):
+    """The default of ``function``'s parameter ``name``: the one source of that default."""
+    return inspect.signature(function).parameters[name].default
+
+
+def _value(default, **checks):
+    """A dataclass field with its default and its range checks, read by ``_check_values``.
+
+    Checks (numbers must be >= 0 unless ``signed``): ``positive``, ``signed``, ``fraction``
+    (in [0, 1]), ``size`` (a vector's length), ``choices`` (allowed values).
+    """
+    if isinstance(default, (list, tuple, np.ndarray)):
+        items = list(default)
+        return dc.field(default_factory=lambda: list(items), metadata=checks)
+    return dc.field(default=default, metadata=checks)
+
+
+def _field(function, name, **checks):
+    """A field whose default is ``function``'s default for ``name`` (see :func:`_value`)."""
+    value = _default(function, name)
+    if isinstance(value, (list, tuple, np.ndarray)):
+        value = [float(v) for v in value]
+    return _value(value, **checks)
+
+
+@dc.dataclass
+class SceneConfig:
+    """Where the task's object stands, and its physics (the scene frame T)."""
+
+    # Position of the scene frame T in the world (m): the cotter pin's ring centre with the
+    # pin in; the sheet's top-surface centre. Empty: the task's default (DEFAULT_POSITIONS).
+    # The operator's plan and the workspace map move with it.
+    position: list[float] = _value([], signed=True, size=(0, 3))
+    # Turn of the scene about world +z (deg): the fixture, the sheet and its strokes, the
+    # plan and the master's frame turn with it (the pin's pull axis stays world +z).
+    yaw_deg: float = _value(0.0, signed=True)
+    # The cotter pin's detent, friction and grasp (used when task is cotter_pin).
+    cotter_pin: CotterPinParams = dc.field(default_factory=CotterPinParams)
+    # The pen, its contact and the plan's heights (used when task is drawing).
+    drawing: DrawingParams = dc.field(default_factory=DrawingParams)
 
 
 @dc.dataclass
@@ -42,8 +106,9 @@ class PlanConfig:
 
     # Waypoint times (s), strictly increasing, at least two.
     times: list[float] = dc.field(default_factory=list)
-    # Waypoints p_WE of the tool point in the world frame (m), one [x, y, z] per time.
-    points: list[list[float]] = dc.field(default_factory=list)
+    # Waypoints of the tool point in the scene frame T (m), one [x, y, z] per time; the
+    # scene's pose maps them to the world.
+    points: list[list[float]] = _value([], signed=True)
     # "free" or "forceful", one per segment (between consecutive waypoints).
     kinds: list[str] = dc.field(default_factory=list)
     # Drawing: the pen touches the paper, one flag per segment (empty: all False).
@@ -57,14 +122,16 @@ class MappingConfig:
     """Master-to-slave workspace map (:class:`~hemg_drake.teleop.mapping.WorkspaceMapping`)."""
 
     # Slave metres per master metre.
-    scale: float = 2.0
-    # p_WMo: the slave point (world, m) that the centre of the master's workspace maps to.
-    offset: list[float] = dc.field(default_factory=lambda: [0.64, -0.84, 0.12])
-    # Orientation R_WM of the master frame M in the world, roll-pitch-yaw in degrees. The
-    # default puts the operator behind the robot, facing the way it faces.
-    rpy_deg: list[float] = dc.field(default_factory=lambda: [90.0, 0.0, -90.0])
+    scale: float = _value(WorkspaceMapping.__dataclass_fields__["scale"].default, positive=True)
+    # The slave point that the centre of the master's workspace maps to, from the scene
+    # frame's origin, in the scene frame T (m): the map follows the scene.
+    scene_offset: list[float] = _value([0.0, 0.0, 0.0], signed=True, size=3)
+    # Orientation of the master frame M relative to the scene frame T, roll-pitch-yaw in
+    # degrees (R_WM = R_WT R_TM). The default puts the operator behind the robot, facing
+    # the way it faces.
+    rpy_deg: list[float] = _value([90.0, 0.0, -90.0], signed=True, size=3)
     # Constant transport delay of the teleoperation channel, in master samples (1 ms each).
-    delay_steps: int = 0
+    delay_steps: int = _field(WorkspaceMap.__init__, "delay_steps")
 
 
 @dc.dataclass
@@ -72,20 +139,22 @@ class MasterConfig:
     """Touch X tip dynamics (:class:`~hemg_drake.teleop.master.HapticMaster`), SI units."""
 
     # Apparent mass at the tip (kg).
-    mass: float = 0.045
+    mass: float = _field(MasterDynamics.__init__, "mass", positive=True)
     # Viscous backdrive damping (N s/m).
-    damping: float = 0.1
+    damping: float = _field(MasterDynamics.__init__, "damping")
     # Coulomb backdrive friction (N).
-    friction: float = 0.0
+    friction: float = _field(MasterDynamics.__init__, "friction")
     # Motor force saturation (N), the Touch X peak force.
-    peak_force: float = 7.9
+    peak_force: float = _field(MasterDynamics.__init__, "peak_force")
     # Workspace box, width x height x depth (m).
-    workspace_size: list[float] = dc.field(default_factory=lambda: [0.16, 0.12, 0.12])
+    workspace_size: list[float] = _field(
+        MasterDynamics.__init__, "workspace_size", positive=True, size=3
+    )
     # Soft walls beyond the box: spring (N/m) and damper (N s/m).
-    wall_stiffness: float = 5000.0
-    wall_damping: float = 20.0
+    wall_stiffness: float = _field(MasterDynamics.__init__, "wall_stiffness")
+    wall_damping: float = _field(MasterDynamics.__init__, "wall_damping")
     # Sample period of the haptic loop (s): the device's servo rate, 1 kHz.
-    period: float = 1e-3
+    period: float = _field(MasterDynamics.__init__, "period", positive=True)
 
 
 @dc.dataclass
@@ -95,26 +164,30 @@ class OperatorConfig:
 
     # Hand impedance pushing the stylus toward the planned point, in the master frame:
     # stiffness (N/m), damping (N s/m), and the saturation of the hand force's norm (N).
-    hand_stiffness: float = 300.0
-    hand_damping: float = 5.0
-    max_hand_force: float = 15.0
+    hand_stiffness: float = _field(OperatorModel.__init__, "hand_stiffness", positive=True)
+    hand_damping: float = _field(OperatorModel.__init__, "hand_damping")
+    max_hand_force: float = _field(OperatorModel.__init__, "max_hand_force")
     # Muscle activation in [0, 1]: relaxed, moving freely, working against the task (at
     # effort 1).
-    rest_activation: float = 0.05
-    free_activation: float = 0.2
-    forceful_activation: float = 0.7
+    rest_activation: float = _field(OperatorModel.__init__, "rest_activation", fraction=True)
+    free_activation: float = _field(OperatorModel.__init__, "free_activation", fraction=True)
+    forceful_activation: float = _field(
+        OperatorModel.__init__, "forceful_activation", fraction=True
+    )
     # Co-contraction: activation added per newton of force felt on the stylus (1/N).
-    co_contraction_gain: float = 0.05
+    co_contraction_gain: float = _field(OperatorModel.__init__, "co_contraction_gain")
     # Time constant of the muscle activation (s).
-    activation_time_constant: float = 0.04
+    activation_time_constant: float = _field(
+        OperatorModel.__init__, "activation_time_constant", positive=True
+    )
     # Sample period of the activation (s): the MYO's 1/200 s, the rate at which the sEMG
-    # source reads it (a faster update would be computed and never seen).
-    period: float = 0.005
+    # source reads it.
+    period: float = _field(OperatorModel.__init__, "period", positive=True)
     # Variability (TaskPlan.perturbed): log-normal spread of each segment's duration, the
     # path offset's standard deviation per world axis (m), log-normal spread of the effort.
-    timing_std: float = 0.1
-    path_std: list[float] = dc.field(default_factory=lambda: [0.003, 0.003, 0.003])
-    effort_std: float = 0.1
+    timing_std: float = _field(TaskPlan.perturbed, "timing_std")
+    path_std: list[float] = _value([_default(TaskPlan.perturbed, "path_std")] * 3, size=3)
+    effort_std: float = _field(TaskPlan.perturbed, "effort_std")
 
     def model_parameters(self):
         """Keyword arguments of ``SimulatedOperator`` (all fields but the variability)."""
@@ -129,18 +202,18 @@ class EmgConfig:
     """sEMG chain: synthetic MYO source, RMS envelope (eqs. 1-2), gain law (eq. 22)."""
 
     # Moving-RMS window L_win in 200 Hz samples (the paper picks 20).
-    window: int = 20
+    window: int = _field(RmsEnvelope.__init__, "window", positive=True)
     # RMS per channel, then summed, instead of the paper's RMS of the channel sum.
-    per_channel: bool = False
+    per_channel: bool = _field(RmsEnvelope.__init__, "per_channel")
     # Shape factor of the activation curve (Table I).
-    A_emg: float = -0.6981
+    A_emg: float = _field(VariableGain.__init__, "A_emg", signed=True)
     # Gain K at rest and at maximum contraction (VariableGainPd's K; its tested range is
     # 5 to 500, Table I's 50 sits between).
-    k_min: float = 10.0
-    k_max: float = 200.0
+    k_min: float = _field(VariableGain.__init__, "k_min")
+    k_max: float = _field(VariableGain.__init__, "k_max")
     # Length of the synthetic rest and maximum-contraction recordings (s) from which the
     # envelope's calibration is computed before each demonstration.
-    calibration_duration: float = 2.0
+    calibration_duration: float = _value(2.0, positive=True)
 
 
 @dc.dataclass
@@ -148,13 +221,13 @@ class ClikConfig:
     """Closed-loop inverse kinematics (:class:`~hemg_drake.control.clik.Clik`, eq. 21)."""
 
     # K_sp: 1/(m^2 s) for "transpose", 1/s for "dls".
-    gain: float = 300.0
+    gain: float = _field(Clik.__init__, "gain", positive=True)
     # "transpose" (the paper's J^T law) or "dls" (damped least squares).
-    method: str = "transpose"
+    method: str = _field(Clik.__init__, "method", choices=CLIK_METHODS)
     # Damping of the "dls" law (m).
-    damping: float = 0.05
+    damping: float = _field(Clik.__init__, "damping")
     # Update period (s).
-    period: float = 1e-3
+    period: float = _field(Clik.__init__, "period", positive=True)
 
 
 @dc.dataclass
@@ -162,114 +235,165 @@ class FeedbackConfig:
     """Force fed back to the master (:class:`~hemg_drake.teleop.feedback.ForceFeedback`)."""
 
     # "force": the slave's interaction force; "position_error": the master PD of Table I.
-    mode: str = "force"
+    mode: str = _field(ForceFeedback.__init__, "mode", choices=FEEDBACK_MODES)
     # Extra scale on the force in mode "force" (dimensionless).
-    gain: float = 1.0
+    gain: float = _field(ForceFeedback.__init__, "gain")
     # K_pm (N/m) and K_dm (N s/m) in mode "position_error" (Table I: 50 and 50).
-    stiffness: float = 50.0
-    damping: float = 50.0
+    stiffness: float = _field(ForceFeedback.__init__, "stiffness")
+    damping: float = _field(ForceFeedback.__init__, "damping")
     # Saturation of the motor force (N).
-    peak_force: float = 7.9
+    peak_force: float = _field(ForceFeedback.__init__, "peak_force")
+
+
+@dc.dataclass
+class LearningConfig:
+    """What the HSMM (eqs. 4-11) learns from the demonstrations, and how it starts."""
+
+    # Number of HSMM states N.
+    num_states: int = _value(4, positive=True)
+    # Positions of the observations [x, xdot, k]: "tool" (the measured tool point p_WE,
+    # v_WE) or "reference" (the reference the CLIK received and its rate: what the slave
+    # tracked with the gain k; a pen pressed into the sheet only shows in the reference).
+    positions: str = _value("tool", choices=("tool", "reference"))
+    # Initial states: "time" (equal times), "kmeans", "polyline" (straight pieces of the
+    # path: states start where it turns).
+    init: str = _field(HSMM.__init__, "init", choices=HSMM_INITS)
+    # Covariance floor, relative to each dimension's variance in the data.
+    reg_covar: float = _field(HSMM.__init__, "reg_covar", positive=True)
+    # EM iterations at most.
+    n_iter: int = _field(HSMM.__init__, "n_iter", positive=True)
+
+
+@dc.dataclass
+class ReproductionConfig:
+    """How the learnt task is reproduced (eqs. 12-18, 23; ``docs/reproduction.md``)."""
+
+    # State weighting h_t: "temporal" (timing alone), "spatial" (eq. 14), "forward"
+    # (eqs. 11, 13).
+    weighting: str = _field(reproduce, "weighting", choices=WEIGHTINGS)
+    # kappa of the cross-track attractor (1/s): a start offset decays as exp(-kappa t);
+    # 0: eqs. 15-18 alone.
+    restoring_gain: float = _field(reproduce, "restoring_gain")
+    # The position the reproducer observes: "reference" (its own x*) or "tool" (the
+    # slave's measured tool point).
+    observe: str = _value("reference", choices=("reference", "tool"))
+    # K_ptr (N/m) and K_dtr (N s/m) of the tracking force (eq. 23; Table I: 50 and 50).
+    tracking_gains: list[float] = _value([50.0, 50.0], size=2)
+    # Simulated time to let the arm come to rest in the scene, holding x*_0, before the
+    # reproduction starts (s).
+    settle_time: float = _value(1.0)
+    # Start offsets (m, in the scene frame T) of the extra reproductions that the full
+    # demo runs, each from the demonstrations' mean start plus the offset.
+    start_offsets: list[list[float]] = _value([], signed=True)
 
 
 @dc.dataclass
 class Scenario:
-    """One demonstration scenario: task, plant, devices, operator, EMG and controllers."""
+    """One run: task and scene, plant, devices, operator, EMG, controllers, learning."""
 
     # "cotter_pin" or "drawing".
-    task: str = "cotter_pin"
-    # Override of the task's default plan; leave out for the default.
+    task: str = _value("cotter_pin", choices=TASKS)
+    # Where the task's object stands and its physics.
+    scene: SceneConfig = dc.field(default_factory=SceneConfig)
+    # Override of the task's default plan (in the scene frame); leave out for the default.
     plan: typing.Optional[PlanConfig] = None
-    # The plant (time step 1 ms: the PD and the master are tuned for it; contact model).
-    # Live output ports: the contact force a sensor reads is that of the step about to be
-    # taken, not the last one's, and the plant steps by a plain discrete update instead of
-    # an unrestricted one that copies its sampled outputs; the demonstration diagram runs
-    # 16-28 % faster (benchmarks/bench_demonstration.py).
+    # The plant (time step 1 ms: the PD and the master are tuned for it). Point contact:
+    # the drawing's pen is tuned for it (hemg_drake.tasks.drawing says why). Live output
+    # ports: the contact force a sensor reads is that of the step about to be taken, and
+    # the plant steps by a plain discrete update instead of an unrestricted one; the
+    # demonstration diagram runs 16-28 % faster (benchmarks/bench_demonstration.py).
     plant: MultibodyPlantConfig = dc.field(
         default_factory=lambda: MultibodyPlantConfig(
-            time_step=1e-3, use_sampled_output_ports=False
+            time_step=1e-3, contact_model="point", use_sampled_output_ports=False
         )
     )
+    # Drake's simulator settings (target_realtime_rate 0: as fast as possible).
+    simulator: SimulatorConfig = dc.field(default_factory=SimulatorConfig)
     # Simulated length of one demonstration (s).
-    duration: float = 8.0
+    duration: float = _value(8.0, positive=True)
     # Sample period of the logged demonstration (s; Table I: 0.01).
-    log_period: float = 0.01
+    log_period: float = _value(0.01, positive=True)
     # Number of demonstrations C (cotter pin 4, drawing 3).
-    num_demonstrations: int = 4
-    # Number of HSMM states N for learning (cotter pin 4, drawing 18).
-    num_states: int = 4
-    # Demonstration c (0-based) is run with seed ``seed + c``: plan variability, sEMG noise.
-    seed: int = 0
+    num_demonstrations: int = _value(4, positive=True)
+    # Demonstration c (1-based) is run with seed ``seed + c - 1``: plan variability, sEMG
+    # noise; the HSMM's initialisation takes ``seed``.
+    seed: int = _value(0)
     mapping: MappingConfig = dc.field(default_factory=MappingConfig)
     master: MasterConfig = dc.field(default_factory=MasterConfig)
     operator: OperatorConfig = dc.field(default_factory=OperatorConfig)
     emg: EmgConfig = dc.field(default_factory=EmgConfig)
     clik: ClikConfig = dc.field(default_factory=ClikConfig)
     feedback: FeedbackConfig = dc.field(default_factory=FeedbackConfig)
+    learning: LearningConfig = dc.field(default_factory=LearningConfig)
+    reproduction: ReproductionConfig = dc.field(default_factory=ReproductionConfig)
 
     def seeds(self):
         """Seeds of the C demonstrations: ``[seed, seed + 1, ..., seed + C - 1]``."""
         return [self.seed + c for c in range(self.num_demonstrations)]
 
+    def X_WT(self):
+        """The scene frame's pose in the world (``scene.position``, ``scene.yaw_deg``)."""
+        position = self.scene.position or DEFAULT_POSITIONS[self.task]
+        return scene_pose(position, self.scene.yaw_deg)
+
+    def scene_params(self):
+        """The task's scene parameters: ``scene.cotter_pin`` or ``scene.drawing``."""
+        return getattr(self.scene, self.task)
+
     def task_plan(self):
-        """The plan in force: the override, or the task's default plan."""
+        """The plan in force, in the world: the override or the task's default, placed."""
+        X_WT = self.X_WT()
         if self.plan is not None:
             data = dc.asdict(self.plan)
             # Empty optional lists take TaskPlan's defaults.
             for name in ("pen_down", "effort"):
                 if not data[name]:
                     del data[name]
+            data["points"] = to_world(X_WT, data["points"]).tolist()
             return TaskPlan.from_dict(data)
-        return DEFAULT_PLANS[self.task]()
+        if self.task == "cotter_pin":
+            return cotter_pin.default_cotter_pin_plan(X_WT=X_WT)
+        return drawing.default_drawing_plan(self.scene.drawing, X_WT=X_WT)
 
     def R_WM(self):
-        """The mapping's rotation as a ``RotationMatrix``."""
-        return RotationMatrix(RollPitchYaw(np.radians(self.mapping.rpy_deg)))
+        """The master frame's orientation in W: the scene's yaw, then ``mapping.rpy_deg``."""
+        R_TM = RotationMatrix(RollPitchYaw(np.radians(self.mapping.rpy_deg)))
+        return self.X_WT().rotation() @ R_TM
+
+    def workspace_mapping(self):
+        """The :class:`WorkspaceMapping` of the scenario, placed with the scene."""
+        p_WMo = to_world(self.X_WT(), self.mapping.scene_offset)
+        return WorkspaceMapping(scale=self.mapping.scale, R_WM=self.R_WM(), p_WMo=p_WMo)
 
     def to_yaml(self):
         """YAML text that :func:`parse_scenario` reads back to an equal scenario."""
         return yaml_dump_typed(self)
 
-    def replaced(self, *, source="<overrides>", **changes):
-        """A checked copy with top-level fields changed, e.g. ``replaced(duration=2.0)``.
+    def replaced(self, overrides=(), *, source="--set"):
+        """A checked copy with dotted keys overridden, e.g. ``["duration=2.0"]``.
 
-        Raises ValueError (naming ``source`` and the key) as :func:`load_scenario` does.
+        Raises ValueError (naming ``source``, the override and the key) as
+        :func:`load_scenario` does.
         """
-        return parse_scenario(dc.replace(self, **changes).to_yaml(), source=source)
+        return parse_scenario(self.to_yaml(), source="scenario", overrides=overrides,
+                              overrides_source=source)  # fmt: skip
 
 
-# Numbers that may be negative (all others must be >= 0), by YAML key path.
-_SIGNED = {"plan.points", "mapping.offset", "mapping.rpy_deg", "emg.A_emg"}
-# Numbers that must be strictly positive.
-_POSITIVE = {
-    "plant.time_step", "duration", "log_period", "num_demonstrations", "num_states",
-    "mapping.scale", "master.mass", "master.workspace_size", "master.period",
-    "operator.hand_stiffness",
-    "operator.activation_time_constant", "operator.period", "emg.window",
-    "emg.calibration_duration", "clik.gain", "clik.period",
-}
-# Vectors of fixed length.
-_SIZES = {
-    "mapping.offset": 3, "mapping.rpy_deg": 3, "master.workspace_size": 3,
-    "operator.path_std": 3,
-}
-# Values in [0, 1].
-_FRACTIONS = {
-    "operator.rest_activation", "operator.free_activation", "operator.forceful_activation",
-}
-_CHOICES = {
-    "task": TASKS,
-    "clik.method": CLIK_METHODS,
-    "feedback.mode": FEEDBACK_MODES,
-}
+# Checks of Drake's config structs' fields, which carry no metadata of their own.
+_STRUCT_CHECKS = {"plant.time_step": {"positive": True}}
+# Sections whose dataclass checks itself (``check()``), by key path.
+_SELF_CHECKED = ("scene.cotter_pin", "scene.drawing")
 
 
-def load_scenario(path):
-    """Read and check a scenario file.
+def load_scenario(path, *, overrides=()):
+    """Read and check a scenario file, with optional ``key=value`` overrides.
 
     Parameters
     ----------
     path : path-like, a YAML file.
+    overrides : sequence of str
+        ``"dotted.key=value"`` with the value in YAML syntax (``--set`` on the CLI), applied
+        in order on top of the file.
 
     Returns
     -------
@@ -280,33 +404,96 @@ def load_scenario(path):
     FileNotFoundError
         No such file.
     ValueError
-        Malformed YAML, an unknown key, a value of the wrong type or size, a non-finite or
-        negative number, an unknown task or method: the message names the file and the key.
+        A folder, an empty or non-UTF-8 file, malformed YAML, an unknown key, a value of
+        the wrong type or size, a non-finite or negative number, an unknown task or method,
+        a malformed override: the message names the file (or the override) and the key.
     """
     path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{path}: is a folder, not a scenario file (a .yaml file)")
     if not path.is_file():
         raise FileNotFoundError(f"scenario file not found: {path}")
-    return parse_scenario(path.read_text(encoding="utf-8"), source=str(path))
-
-
-def parse_scenario(text, *, source="<scenario>"):
-    """Like :func:`load_scenario`, from YAML text; ``source`` names it in errors."""
     try:
-        raw = yaml_load(data=text) if text.strip() else {}
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as error:
+        raise ValueError(f"{path}: not UTF-8 text (byte {error.start}): not a YAML file") from None
+    if not text.strip() or (_parses(text) and yaml_load(data=text) is None):
+        raise ValueError(f"{path}: the scenario file is empty; give at least its 'task'")
+    return parse_scenario(text, source=str(path), overrides=overrides)
+
+
+def shipped_scenario(name):
+    """Path of a scenario shipped with the package: ``"cotter_pin"`` or ``"drawing"``."""
+    path = SCENARIOS / f"{name}.yaml"
+    if not path.is_file():
+        raise FileNotFoundError(f"no shipped scenario named {name!r} (have {list(TASKS)})")
+    return Path(str(path))
+
+
+def _parses(text):
+    try:
+        yaml_load(data=text)
+    except yaml.YAMLError:
+        return False
+    return True
+
+
+def parse_scenario(text, *, source="<scenario>", overrides=(), overrides_source="--set"):
+    """Like :func:`load_scenario`, from YAML text; ``source`` names it in errors.
+
+    ``overrides_source`` names the overrides in their errors (``--set`` by default).
+    """
+    raw = _parse_yaml(text, source)
+    if raw is None:
+        raw = {}
+    if not isinstance(raw, dict):
+        raise ValueError(f"{source}: the top level must be a mapping of Scenario's fields")
+    for override in overrides:
+        where = f"{overrides_source} {override}"
+        try:
+            _apply_override(raw, override, where)
+            _check_types(raw, Scenario, "")
+        except ValueError as error:
+            raise ValueError(f"{where}: {_first_line(error)}") from None
+    try:
+        _check_types(raw, Scenario, "")
+        data = yaml.safe_dump(raw, sort_keys=False)
+        scenario = yaml_load_typed(schema=Scenario, data=data, defaults=Scenario())
+        _check_values(scenario)
+    except (RuntimeError, ValueError, AssertionError) as error:
+        origin = source if not overrides else f"{source} with {overrides_source} {' '.join(overrides)}"
+        raise ValueError(f"{origin}: {_first_line(error)}") from None
+    return scenario
+
+
+def _parse_yaml(text, source):
+    try:
+        return yaml_load(data=text) if text.strip() else {}
     except yaml.YAMLError as error:
         mark = getattr(error, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = getattr(error, "problem", None) or _first_line(error)
         raise ValueError(f"{source}: malformed YAML{where}: {problem}") from None
-    if raw is None:
-        raw = {}
-    try:
-        _check_types(raw, Scenario, "")
-        scenario = yaml_load_typed(schema=Scenario, data=text) if raw else Scenario()
-        _check_values(scenario)
-    except (RuntimeError, ValueError, AssertionError) as error:
-        raise ValueError(f"{source}: {_first_line(error)}") from None
-    return scenario
+
+
+def _apply_override(raw, override, where):
+    """Set ``key.path=value`` (YAML value) in the raw mapping ``raw``."""
+    key, equals, value_text = str(override).partition("=")
+    key = key.strip()
+    if not equals or not key or any(not part for part in key.split(".")):
+        raise ValueError("an override must read key=value, e.g. emg.k_max=150")
+    value = _parse_yaml(value_text, "the value")
+    node = raw
+    *parents, leaf = key.split(".")
+    for depth, name in enumerate(parents):
+        child = node.get(name)
+        if child is None:
+            child = node[name] = {}
+        if not isinstance(child, dict):
+            path = ".".join(parents[: depth + 1])
+            raise ValueError(f"key '{path}' holds a value, not a section: cannot set '{key}'")
+        node = child
+    node[leaf] = value
 
 
 def _first_line(error):
@@ -362,35 +549,49 @@ def _check_types(value, schema, key):
             _check_types(item, fields[name], f"{key}.{name}" if key else name)
 
 
-def _leaves(obj, key=""):
-    """(key path, value) of every value (number, string, list) in a loaded scenario."""
-    if obj is None or isinstance(obj, (bool, str, int, float, list)):
-        yield key, obj
+def _leaves(obj, key="", checks=None):
+    """(key path, value, checks) of every value (number, string, list) in a loaded scenario."""
+    if obj is None or isinstance(obj, (bool, str, int, float, list, np.ndarray)):
+        yield key, obj, checks or _STRUCT_CHECKS.get(key, {})
+    elif key in _SELF_CHECKED:
+        try:
+            obj.check()
+        except ValueError as error:
+            raise ValueError(f"key '{key}': {error}") from None
     else:
+        metadata = {f.name: f.metadata for f in dc.fields(obj)} if dc.is_dataclass(obj) else {}
         for name in _fields(type(obj)):
-            yield from _leaves(getattr(obj, name), f"{key}.{name}" if key else name)
+            path = f"{key}.{name}" if key else name
+            yield from _leaves(getattr(obj, name), path, metadata.get(name))
 
 
 def _check_values(scenario):
-    for key, value in _leaves(scenario):
-        if key in _CHOICES and value not in _CHOICES[key]:
-            raise ValueError(f"key '{key}' = {value!r} is not one of {_CHOICES[key]}")
+    for key, value, checks in _leaves(scenario):
+        choices = checks.get("choices")
+        if choices is not None and value not in choices:
+            raise ValueError(f"key '{key}' = {value!r} is not one of {tuple(choices)}")
         if isinstance(value, (bool, str)) or value is None:
             continue
         try:
             numbers = np.array(value, dtype=float)
         except ValueError:  # strings (plan.kinds), ragged lists: the TaskPlan checks them
             continue
-        if key in _SIZES and numbers.shape != (_SIZES[key],):
-            raise ValueError(f"key '{key}' must hold {_SIZES[key]} numbers, got {value!r}")
+        size = checks.get("size")
+        sizes = size if isinstance(size, tuple) else (size,)
+        if size is not None and not (numbers.ndim == 1 and len(numbers) in sizes):
+            count = " or ".join(str(n) for n in sizes)
+            raise ValueError(f"key '{key}' must hold {count} numbers, got {value!r}")
         if not np.all(np.isfinite(numbers)):
             raise ValueError(f"key '{key}' must be finite, got {value!r}")
-        if key not in _SIGNED and np.any(numbers < 0):
-            raise ValueError(f"key '{key}' must not be negative, got {value!r}")
-        if key in _POSITIVE and np.any(numbers <= 0):
+        if checks.get("positive") and np.any(numbers <= 0):
             raise ValueError(f"key '{key}' must be positive, got {value!r}")
-        if key in _FRACTIONS and np.any(numbers > 1):
+        if not checks.get("signed") and np.any(numbers < 0):
+            raise ValueError(f"key '{key}' must not be negative, got {value!r}")
+        if checks.get("fraction") and np.any(numbers > 1):
             raise ValueError(f"key '{key}' must lie in [0, 1], got {value!r}")
+    offsets = scenario.reproduction.start_offsets
+    if any(len(offset) != 3 for offset in offsets):
+        raise ValueError(f"key 'reproduction.start_offsets' must hold [dx, dy, dz] lists, got {offsets}")
     if scenario.plant.time_step > MAX_TIME_STEP:
         raise ValueError(
             f"key 'plant.time_step' must be at most {MAX_TIME_STEP} s (the PD and the master "

@@ -1,22 +1,23 @@
 """The foundation's demo: the arm moves through joint-space waypoints, recorded as a replay.
 
-Diagram: two ``TrajectorySource`` (q_d(t) and its derivative) -> ``VariableGainPd`` (fixed
-K, gravity compensation) -> the arm's ``MultibodyPlant`` (1 ms step), whose state feeds back
-to the PD; a ``ReplayRecorder`` records the scene. ``benchmarks/bench_arm.py`` times it;
+Diagram: two ``TrajectorySource`` (q_d(t) and its derivative) -> the slave station driven by
+joint references (its ``VariableGainPd`` at a fixed K with gravity compensation -> the arm's
+``MultibodyPlant``, 1 ms step, in free space); a ``ReplayRecorder`` records the scene. ``benchmarks/bench_arm.py`` times it;
 ``hemg-drake demo`` is the full pipeline (:mod:`hemg_drake.pipeline`), not this tour.
 """
 
 from pathlib import Path
 
 import numpy as np
-from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import TrajectorySource
+from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from hemg_drake.control.pd import MAX_TIME_STEP, VariableGainPd
-from hemg_drake.robots.baxter import FLOOR_Z, HOME_POSITIONS, add_baxter_arm
+from hemg_drake.control.pd import MAX_TIME_STEP
+from hemg_drake.diagrams.station import make_slave_station
+from hemg_drake.robots.baxter import FLOOR_Z, HOME_POSITIONS
+from hemg_drake.scenario import Scenario
 from hemg_drake.viz.recording import ReplayRecorder
 
 # Joint-space waypoints (rad, s0 ... w2), visited at equal intervals: from home, reach
@@ -56,14 +57,15 @@ def waypoint_trajectory(waypoints, duration):
 
 
 def build_arm_demo(*, duration, time_step=MAX_TIME_STEP, gain=50.0, recorder=None):
-    """Build the demo diagram; the arm starts at rest at home, the first waypoint.
+    """Build the demo diagram on the slave station (free space, joint references); the arm
+    starts at rest at home, the first waypoint.
 
     Parameters
     ----------
     duration : float, s, length of the waypoint tour.
     time_step : float, s, plant step (<= ``MAX_TIME_STEP``).
     gain : float, the PD's K (Table I: 50).
-    recorder : ReplayRecorder, optional, attached to the scene graph.
+    recorder : ReplayRecorder, optional, attached to the station's scene graph.
 
     Returns
     -------
@@ -75,22 +77,22 @@ def build_arm_demo(*, duration, time_step=MAX_TIME_STEP, gain=50.0, recorder=Non
         raise ValueError(
             f"time_step must be in (0, {MAX_TIME_STEP}] s (the PD is tuned for it), got {time_step}"
         )
+    scenario = Scenario().replaced([f"plant.time_step={time_step}"], source="build_arm_demo")
+    station = make_slave_station(
+        scenario, q0=HOME_POSITIONS, reference="joints", scene=False, recorder=recorder
+    )
     builder = DiagramBuilder()
-    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=time_step)
-    arm = add_baxter_arm(plant)
-    plant.Finalize()
-
+    slave = builder.AddSystem(station.diagram)
     trajectory = waypoint_trajectory(WAYPOINTS, duration)
     q_desired = builder.AddNamedSystem("q_desired", TrajectorySource(trajectory))
     v_desired = builder.AddNamedSystem("v_desired", TrajectorySource(trajectory.MakeDerivative()))
-    pd = builder.AddNamedSystem("pd", VariableGainPd(plant=plant, arm=arm, gain=gain))
-    builder.Connect(q_desired.get_output_port(), pd.q_desired_input)
-    builder.Connect(v_desired.get_output_port(), pd.v_desired_input)
-    builder.Connect(plant.get_state_output_port(arm.model_instance), pd.state_input)
-    builder.Connect(pd.torque_output, plant.get_actuation_input_port(arm.model_instance))
-    if recorder is not None:
-        recorder.add_to_builder(builder, scene_graph)
-    return builder.Build(), plant, arm, trajectory
+    constant = builder.AddNamedSystem("gain", ConstantVectorSource([float(gain)]))
+    builder.Connect(q_desired.get_output_port(), slave.GetInputPort("q_desired"))
+    builder.Connect(v_desired.get_output_port(), slave.GetInputPort("v_desired"))
+    builder.Connect(constant.get_output_port(), slave.GetInputPort("gain"))
+    diagram = builder.Build()
+    diagram.set_name("arm_demo")
+    return diagram, station.plant, station.arm, trajectory
 
 
 def run_arm_demo(out_dir, *, duration=6.0, time_step=MAX_TIME_STEP):

@@ -2,118 +2,85 @@
 
 Signal flow (each box a LeafSystem of this package, named as in the diagram)::
 
-    operator --hand_force--> master --p_MS, v_MS--> workspace_map --p_WE_desired--> clik
-    clik --q_desired, v_desired--> pd --torque--> plant (arm + task scene)
-    operator --activation--> emg_source --emg--> envelope --> variable_gain --gain-->
-        gain_hold --> pd
-    scene's interaction force f_WE --> force_feedback --motor_force--> master, operator
-    logger (every log_period): p_WE, v_WE, p_MS, envelope, activation, gain, f_WE
+    operator --hand_force--> master --p_MS, v_MS--> workspace_map --p_WE_desired--> station
+    operator --activation--> emg_source --emg--> envelope --> variable_gain --gain--> station
+    station's interaction force f_WE --> force_feedback --motor_force--> master, operator
+    logger (every log_period): p_WE, v_WE, p_MS, p_WE_desired, envelope, activation, gain, f_WE
+    emg_logger (200 Hz): the raw sEMG and the operator's muscle activation
+
+The station (:func:`~hemg_drake.diagrams.station.make_slave_station`) holds the plant, the
+scene, the CLIK (eq. 21) and the variable-gain PD (eq. 20). The gain goes to the PD
+unsampled: ``VariableGain`` declares its prerequisites, so Drake recomputes it only when the
+200 Hz envelope changes (201 evaluations per simulated second, measured), and a hold would
+only delay it.
 
 :func:`build_demonstration_diagram` builds it from a :class:`~hemg_drake.scenario.Scenario`
-and a seed; :func:`run_demonstration` simulates it and returns the logged
-:class:`~hemg_drake.learning.demos.Demonstration`, optionally with an HTML replay;
-:func:`record_demonstrations` runs the scenario's C demonstrations into a folder (what
-``hemg-drake demonstrate`` does).
+and a seed (and only builds); :func:`run_demonstration` simulates a built diagram and
+returns the logged :class:`~hemg_drake.learning.demos.Demonstration`, with an HTML replay
+when the diagram was built with a recorder.
 """
 
 import dataclasses as dc
-import time
-from pathlib import Path
 
 import numpy as np
-from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder, LeafSystem
+from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
+from pydrake.systems.framework import DiagramBuilder
 
-from hemg_drake._validate import as_seed
-from hemg_drake.diagrams.slave import add_logger, add_slave, build_with_viewers, split_log
+from hemg_drake._validate import as_scalar, as_seed
+from hemg_drake.diagrams.log import add_logger, split_log
+from hemg_drake.diagrams.station import make_slave_station
 from hemg_drake.emg.calibration import EmgCalibration
 from hemg_drake.emg.chain import add_emg_gain_chain
-from hemg_drake.emg.sources import MYO_RATE, SyntheticEmgSource, synthesize_emg
-from hemg_drake.learning.demos import FIELD_WIDTHS, Demonstration, save_dataset
-from hemg_drake.robots.baxter import FLOOR_Z
+from hemg_drake.emg.sources import MYO_PERIOD, MYO_RATE, SyntheticEmgSource, synthesize_emg
+from hemg_drake.learning.demos import FIELD_WIDTHS, Demonstration
 from hemg_drake.teleop.feedback import ForceFeedback
-from hemg_drake.teleop.mapping import WorkspaceMap, WorkspaceMapping
+from hemg_drake.teleop.mapping import WorkspaceMap
 from hemg_drake.teleop.master import HapticMaster
 from hemg_drake.teleop.operator import SimulatedOperator
-from hemg_drake.viz.figures import plot_demonstrations, save_figure
 from hemg_drake.viz.ink import add_ink_to_recording, in_contact
-from hemg_drake.viz.recording import ReplayRecorder
 
 # Logged signals after time, in the order of the logger's input vector.
 LOGGED_FIELDS = tuple(name for name in FIELD_WIDTHS if name != "time")
 
 
-class SampleHold(LeafSystem):
-    """Samples its input periodically and holds it, starting from a given value.
-
-    .. pydrake_system::
-
-        name: SampleHold
-        input_ports:
-        - u
-        output_ports:
-        - y
-
-    ``y`` (same size as ``initial``, same units as ``u``) is ``initial`` until the first
-    sample at ``offset`` (s), then the input sampled every ``period`` (s). Drake's
-    ``ZeroOrderHold`` does the same but starts at zero, which is no valid gain.
-
-    Why here: Drake recomputes a stateless system's output whenever the time changes, so
-    without the hold the gain chain would be evaluated at every 1 ms plant step although
-    the sEMG envelope only changes at 200 Hz.
-    """
-
-    def __init__(self, *, initial, period, offset):
-        LeafSystem.__init__(self)
-        initial = np.atleast_1d(np.asarray(initial, dtype=float))
-        self.u_input = self.DeclareVectorInputPort("u", len(initial))
-        index = self.DeclareDiscreteState(initial)
-        self.DeclarePeriodicDiscreteUpdateEvent(
-            period_sec=period, offset_sec=offset, update=self._update
-        )
-        self.y_output = self.DeclareStateOutputPort("y", index)
-
-    def _update(self, context, discrete_state):
-        discrete_state.set_value(self.u_input.Eval(context))
-
-
-@dc.dataclass(frozen=True)
+@dc.dataclass(frozen=True, eq=False)
 class DemonstrationDiagram:
     """A built demonstration diagram and handles into it.
 
     Attributes
     ----------
     diagram : Diagram
-        Subsystems by name: ``plant``, ``scene_graph``, ``operator``, ``master``,
-        ``workspace_map``, ``clik``, ``pd``, ``emg_source``, ``envelope``,
-        ``variable_gain``, ``gain_hold``, ``force_feedback``, ``tool_point``,
-        ``log_mux``, ``logger``, and the scene's own systems (its force sensor gives
-        ``f_WE``) or ``no_contact`` (zero force) in free space.
-    plant : MultibodyPlant
-    arm : BaxterArm
+        Subsystems by name: ``station`` (the slave), ``operator``, ``master``,
+        ``workspace_map``, ``emg_source``, ``envelope``, ``variable_gain``,
+        ``force_feedback``, ``logger`` and ``emg_logger`` (and their muxes).
+    station : SlaveStation
+    scenario : Scenario
+    seed : int
     plan : TaskPlan
-        The seeded operator's plan (the task plan perturbed by the seed).
+        The seeded operator's plan (the task plan perturbed by the seed), in W.
     mapping : WorkspaceMapping
-    scene : object or None
-        What the task's scene builder returned; None in free space.
-    logger : VectorLogSink
-        Logs ``LOGGED_FIELDS`` (15 numbers) every ``scenario.log_period``.
+    logger : VectorLogSink, ``LOGGED_FIELDS`` every ``scenario.log_period``.
+    emg_logger : VectorLogSink, [sEMG (8), muscle activation (1)] every 5 ms.
+    recorder : ReplayRecorder or None
     """
 
     diagram: object
-    plant: object
-    arm: object
+    station: object
+    scenario: object
+    seed: int
     plan: object
-    mapping: WorkspaceMapping
-    scene: object
+    mapping: object
     logger: object
+    emg_logger: object
+    recorder: object = None
 
+    @property
+    def plant(self):
+        return self.station.plant
 
-def workspace_mapping(scenario):
-    """The scenario's :class:`WorkspaceMapping`."""
-    return WorkspaceMapping(
-        scale=scenario.mapping.scale, R_WM=scenario.R_WM(), p_WMo=scenario.mapping.offset
-    )
+    @property
+    def scene(self):
+        return self.station.scene
 
 
 def operator_plan(scenario, seed):
@@ -153,9 +120,9 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
     seed : int
         Seeds the operator's variability (``plan.perturbed``) and the sEMG noise.
     meshcat : Meshcat, optional
-        Live view: a ``MeshcatVisualizer`` of the scene graph is added.
+        Live view: a ``MeshcatVisualizer`` of the station's scene graph is added.
     recorder : ReplayRecorder, optional
-        Attached to the scene graph, to record an HTML replay.
+        Attached to the station's scene graph, to record an HTML replay.
     scene : bool
         False leaves out the task's scene: the arm in free space, no contact force.
 
@@ -164,28 +131,27 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
     DemonstrationDiagram
     """
     seed = as_seed(seed)
-    operator_config = scenario.operator
-    task_plan = scenario.task_plan()
     plan = operator_plan(scenario, seed)
-    mapping = workspace_mapping(scenario)
+    mapping = scenario.workspace_mapping()
     # Arm and stylus start at rest where the task is set up (the unperturbed plan's first
     # point, e.g. the pin's ring); the operator's own plan varies from there.
-    p_MS_initial = mapping.slave_to_master(task_plan.points[0])
+    start = scenario.task_plan().points[0]
+    p_MS_initial = mapping.slave_to_master(start)
 
     builder = DiagramBuilder()
-    slave = add_slave(builder, scenario, start=task_plan.points[0], scene=scene)
-    plant, scene_graph, arm, task_scene = slave.plant, slave.scene_graph, slave.arm, slave.scene
-    tool_point = slave.tool_point
+    station = make_slave_station(
+        scenario, start=start, scene=scene, meshcat=meshcat, recorder=recorder
+    )
+    slave = builder.AddSystem(station.diagram)
 
     def add(name, system):
         return builder.AddNamedSystem(name, system)
 
     operator = add(
         "operator",
-        SimulatedOperator(plan=plan, mapping=mapping, **operator_config.model_parameters()),
+        SimulatedOperator(plan=plan, mapping=mapping, **scenario.operator.model_parameters()),
     )
-    master_config = dc.asdict(scenario.master)
-    master = add("master", HapticMaster(p_MS_initial=p_MS_initial, **master_config))
+    master = add("master", HapticMaster(p_MS_initial=p_MS_initial, **dc.asdict(scenario.master)))
     workspace_map = add(
         "workspace_map",
         WorkspaceMap(
@@ -203,8 +169,9 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
     )
     envelope.set_name("envelope")
     variable_gain.set_name("variable_gain")
-    feedback_config = dc.asdict(scenario.feedback)
-    force_feedback = add("force_feedback", ForceFeedback(mapping=mapping, **feedback_config))
+    force_feedback = add(
+        "force_feedback", ForceFeedback(mapping=mapping, **dc.asdict(scenario.feedback))
+    )
 
     connect = builder.Connect
     connect(operator.GetOutputPort("hand_force"), master.GetInputPort("hand_force"))
@@ -212,26 +179,16 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
     for name in ("p_MS", "v_MS"):
         connect(master.GetOutputPort(name), operator.GetInputPort(name))
         connect(master.GetOutputPort(name), workspace_map.GetInputPort(name))
-    connect(workspace_map.GetOutputPort("p_WE_desired"), slave.p_WE_desired_input)
-    # The envelope updates half a MYO period after each sample; the hold reads it a plant
-    # step later, so the PD's gain lags the envelope by one plant step.
-    gain_hold = add(
-        "gain_hold",
-        SampleHold(
-            initial=[scenario.emg.k_min],
-            period=1.0 / MYO_RATE,
-            offset=0.5 / MYO_RATE + scenario.plant.time_step,
-        ),
-    )
-    connect(variable_gain.get_gain_output_port(), gain_hold.u_input)
-    connect(gain_hold.y_output, slave.gain_input)
+    p_WE_desired = workspace_map.GetOutputPort("p_WE_desired")
+    connect(p_WE_desired, slave.GetInputPort("p_WE_desired"))
+    connect(variable_gain.get_gain_output_port(), slave.GetInputPort("gain"))
 
-    f_WE = slave.f_WE_output
+    f_WE = slave.GetOutputPort("f_WE")
     if scenario.feedback.mode == "force":
         connect(f_WE, force_feedback.GetInputPort("f_WE"))
     else:
-        connect(tool_point.p_WE_output, force_feedback.GetInputPort("p_WE"))
-        connect(tool_point.v_WE_output, force_feedback.GetInputPort("v_WE"))
+        connect(slave.GetOutputPort("p_WE"), force_feedback.GetInputPort("p_WE"))
+        connect(slave.GetOutputPort("v_WE"), force_feedback.GetInputPort("v_WE"))
         for name in ("p_MS", "v_MS"):
             connect(master.GetOutputPort(name), force_feedback.GetInputPort(name))
     motor_force = force_feedback.GetOutputPort("motor_force")
@@ -239,116 +196,113 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
     connect(motor_force, operator.GetInputPort("feedback_force"))
 
     sources = {
-        "p_WE": tool_point.p_WE_output,
-        "v_WE": tool_point.v_WE_output,
+        "p_WE": slave.GetOutputPort("p_WE"),
+        "v_WE": slave.GetOutputPort("v_WE"),
         "p_MS": master.GetOutputPort("p_MS"),
+        "p_WE_desired": p_WE_desired,
         "envelope": envelope.get_envelope_output_port(),
         "activation": variable_gain.get_activation_output_port(),
-        "gain": gain_hold.y_output,
+        "gain": variable_gain.get_gain_output_port(),
         "f_WE": f_WE,
     }
-    ordered = {name: sources[name] for name in LOGGED_FIELDS}
-    logger = add_logger(builder, ordered, scenario.log_period)
-    diagram = build_with_viewers(
-        builder, scene_graph, "demonstration", meshcat=meshcat, recorder=recorder
+    logger = add_logger(builder, {name: sources[name] for name in LOGGED_FIELDS}, scenario.log_period)
+    emg_sources = {
+        "emg": emg_source.get_emg_output_port(),
+        "muscle_activation": operator.GetOutputPort("activation"),
+    }
+    emg_logger = add_logger(builder, emg_sources, MYO_PERIOD, name="emg_logger")
+    diagram = builder.Build()
+    diagram.set_name("demonstration")
+    return DemonstrationDiagram(
+        diagram=diagram,
+        station=station,
+        scenario=scenario,
+        seed=seed,
+        plan=plan,
+        mapping=mapping,
+        logger=logger,
+        emg_logger=emg_logger,
+        recorder=recorder,
     )
-    return DemonstrationDiagram(diagram, plant, arm, plan, mapping, task_scene, logger)
 
 
-def demonstration_from_log(log, seed):
-    """The :class:`Demonstration` held by the logger's log (a ``VectorLog``)."""
+def demonstration_from_logs(log, emg_log, seed):
+    """The :class:`Demonstration` held by the two loggers' logs (``VectorLog``).
+
+    A logger sees its ports before the updates at its own sample instants: row k + 1 of
+    the sEMG log holds sample k (emitted at k / 200 s), and row k the muscle activation
+    that the source read for it. The last activation row, whose sample is not logged, is
+    dropped.
+    """
     blocks = split_log(log, {name: FIELD_WIDTHS[name] for name in LOGGED_FIELDS})
     fields = {name: block[:, 0] if block.shape[1] == 1 else block for name, block in blocks.items()}
-    return Demonstration(seed=seed, time=log.sample_times(), **fields)
+    emg_blocks = split_log(emg_log, {"emg": 8, "muscle_activation": 1})
+    emg = emg_blocks["emg"][1:]
+    return Demonstration(
+        seed=seed,
+        time=log.sample_times(),
+        emg_time=np.arange(len(emg)) * MYO_PERIOD,
+        emg=emg,
+        muscle_activation=emg_blocks["muscle_activation"][:-1, 0],
+        **fields,
+    )
 
 
-def run_demonstration(scenario, seed, *, replay_path=None, scene=True):
-    """Simulate one demonstration of ``scenario.duration`` seconds.
+def run_demonstration(built, *, duration=None, replay_path=None):
+    """Simulate a built demonstration diagram and read its logs.
 
     Parameters
     ----------
-    scenario : Scenario
-    seed : int
+    built : DemonstrationDiagram
+    duration : float, optional
+        Simulated seconds; default the scenario's ``duration``.
     replay_path : path-like, optional
-        Write a self-contained HTML replay there (with the ink for drawing).
-    scene : bool
-        False: free space (see :func:`build_demonstration_diagram`).
+        With a diagram built with a recorder: write the HTML replay there (with the ink
+        for drawing).
 
     Returns
     -------
     Demonstration
     """
-    recorder = None if replay_path is None else ReplayRecorder(floor_z=FLOOR_Z)
-    built = build_demonstration_diagram(scenario, seed=seed, recorder=recorder, scene=scene)
+    scenario = built.scenario
+    duration = scenario.duration if duration is None else as_scalar("duration", duration)
+    if replay_path is not None and built.recorder is None:
+        raise ValueError("replay_path needs a diagram built with a recorder")
     simulator = Simulator(built.diagram)
+    ApplySimulatorConfig(scenario.simulator, simulator)
     simulator.Initialize()
-    if recorder is not None:
-        recorder.start()
-    simulator.AdvanceTo(scenario.duration)
+    if built.recorder is not None:
+        built.recorder.start()
+    simulator.AdvanceTo(duration)
     context = simulator.get_context()
-    demo = demonstration_from_log(built.logger.FindLog(context), seed)
-    if recorder is not None:
+    demo = demonstration_from_logs(
+        built.logger.FindLog(context), built.emg_logger.FindLog(context), built.seed
+    )
+    if replay_path is not None:
         if scenario.task == "drawing" and built.scene is not None:
             # The ink is drawn into the open recording, just above the sheet.
             add_ink_to_recording(
-                recorder.meshcat,
+                built.recorder.meshcat,
                 demo.time,
                 demo.p_WE,
                 in_contact(demo.f_WE),
                 height=built.scene.paper_height + 5e-4,
             )
-        recorder.stop_and_export(replay_path)
+        built.recorder.stop_and_export(replay_path)
     return demo
 
 
-def record_demonstrations(scenario, out_dir, *, replays=True, progress=None):
-    """Run the scenario's C demonstrations and write them to ``out_dir``.
+def record_demonstration(scenario, seed, *, replay_path=None, scene=True, recorder_factory=None):
+    """Build and run one demonstration: :func:`build_demonstration_diagram` then
+    :func:`run_demonstration`, with a replay recorder when ``replay_path`` is given.
 
-    Writes ``dataset.npz`` (:func:`~hemg_drake.learning.demos.save_dataset`, with the
-    scenario's YAML, task, N and log period in the metadata), ``replay_<c>.html`` for
-    c = 1 .. C when ``replays``, and ``demonstrations.png`` (Fig. 8 (a)-(b) or Fig. 10).
-    Every file is written atomically, so existing files are replaced whole or not at all.
-
-    Parameters
-    ----------
-    scenario : Scenario
-    out_dir : path-like, created if missing.
-    replays : bool
-    progress : callable, optional
-        Called with one line of text per finished demonstration.
-
-    Returns
-    -------
-    list of Path, the files written (dataset first).
+    ``recorder_factory`` makes the recorder (default ``ReplayRecorder`` over the floor).
     """
-    out_dir = Path(out_dir)
-    demos, written = [], []
-    for c, seed in enumerate(scenario.seeds(), start=1):
-        replay = out_dir / f"replay_{c}.html" if replays else None
-        start = time.perf_counter()
-        demos.append(run_demonstration(scenario, seed, replay_path=replay))
-        if replay is not None:
-            written.append(replay)
-        if progress is not None:
-            plan_end = operator_plan(scenario, seed).end_time
-            progress(
-                f"demonstration {c}/{scenario.num_demonstrations} (seed {seed}): "
-                f"{scenario.duration:g} s simulated in {time.perf_counter() - start:.1f} s"
-                + (f", replay {replay}" if replay else "")
-                + (
-                    f"; cut short: the operator's plan ends at {plan_end:.2f} s"
-                    if plan_end > scenario.duration
-                    else ""
-                )
-            )
-    dataset = out_dir / "dataset.npz"
-    metadata = dict(
-        scenario=scenario.to_yaml(),
-        task=scenario.task,
-        num_states=scenario.num_states,
-        log_period=scenario.log_period,
-    )
-    save_dataset(dataset, demos, metadata)
-    figure = out_dir / "demonstrations.png"
-    save_figure(plot_demonstrations(demos, task=scenario.task), figure)
-    return [dataset, *written, figure]
+    recorder = None
+    if replay_path is not None:
+        from hemg_drake.robots.baxter import FLOOR_Z
+        from hemg_drake.viz.recording import ReplayRecorder
+
+        recorder = (recorder_factory or (lambda: ReplayRecorder(floor_z=FLOOR_Z)))()
+    built = build_demonstration_diagram(scenario, seed=seed, recorder=recorder, scene=scene)
+    return run_demonstration(built, replay_path=replay_path)

@@ -10,6 +10,11 @@ Layout: arrays ``demo<c>.<field>`` for every field of :class:`Demonstration` (c 
 C - 1), and ``metadata``, a JSON string with ``format_version``, ``num_demonstrations``,
 ``seeds``, ``versions`` (hemg_drake, drake, numpy) and whatever the caller adds (the
 scenario's YAML text). Only plain arrays are stored (no pickles).
+
+Format 2 (this version) adds what later stages read instead of rebuilding it: the reference
+the CLIK received (``p_WE_desired``), and at the MYO's 200 Hz the raw sEMG the gain chain
+read (``emg``) with the operator's muscle activation that drove it. Format 1 datasets are
+refused with a message to record them again.
 """
 
 import dataclasses as dc
@@ -22,18 +27,22 @@ import numpy as np
 import hemg_drake
 from hemg_drake.fileio import load_npz, save_npz_atomic
 
-FORMAT_VERSION = 1
-# Number of columns of each logged field (1 for a scalar signal, stored as shape (T,)).
+FORMAT_VERSION = 2
+# Number of columns of each field logged every log period (1: a scalar signal, shape (T,)).
 FIELD_WIDTHS = {
     "time": 1,
     "p_WE": 3,
     "v_WE": 3,
     "p_MS": 3,
+    "p_WE_desired": 3,
     "envelope": 1,
     "activation": 1,
     "gain": 1,
     "f_WE": 3,
 }
+# Fields logged at the MYO's rate (200 Hz), on their own time base ``emg_time``.
+EMG_FIELD_WIDTHS = {"emg_time": 1, "emg": 8, "muscle_activation": 1}
+ALL_FIELDS = (*FIELD_WIDTHS, *EMG_FIELD_WIDTHS)
 
 
 @dc.dataclass(frozen=True, eq=False)
@@ -50,6 +59,9 @@ class Demonstration:
         Slave tool point E in the world: position (m) and velocity (m/s).
     p_MS : array, shape (T, 3)
         Master stylus tip S in the master frame M (m).
+    p_WE_desired : array, shape (T, 3)
+        The reference the CLIK received (m, W): the master mapped to the slave, after the
+        channel's transport delay.
     envelope : array, shape (T,)
         Raw RMS envelope of the summed sEMG (MYO units, eqs. 1-2).
     activation : array, shape (T,)
@@ -58,6 +70,12 @@ class Demonstration:
         Slave gain K, the stiffness the robot learns (eq. 22).
     f_WE : array, shape (T, 3)
         Force of the environment on the slave's tool point, in the world (N).
+    emg_time : array, shape (T_e,)
+        Times of the 200 Hz sEMG samples (s): sample k at k / 200 s.
+    emg : array, shape (T_e, 8)
+        The raw sEMG samples the gain chain read (MYO units, int8 values).
+    muscle_activation : array, shape (T_e,)
+        The operator's muscle activation in [0, 1] that drove each sEMG sample.
     """
 
     seed: int
@@ -69,21 +87,26 @@ class Demonstration:
     activation: np.ndarray
     gain: np.ndarray
     f_WE: np.ndarray
+    p_WE_desired: np.ndarray
+    emg_time: np.ndarray
+    emg: np.ndarray
+    muscle_activation: np.ndarray
 
     def __post_init__(self):
         object.__setattr__(self, "seed", int(self.seed))
-        length = None
-        for name, width in FIELD_WIDTHS.items():
-            array = np.asarray(getattr(self, name), dtype=float)
-            length = len(array) if length is None else length
-            shape = (length,) if width == 1 else (length, width)
-            if array.shape != shape:
-                raise ValueError(
-                    f"Demonstration field '{name}' must have shape {shape}, got {array.shape}"
-                )
-            if not np.all(np.isfinite(array)):
-                raise ValueError(f"Demonstration field '{name}' contains NaN or inf")
-            object.__setattr__(self, name, array)
+        for widths in (FIELD_WIDTHS, EMG_FIELD_WIDTHS):
+            length = None
+            for name, width in widths.items():
+                array = np.asarray(getattr(self, name), dtype=float)
+                length = len(array) if length is None else length
+                shape = (length,) if width == 1 else (length, width)
+                if array.shape != shape:
+                    raise ValueError(
+                        f"Demonstration field '{name}' must have shape {shape}, got {array.shape}"
+                    )
+                if not np.all(np.isfinite(array)):
+                    raise ValueError(f"Demonstration field '{name}' contains NaN or inf")
+                object.__setattr__(self, name, array)
 
     def __len__(self):
         return len(self.time)
@@ -126,7 +149,7 @@ def save_dataset(path, demos, metadata=None):
         raise ValueError(f"dataset metadata must be JSON-serialisable: {error}") from None
     arrays = {"metadata": np.array(text)}
     for c, demo in enumerate(demos):
-        for name in FIELD_WIDTHS:
+        for name in ALL_FIELDS:
             arrays[f"demo{c}.{name}"] = getattr(demo, name)
     save_npz_atomic(path, **arrays)
 
@@ -155,10 +178,19 @@ def load_dataset(path):
         metadata = json.loads(str(arrays["metadata"]))
     except json.JSONDecodeError as error:
         raise ValueError(f"{path}: metadata is not valid JSON: {error}") from None
-    if not isinstance(metadata, dict) or metadata.get("format_version") != FORMAT_VERSION:
-        found = metadata.get("format_version") if isinstance(metadata, dict) else None
+    if not isinstance(metadata, dict) or "format_version" not in metadata:
+        raise ValueError(f"{path}: the metadata has no format_version; not a hemg_drake dataset")
+    found = metadata["format_version"]
+    if found != FORMAT_VERSION:
+        advice = (
+            "it lacks the raw sEMG and the CLIK's reference that learning and Fig. 6 read; "
+            "record it again with hemg-drake demonstrate"
+            if found == 1
+            else "it was written by another hemg_drake version"
+        )
         raise ValueError(
-            f"{path}: dataset format version {found!r}, this hemg_drake reads {FORMAT_VERSION}"
+            f"{path}: dataset format {found!r}, this hemg_drake reads format "
+            f"{FORMAT_VERSION}: {advice}"
         )
     count, seeds = metadata.get("num_demonstrations"), metadata.get("seeds")
     valid = isinstance(count, int) and count >= 1 and isinstance(seeds, list)
@@ -167,7 +199,7 @@ def load_dataset(path):
     demos = []
     for c in range(count):
         fields = {}
-        for name in FIELD_WIDTHS:
+        for name in ALL_FIELDS:
             key = f"demo{c}.{name}"
             if key not in arrays:
                 raise ValueError(f"{path}: missing array '{key}'")
@@ -175,7 +207,7 @@ def load_dataset(path):
         try:
             demos.append(Demonstration(seed=seeds[c], **fields))
         except (TypeError, ValueError) as error:
-            raise ValueError(f"{path}: demonstration {c}: {error}") from None
+            raise ValueError(f"{path}: demonstration {c + 1}: {error}") from None
     return demos, metadata
 
 

@@ -7,7 +7,7 @@ axis, world +z** (up). Joint position x = withdrawal: 0 = in, ``pin_length`` (0.
 
 What holds the pin (all along the joint, nothing collides):
 
-- a **detent**, in :class:`PinResistance` (numpy twin :func:`detent_force`): a spring of
+- a **detent**, in :class:`PinResistance` (reference :func:`detent_force`): a spring of
   ``detent_stiffness`` towards x = 0 saturated at ``hold_force``, acting while
   x < ``detent_length`` (3 mm); past it the pin is free of the detent. A pull below
   ``hold_force`` only moves the pin by pull / ``detent_stiffness`` (about 1 mm); a pull above
@@ -50,13 +50,16 @@ from pydrake.systems.framework import LeafSystem
 from hemg_drake.robots.baxter import MODELS_DIR, make_parser
 from hemg_drake.tasks.plan import TaskPlan
 from hemg_drake.tasks.sensors import BushingForceSensor
-from hemg_drake._validate import as_scalar, as_vector
+from hemg_drake.tasks.placement import scene_pose
+from hemg_drake._validate import as_scalar
 
 COTTER_PIN_MODEL = MODELS_DIR / "cotter_pin.sdf"
-# The pin slides out along world +z (the model's z, welded without rotation).
+# The pin slides out along world +z (the model's z; the scene only turns about z).
 PULL_AXIS_W = np.array([0.0, 0.0, 1.0])
-# The tool point p_WE at BaxterArm.home_positions, to the millimetre: where the ring waits.
+# The tool point p_WE at BaxterArm.home_positions, to the millimetre: where the ring waits
+# by default (the scene frame T's origin, ``scene.position`` in a scenario).
 HOME_TOOL_POINT = (0.642, -0.837, 0.120)
+DEFAULT_POSITION = HOME_TOOL_POINT
 # The pin's explicit forces (detent and grasp springs k, friction and grasp dampers c, all
 # sampled once per step) on its mass m are stable at the plant's step dt while
 # (omega dt)^2 + 2 c dt / m < 4 (omega^2 = k / m; the discrete plant's semi-implicit Euler
@@ -66,14 +69,13 @@ _STABILITY_MARGIN = 2.0
 
 @dc.dataclass
 class CotterPinParams:
-    """Placement and physics of the cotter-pin scene (SI units); loadable from YAML.
+    """Physics of the cotter-pin scene (SI units); loadable from YAML (``scene.cotter_pin``).
 
-    Every field is checked by :meth:`check` (also called by :func:`add_cotter_pin_scene` and
-    :func:`default_cotter_pin_plan`), which raises ValueError naming the field.
+    The placement is not a parameter: the scene frame T (:func:`scene_pose`) puts the ring's
+    centre, with the pin fully in, at T's origin. Every field is checked by :meth:`check`
+    (also called by :func:`add_cotter_pin_scene`), which raises ValueError naming the field.
     """
 
-    # Centre of the pin's ring (the grasp point) with the pin fully in, world frame (m).
-    ring_position: np.ndarray = dc.field(default_factory=lambda: np.array(HOME_TOOL_POINT))
     # Largest force (N) with which the detent holds the pin in.
     hold_force: float = 50.0
     # Withdrawal (m) over which the detent acts; beyond it only sliding friction remains.
@@ -92,7 +94,6 @@ class CotterPinParams:
     def check(self):
         """Raise ValueError naming the first bad field; return self."""
         name = type(self).__name__
-        self.ring_position = as_vector(f"{name}.ring_position", self.ring_position, 3)
         for field in ("hold_force", "detent_length", "detent_stiffness", "grasp_stiffness"):
             as_scalar(f"{name}.{field}", getattr(self, field))
         for field in ("sliding_damping", "grasp_damping"):
@@ -170,24 +171,21 @@ class PinResistance(LeafSystem):
         - generalized_force
 
     ``pin_state`` is the pin model instance's [x; xdot] (m, m/s; connect
-    ``plant.get_state_output_port(pin_model)``). ``generalized_force`` has the size of the
-    plant's velocities (connect ``plant.get_applied_generalized_force_input_port()``): zero
-    except on the pin joint, where it is :func:`pin_resistance_force` (N along the pull
-    axis): the detent's spring minus ``sliding_damping`` times the pin's speed.
+    ``plant.get_state_output_port(pin_model)``). ``generalized_force`` (1, N along the pull
+    axis) is :func:`pin_resistance_force`: the detent's spring minus ``sliding_damping``
+    times the pin's speed. It drives the pin's own joint actuator (``pin_resistance``, added
+    by :func:`add_cotter_pin_scene`) through ``plant.get_actuation_input_port(pin_model)``,
+    so the plant's ``applied_generalized_force`` input stays free for users.
 
     Timing: stateless, direct feedthrough of the state; the discrete plant samples it once
     per step, so the detent spring and the friction are explicit (``add_cotter_pin_scene``
     checks their stability at the plant's step).
     """
 
-    def __init__(
-        self, *, plant, pin_joint, hold_force, detent_length, detent_stiffness, sliding_damping
-    ):
+    def __init__(self, *, hold_force, detent_length, detent_stiffness, sliding_damping):
         """
         Parameters
         ----------
-        plant : MultibodyPlant, finalized.
-        pin_joint : PrismaticJoint, the pin's slide.
         hold_force, detent_length, detent_stiffness, sliding_damping : float, N, m, N/m,
             N s/m (see :class:`CotterPinParams`).
         """
@@ -198,12 +196,10 @@ class PinResistance(LeafSystem):
             detent_stiffness=as_scalar("detent_stiffness", detent_stiffness),
             sliding_damping=as_scalar("sliding_damping", sliding_damping, strict=False),
         )
-        self._tau = np.zeros(plant.num_velocities())
-        self._index = pin_joint.velocity_start()
         self.pin_state_input = self.DeclareVectorInputPort("pin_state", 2)
         self.generalized_force_output = self.DeclareVectorOutputPort(
             "generalized_force",
-            len(self._tau),
+            1,
             self._calc_generalized_force,
             prerequisites_of_calc={self.pin_state_input.ticket()},
         )
@@ -215,8 +211,7 @@ class PinResistance(LeafSystem):
         law = self._law
         spring = -min(max(law["detent_stiffness"] * x, -law["hold_force"]), law["hold_force"])
         detent = spring if x < law["detent_length"] else 0.0
-        self._tau[self._index] = detent - law["sliding_damping"] * xdot
-        output.SetFromVector(self._tau)
+        output.SetAtIndex(0, detent - law["sliding_damping"] * xdot)
 
 
 @dc.dataclass(frozen=True, eq=False)
@@ -232,6 +227,7 @@ class CotterPinScene:
     bushing : LinearBushingRollPitchYaw, the grasp (frame A = ring, frame C = tool).
     pin_length : float, m; the pin is out once withdrawn this far.
     params : CotterPinParams, the scene's own copy.
+    X_WT : RigidTransform, the scene frame: the ring's centre (pin in) at its origin.
     """
 
     plant: object
@@ -241,6 +237,7 @@ class CotterPinScene:
     bushing: object
     pin_length: float
     params: CotterPinParams
+    X_WT: RigidTransform
 
     @property
     def pull_axis_W(self):
@@ -263,9 +260,8 @@ class CotterPinScene:
     def add_systems(self, builder):
         """Add the detent and the force sensor to ``builder`` (once; later calls reuse them).
 
-        Connects :class:`PinResistance` to the plant's applied generalized force input, which
-        it then occupies (sum other generalized forces into it with an ``Adder``). Call after
-        ``plant.Finalize()``.
+        Connects :class:`PinResistance` to the actuation input of the pin's own model
+        instance (its joint actuator ``pin_resistance``). Call after ``plant.Finalize()``.
 
         Returns
         -------
@@ -279,8 +275,6 @@ class CotterPinScene:
         detent = builder.AddNamedSystem(
             names[0],
             PinResistance(
-                plant=plant,
-                pin_joint=self.pin_joint,
                 hold_force=self.params.hold_force,
                 detent_length=self.params.detent_length,
                 detent_stiffness=self.params.detent_stiffness,
@@ -289,7 +283,7 @@ class CotterPinScene:
         )
         builder.Connect(plant.get_state_output_port(self.model_instance), detent.pin_state_input)
         builder.Connect(
-            detent.generalized_force_output, plant.get_applied_generalized_force_input_port()
+            detent.generalized_force_output, plant.get_actuation_input_port(self.model_instance)
         )
         sensor = builder.AddNamedSystem(
             names[1], BushingForceSensor(plant=plant, bushing=self.bushing)
@@ -302,7 +296,7 @@ class CotterPinScene:
         return self.add_systems(builder)[1].f_WE_output
 
 
-def add_cotter_pin_scene(plant, arm, *, params=None):
+def add_cotter_pin_scene(plant, arm, *, params=None, X_WT=None):
     """Add the fixture, the pin and the grasp of its ring by the arm's tool to ``plant``.
 
     Call before ``plant.Finalize()``; after it, :meth:`CotterPinScene.add_systems` (or
@@ -313,6 +307,10 @@ def add_cotter_pin_scene(plant, arm, *, params=None):
     plant : MultibodyPlant, not finalized, discrete (the detent is checked against its step).
     arm : BaxterArm, from ``add_baxter_arm``; its ``tool_frame`` grasps the ring.
     params : CotterPinParams, optional (default ``CotterPinParams()``).
+    X_WT : RigidTransform, optional
+        The scene frame (:func:`~hemg_drake.tasks.placement.scene_pose`): the ring's centre
+        with the pin in at its origin, the fixture turned by its yaw about world z (the pull
+        axis stays world +z); default at ``DEFAULT_POSITION``, unturned.
 
     Returns
     -------
@@ -325,6 +323,7 @@ def add_cotter_pin_scene(plant, arm, *, params=None):
         stiff for the plant's time step.
     """
     params = (CotterPinParams() if params is None else params).check()
+    X_WT = scene_pose(DEFAULT_POSITION) if X_WT is None else _check_pose(X_WT)
     if plant.is_finalized():
         raise ValueError("add_cotter_pin_scene must be called before plant.Finalize()")
     dt = plant.time_step()
@@ -332,6 +331,8 @@ def add_cotter_pin_scene(plant, arm, *, params=None):
         raise ValueError("the cotter-pin scene needs a discrete plant (time_step > 0)")
     (model,) = make_parser(plant).AddModels(str(COTTER_PIN_MODEL))
     pin_joint = plant.GetJointByName("pin_slide", model)
+    # The detent and friction act through the pin's own actuator (see PinResistance).
+    plant.AddJointActuator("pin_resistance", pin_joint)
     ring_frame = plant.GetFrameByName("ring", model)
     pin_mass = plant.GetBodyByName("pin", model).default_mass()
     stiffness = params.detent_stiffness + params.grasp_stiffness
@@ -349,7 +350,7 @@ def add_cotter_pin_scene(plant, arm, *, params=None):
     plant.WeldFrames(
         plant.world_frame(),
         plant.GetFrameByName("fixture", model),
-        RigidTransform(params.ring_position - p_FR),
+        X_WT @ RigidTransform(-p_FR),
     )
     bushing = plant.AddForceElement(
         LinearBushingRollPitchYaw(
@@ -369,10 +370,21 @@ def add_cotter_pin_scene(plant, arm, *, params=None):
         bushing=bushing,
         pin_length=pin_length(),
         params=copy.deepcopy(params),  # the scene's own: later edits cannot change it
+        X_WT=RigidTransform(X_WT),
     )
 
 
-def default_cotter_pin_plan(params=None, *, margin=0.015, carry=0.035):
+def _check_pose(X_WT):
+    """X_WT itself if it is a pose that keeps world z up (a turn about z only)."""
+    if not isinstance(X_WT, RigidTransform):
+        raise ValueError(f"X_WT must be a RigidTransform, got {type(X_WT).__name__}")
+    z_T = X_WT.rotation().matrix()[:, 2]
+    if not np.allclose(z_T, PULL_AXIS_W, atol=1e-9):
+        raise ValueError("X_WT may only turn the scene about world z (its yaw)")
+    return X_WT
+
+
+def default_cotter_pin_plan(*, X_WT=None, margin=0.015, carry=0.035):
     """The pulling task in the paper's N = 4 phases, as timed tool-point waypoints in W.
 
     1. hold (0-0.5 s, free): the tool waits at the ring;
@@ -384,18 +396,20 @@ def default_cotter_pin_plan(params=None, *, margin=0.015, carry=0.035):
 
     Parameters
     ----------
-    params : CotterPinParams, optional; its ``ring_position`` is the first waypoint.
+    X_WT : RigidTransform, optional
+        The scene frame: its origin, the ring, is the first waypoint (default as
+        :func:`add_cotter_pin_scene`).
     margin, carry : float, m, >= 0.
 
     Returns
     -------
     TaskPlan
     """
-    params = (CotterPinParams() if params is None else params).check()
+    X_WT = scene_pose(DEFAULT_POSITION) if X_WT is None else _check_pose(X_WT)
     margin = as_scalar("margin", margin, strict=False)
     carry = as_scalar("carry", carry, strict=False)
     pulled = pin_length() + margin
-    p_WR = params.ring_position
+    p_WR = X_WT.translation()
     rises = np.array([0.0, 0.0, pulled, pulled + carry, pulled + carry])
     return TaskPlan(
         times=np.array([0.0, 0.5, 2.0, 3.0, 3.5]),

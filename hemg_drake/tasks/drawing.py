@@ -1,8 +1,9 @@
 """The drawing task (the paper's Fig. 9-11): a pen on the slave draws three strokes on an A4 sheet.
 
 Scene (``models/drawing.sdf``, primitives only): a table in front of the robot with an A4
-sheet (210 mm along world x, 297 mm along y) whose top surface centre is
-``DrawingParams.paper_center``. :func:`add_drawing_scene` also gives the arm a **pen**: a
+sheet (210 mm along the scene frame's x, 297 mm along its y) whose top surface centre is
+the origin of the scene frame T (``X_WT``: ``scene.position`` and ``scene.yaw_deg`` of a
+scenario; by default ``DEFAULT_POSITION``, unturned). :func:`add_drawing_scene` also gives the arm a **pen**: a
 collision sphere of radius ``pen_radius`` on ``right_hand`` whose lowest point is the
 ``right_tool`` point (so the tool point E, which CLIK drives, is the pen's tip P), and a
 green visual body along the hand's z axis.
@@ -12,9 +13,18 @@ solver (1 ms, Drake's default ``lagged`` approximation, which uses Hunt-Crossley
 dissipation). The sheet is nearly rigid (1e6 N/m, in the model file); Drake combines point
 stiffnesses in series, so the contact's stiffness is close to the pen's ``pen_stiffness``
 (1e4 N/m: 1 N presses the tip 0.1 mm) and its dissipation the pen's ``pen_dissipation``
-(s/m); Coulomb friction ``pen_friction`` (0.2 on both, a felt tip on paper). The hydroelastic
-model is not used: neither geometry has hydroelastic properties, so the plant's default
-``hydroelastic_with_fallback`` falls back to point contact.
+(s/m); Coulomb friction ``pen_friction`` (0.2 on both, a felt tip on paper).
+
+The contact model is chosen explicitly: the plant must use ``point`` contact
+(``MultibodyPlantConfig.contact_model: point``, the scenarios' default), and
+:func:`add_drawing_scene` refuses any other. Why point contact: the pen's tip is a 3 mm
+sphere pressed 0.1 mm into a sheet; one point with one stiffness per geometry is the model
+whose parameters (``pen_stiffness``, the force per depth a pen tip shows) are what was
+tuned and measured, it costs one contact pair per step, and it behaves the same for any
+placement. A hydroelastic pen would need a compliant-hydroelastic mesh of the tip and a
+modulus for the paper, neither known for a felt tip, and a thin sheet is the case where
+hydroelastic pressure fields are least accurate. Relying on ``hydroelastic_with_fallback``
+gave the same point contact only because neither geometry had hydroelastic properties.
 
 :func:`default_drawing_plan` draws a line, an arc and a zig-zag with pen lifts between them,
 the six steps I-VI of Fig. 10 (see :func:`drawing_steps`); pen-down segments put the tip
@@ -28,14 +38,18 @@ import dataclasses as dc
 import numpy as np
 from pydrake.geometry import AddContactMaterial, Cylinder, ProximityProperties, Sphere
 from pydrake.math import RigidTransform
-from pydrake.multibody.plant import CoulombFriction
+from pydrake.multibody.plant import ContactModel, CoulombFriction
 
 from hemg_drake.robots.baxter import MODELS_DIR, make_parser
 from hemg_drake.tasks.plan import TaskPlan
 from hemg_drake.tasks.sensors import ContactForceSensor
-from hemg_drake._validate import as_scalar, as_vector
+from hemg_drake.tasks.placement import scene_pose, to_world
+from hemg_drake._validate import as_scalar
 
 DRAWING_MODEL = MODELS_DIR / "drawing.sdf"
+# Centre of the sheet's top surface by default (m, W): 3 cm under the tool point at
+# BaxterArm.home_positions (0.642, -0.837, 0.120), to 3 mm.
+DEFAULT_POSITION = (0.64, -0.84, 0.09)
 # A4, as in the model file: (x, y) extent of the sheet (m).
 SHEET_SIZE = (0.210, 0.297)
 _PEN_GREEN = (0.1, 0.6, 0.25, 1.0)
@@ -43,15 +57,15 @@ _PEN_GREEN = (0.1, 0.6, 0.25, 1.0)
 
 @dc.dataclass
 class DrawingParams:
-    """Placement of the sheet, the pen and its contact (SI units); loadable from YAML.
+    """The pen, its contact and the plan's heights (SI units); loadable from YAML
+    (``scene.drawing``).
 
-    Every field is checked by :meth:`check` (also called by :func:`add_drawing_scene` and
-    :func:`default_drawing_plan`), which raises ValueError naming the field.
+    The placement is not a parameter: the scene frame T puts the sheet's top-surface centre
+    at its origin. Every field is checked by :meth:`check` (also called by
+    :func:`add_drawing_scene` and :func:`default_drawing_plan`), which raises ValueError
+    naming the field.
     """
 
-    # Centre of the sheet's top surface in the world (m). The default puts it 3 cm under the
-    # tool point at BaxterArm.home_positions (0.642, -0.837, 0.120), to 3 mm.
-    paper_center: np.ndarray = dc.field(default_factory=lambda: np.array([0.64, -0.84, 0.09]))
     # Radius of the pen's spherical tip (m).
     pen_radius: float = 0.003
     # Point-contact stiffness (N/m), Hunt-Crossley dissipation (s/m), friction of the tip.
@@ -69,7 +83,6 @@ class DrawingParams:
     def check(self):
         """Raise ValueError naming the first bad field; return self."""
         name = type(self).__name__
-        self.paper_center = as_vector(f"{name}.paper_center", self.paper_center, 3)
         for field in ("pen_radius", "pen_stiffness", "press_depth", "hover_height"):
             as_scalar(f"{name}.{field}", getattr(self, field))
         for field in ("pen_dissipation", "pen_friction"):
@@ -92,9 +105,9 @@ class DrawingScene:
     model_instance : ModelInstanceIndex, the table and sheet.
     pen_body : Body, the arm's ``right_hand``, which carries the pen.
     pen_tip_frame : Frame, the arm's tool frame: its origin is the pen's tip P.
-    paper_center : array, shape (3,), centre of the sheet's top surface in W (m).
-    sheet_size : (float, float), the sheet's x and y extent (m).
+    sheet_size : (float, float), the sheet's x and y extent (m), along T's x and y.
     params : DrawingParams
+    X_WT : RigidTransform, the scene frame: the sheet's top-surface centre at its origin.
     """
 
     plant: object
@@ -103,11 +116,12 @@ class DrawingScene:
     pen_tip_frame: object
     sheet_size: tuple
     params: DrawingParams
+    X_WT: RigidTransform
 
     @property
     def paper_center(self):
-        """Centre of the sheet's top surface in W (m), shape (3,): ``params.paper_center``."""
-        return self.params.paper_center.copy()
+        """Centre of the sheet's top surface in W (m), shape (3,): the origin of T."""
+        return self.X_WT.translation().copy()
 
     @property
     def paper_height(self):
@@ -132,7 +146,7 @@ class DrawingScene:
         return self.add_systems(builder).f_WE_output
 
 
-def add_drawing_scene(plant, arm, *, params=None):
+def add_drawing_scene(plant, arm, *, params=None, X_WT=None):
     """Add the table with its A4 sheet, and the pen on the arm's hand, to ``plant``.
 
     Call before ``plant.Finalize()``. The plant must be discrete (the contact parameters are
@@ -143,6 +157,9 @@ def add_drawing_scene(plant, arm, *, params=None):
     plant : MultibodyPlant, not finalized.
     arm : BaxterArm; the pen goes on ``hand_frame``'s body, its tip at ``tool_frame``.
     params : DrawingParams, optional (default ``DrawingParams()``).
+    X_WT : RigidTransform, optional
+        The scene frame (:func:`~hemg_drake.tasks.placement.scene_pose`), a turn about
+        world z only; default at ``DEFAULT_POSITION``, unturned.
 
     Returns
     -------
@@ -151,21 +168,27 @@ def add_drawing_scene(plant, arm, *, params=None):
     Raises
     ------
     ValueError
-        Bad parameters (naming the field), a finalized or continuous plant, or a plant
-        without a SceneGraph.
+        Bad parameters (naming the field), a finalized or continuous plant, a contact model
+        other than point contact, or a plant without a SceneGraph.
     """
     params = (DrawingParams() if params is None else params).check()
+    X_WT = _pose(X_WT)
     if plant.is_finalized():
         raise ValueError("add_drawing_scene must be called before plant.Finalize()")
     if not plant.time_step() > 0:
         raise ValueError("the drawing scene needs a discrete plant (time_step > 0)")
+    if plant.get_contact_model() != ContactModel.kPoint:
+        raise ValueError(
+            "the drawing scene needs point contact (plant config contact_model: point), got "
+            f"{plant.get_contact_model()}; see hemg_drake.tasks.drawing for why"
+        )
     if not plant.geometry_source_is_registered():
         raise ValueError("the drawing scene needs a plant registered with a SceneGraph")
     (model,) = make_parser(plant).AddModels(str(DRAWING_MODEL))
     plant.WeldFrames(
         plant.world_frame(),
         plant.GetFrameByName("table", model),
-        RigidTransform(params.paper_center),
+        X_WT,
     )
     _add_pen(plant, arm, params)
     return DrawingScene(
@@ -174,8 +197,20 @@ def add_drawing_scene(plant, arm, *, params=None):
         pen_body=arm.hand_frame.body(),
         pen_tip_frame=arm.tool_frame,
         sheet_size=SHEET_SIZE,
-        params=copy.deepcopy(params),  # the scene's own: later edits cannot move the sheet
+        params=copy.deepcopy(params),  # the scene's own: later edits cannot change it
+        X_WT=RigidTransform(X_WT),
     )
+
+
+def _pose(X_WT):
+    """The scene frame, default or checked to turn about world z only."""
+    if X_WT is None:
+        return scene_pose(DEFAULT_POSITION)
+    if not isinstance(X_WT, RigidTransform):
+        raise ValueError(f"X_WT must be a RigidTransform, got {type(X_WT).__name__}")
+    if not np.allclose(X_WT.rotation().matrix()[:, 2], [0.0, 0.0, 1.0], atol=1e-9):
+        raise ValueError("X_WT may only turn the sheet about world z (its yaw)")
+    return X_WT
 
 
 def _add_pen(plant, arm, params):
@@ -242,7 +277,7 @@ def _chord_times(xy):
     return lengths / _DRAW_SPEED + _TURN_TIME * turns / np.pi
 
 
-def default_drawing_plan(params=None):
+def default_drawing_plan(params=None, *, X_WT=None):
     """Three strokes with pen lifts between them: the paper's six steps I-VI (Fig. 10).
 
     I stroke 1, a 11 cm line; II lift and move; III stroke 2, a 14 cm half circle (six
@@ -256,17 +291,21 @@ def default_drawing_plan(params=None):
 
     Parameters
     ----------
-    params : DrawingParams, optional; the sheet's placement and the plan's heights.
+    params : DrawingParams, optional; the plan's heights.
+    X_WT : RigidTransform, optional
+        The sheet's frame (as :func:`add_drawing_scene`); the plan is written in it and
+        mapped to W, so the strokes turn with the sheet.
 
     Returns
     -------
-    TaskPlan
+    TaskPlan, waypoints in W.
     """
     params = (DrawingParams() if params is None else params).check()
-    center = params.paper_center
-    hover = center[2] + params.hover_height
-    touch = center[2] + _CLEARANCE
-    press = center[2] - params.press_depth
+    X_WT = _pose(X_WT)
+    center = np.zeros(3)
+    hover = params.hover_height
+    touch = _CLEARANCE
+    press = -params.press_depth
     above_center = np.array([*center[:2], hover])
     points, durations, pen_down = [above_center], [], []
 
@@ -287,7 +326,8 @@ def default_drawing_plan(params=None):
     go(above_center, _TRAVEL_TIME, False)
     times = np.concatenate([[0.0], np.cumsum(durations)])
     kinds = tuple("forceful" if down else "free" for down in pen_down)
-    return TaskPlan(times=times, points=np.array(points), kinds=kinds, pen_down=tuple(pen_down))
+    points_W = to_world(X_WT, np.array(points))
+    return TaskPlan(times=times, points=points_W, kinds=kinds, pen_down=tuple(pen_down))
 
 
 def drawing_steps(plan):

@@ -42,7 +42,8 @@ class OperatorModel:
     activation_time_constant : float
         Muscle activation time constant (s); 30-50 ms is typical of activation dynamics.
     period : float
-        Sample period of the activation (s).
+        Sample period of the activation (s): the MYO's 1/200 s, the rate at which the sEMG
+        source reads it (a faster update would be computed and never seen).
     """
 
     def __init__(
@@ -58,7 +59,7 @@ class OperatorModel:
         forceful_activation=0.7,
         co_contraction_gain=0.05,
         activation_time_constant=0.04,
-        period=1e-3,
+        period=0.005,
     ):
         if not isinstance(plan, TaskPlan):
             raise ValueError(f"plan must be a TaskPlan, got {type(plan).__name__}")
@@ -145,7 +146,7 @@ class SimulatedOperator(LeafSystem):
     Timing: the hand is a continuous impedance, so ``hand_force`` is a direct feedthrough
     of ``p_MS``, ``v_MS`` and the time (not of ``feedback_force``); the discrete
     HapticMaster samples it without an extra delay. The activation is discrete state,
-    updated every ``period`` (1 ms) by the exact discretisation of the first-order muscle
+    updated every ``period`` (5 ms) by the exact discretisation of the first-order muscle
     lag, and starts at the rest level. Human variability comes from the plan: give each
     demonstration its own ``plan.perturbed(seed)``. Start the HapticMaster at the plan's
     first point mapped into M (``mapping.slave_to_master(plan.points[0])``) to avoid an

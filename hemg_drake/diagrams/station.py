@@ -1,0 +1,262 @@
+"""The slave station: the Baxter arm, its task scene and its controllers as one sub-diagram.
+
+In the spirit of Drake's ``MakeHardwareStation``: one builder turns a scenario into a
+``Diagram`` with named exported ports, and every diagram of this package (demonstration,
+reproduction, plan follower, arm tour) drives the slave through them::
+
+    station = make_slave_station(scenario)
+    builder.AddSystem(station.diagram)
+    builder.Connect(reference, station.diagram.GetInputPort("p_WE_desired"))
+
+Inside: the ``MultibodyPlant`` and ``SceneGraph`` (``scenario.plant``), the arm
+(:func:`~hemg_drake.robots.baxter.add_baxter_arm`), the task's scene placed at
+``scenario.X_WT()`` with its own systems (the cotter pin's detent on the pin's actuator, the
+force sensors), the CLIK (eq. 21) and the variable-gain PD (eq. 20), and the tool point's
+kinematics. The plant's ``applied_generalized_force`` input is exported untouched, free for
+the user's own forces.
+"""
+
+import dataclasses as dc
+
+import numpy as np
+from pydrake.multibody.plant import AddMultibodyPlant
+from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.geometry import MeshcatVisualizer
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import ConstantVectorSource
+
+from hemg_drake.control.clik import Clik, velocity_columns
+from hemg_drake.control.pd import VariableGainPd
+from hemg_drake.robots.baxter import add_baxter_arm
+from hemg_drake.tasks.cotter_pin import add_cotter_pin_scene
+from hemg_drake.tasks.drawing import add_drawing_scene
+
+# Each task's scene: added to the plant before Finalize, its handle has force_output_port.
+SCENE_BUILDERS = {"cotter_pin": add_cotter_pin_scene, "drawing": add_drawing_scene}
+# How the station is driven: a tool-point reference through the CLIK, or joint references.
+REFERENCES = ("tool_point", "joints")
+
+
+class ToolPointKinematics(LeafSystem):
+    """Position and velocity of the arm's tool point E in the world, from the arm's state.
+
+    .. pydrake_system::
+
+        name: ToolPointKinematics
+        input_ports:
+        - state
+        output_ports:
+        - p_WE
+        - v_WE
+
+    ``state`` is the arm's [q; v] (14: rad, rad/s); ``p_WE`` (3, m) and ``v_WE`` (3, m/s)
+    are the origin of ``frame_E`` (the tool frame) measured and expressed in W, by forward
+    kinematics on the controller's own plant context: v_WE = J_WE(q) v.
+
+    Timing: stateless, direct feedthrough; computed only when a consumer (a logger, the
+    force feedback in ``position_error`` mode, a reproducer observing the tool) evaluates it.
+    """
+
+    def __init__(self, *, plant, arm, frame_E=None):
+        LeafSystem.__init__(self)
+        self._plant = plant
+        self._context = plant.CreateDefaultContext()
+        self._model = arm.model_instance
+        self._frame_E = arm.tool_frame if frame_E is None else frame_E
+        self._columns = velocity_columns(plant, self._model)
+        n = len(arm.joint_names)
+        self._n = n
+        self.state_input = self.DeclareVectorInputPort("state", 2 * n)
+        self.p_WE_output = self.DeclareVectorOutputPort("p_WE", 3, self._calc_p_WE)
+        self.v_WE_output = self.DeclareVectorOutputPort("v_WE", 3, self._calc_v_WE)
+
+    def _set_positions(self, context):
+        x = self.state_input.Eval(context)
+        self._plant.SetPositions(self._context, self._model, x[: self._n])
+        return x[self._n :]
+
+    def _calc_p_WE(self, context, output):
+        self._set_positions(context)
+        output.SetFromVector(self._frame_E.CalcPoseInWorld(self._context).translation())
+
+    def _calc_v_WE(self, context, output):
+        v = self._set_positions(context)
+        world = self._plant.world_frame()
+        J_WE = self._plant.CalcJacobianTranslationalVelocity(
+            self._context, JacobianWrtVariable.kV, self._frame_E, np.zeros(3), world, world
+        )
+        output.SetFromVector(J_WE[:, self._columns] @ v)
+
+
+@dc.dataclass(frozen=True, eq=False)
+class SlaveStation:
+    """The station's diagram and handles into it, from :func:`make_slave_station`.
+
+    Attributes
+    ----------
+    diagram : Diagram, named ``station``. Input ports: ``p_WE_desired`` (3, m, W) or, with
+        ``reference="joints"``, ``q_desired`` and ``v_desired`` (7 each, rad, rad/s);
+        ``gain`` (1, the PD's K); ``applied_generalized_force`` (the plant's, free; may
+        stay unconnected). Output ports: ``p_WE``, ``v_WE`` (3, m and m/s, W), ``f_WE``
+        (3, N: the scene's force on the tool point, zero in free space), ``arm_state``
+        (14: [q; v]), ``q_desired`` (7, the CLIK's joint reference; absent with joint
+        references), ``contact_results``, ``query_object``. Subsystems: ``plant``,
+        ``scene_graph``, ``clik``, ``pd``, ``tool_point`` and the scene's own.
+    plant : MultibodyPlant
+    arm : BaxterArm
+    scene : CotterPinScene, DrawingScene or None (free space).
+    q0 : array, shape (7,), the arm's configuration at the start (rad), at rest.
+    """
+
+    diagram: object
+    plant: object
+    arm: object
+    scene: object
+    q0: np.ndarray
+
+    def plant_context(self, root_context):
+        """The plant's context inside the context of the diagram holding the station."""
+        return self.plant.GetMyContextFromRoot(root_context)
+
+
+def make_slave_station(
+    scenario,
+    *,
+    start=None,
+    q0=None,
+    reference="tool_point",
+    scene=True,
+    meshcat=None,
+    recorder=None,
+    name="station",
+):
+    """Build the slave station of a scenario.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Its ``plant``, ``task``, ``scene`` and ``clik`` sections are used.
+    start : array, shape (3,), optional
+        Where the tool point starts, at rest (m, W); default the task plan's first point.
+    q0 : array, shape (7,), optional
+        The arm's configuration at the start (rad); default the one that puts the tool
+        point on ``start`` (:func:`~hemg_drake.control.ik.solve_tool_point_ik`).
+    reference : {"tool_point", "joints"}
+        Drive the station by a tool-point reference through the CLIK, or by joint
+        references straight into the PD.
+    scene : bool
+        False leaves out the task's scene (free space).
+    meshcat : Meshcat, optional
+        Live view: a ``MeshcatVisualizer`` of the station's scene graph.
+    recorder : ReplayRecorder, optional
+        Attached to the station's scene graph, to record an HTML replay.
+    name : str
+        The diagram's name.
+
+    Returns
+    -------
+    SlaveStation
+
+    Raises
+    ------
+    ValueError
+        An unknown ``reference``, a start out of the arm's reach or of the wrong shape.
+    """
+    if reference not in REFERENCES:
+        raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(scenario.plant, builder)
+    arm = add_baxter_arm(plant)
+    task_scene = None
+    if scene:
+        task_scene = SCENE_BUILDERS[scenario.task](
+            plant, arm, params=scenario.scene_params(), X_WT=scenario.X_WT()
+        )
+    plant.Finalize()
+    if q0 is None:
+        if start is None:
+            start = scenario.task_plan().points[0]
+        q0 = solve_tool_point_ik(plant, arm, np.asarray(start, dtype=float))
+    q0 = np.array(q0, dtype=float)
+    plant.SetDefaultPositions(arm.model_instance, q0)
+
+    pd = builder.AddNamedSystem("pd", VariableGainPd(plant=plant, arm=arm))
+    tool_point = builder.AddNamedSystem("tool_point", ToolPointKinematics(plant=plant, arm=arm))
+    arm_state = plant.get_state_output_port(arm.model_instance)
+    builder.Connect(arm_state, pd.state_input)
+    builder.Connect(arm_state, tool_point.state_input)
+    builder.Connect(pd.torque_output, plant.get_actuation_input_port(arm.model_instance))
+    if reference == "tool_point":
+        clik = builder.AddNamedSystem(
+            "clik",
+            Clik(
+                plant=plant,
+                model_instance=arm.model_instance,
+                frame_E=arm.tool_frame,
+                **dc.asdict(scenario.clik),
+            ),
+        )
+        builder.Connect(arm_state, clik.GetInputPort("state"))
+        builder.Connect(clik.GetOutputPort("q_desired"), pd.q_desired_input)
+        builder.Connect(clik.GetOutputPort("v_desired"), pd.v_desired_input)
+        builder.ExportInput(clik.GetInputPort("p_WE_desired"), "p_WE_desired")
+    else:
+        builder.ExportInput(pd.q_desired_input, "q_desired")
+        builder.ExportInput(pd.v_desired_input, "v_desired")
+    builder.ExportInput(pd.gain_input, "gain")
+    builder.ExportInput(plant.get_applied_generalized_force_input_port(), "applied_generalized_force")
+
+    if task_scene is not None:
+        # Wires the scene's own systems (the pin's detent) as well as its force sensor.
+        f_WE = task_scene.force_output_port(builder)
+    else:
+        f_WE = builder.AddNamedSystem("no_contact", ConstantVectorSource(np.zeros(3)))
+        f_WE = f_WE.get_output_port()
+    builder.ExportOutput(tool_point.p_WE_output, "p_WE")
+    builder.ExportOutput(tool_point.v_WE_output, "v_WE")
+    builder.ExportOutput(f_WE, "f_WE")
+    builder.ExportOutput(arm_state, "arm_state")
+    if reference == "tool_point":
+        builder.ExportOutput(clik.GetOutputPort("q_desired"), "q_desired")
+    builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
+    builder.ExportOutput(scene_graph.get_query_output_port(), "query_object")
+    if meshcat is not None:
+        MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
+    if recorder is not None:
+        recorder.add_to_builder(builder, scene_graph)
+    diagram = builder.Build()
+    diagram.set_name(name)
+    return SlaveStation(diagram=diagram, plant=plant, arm=arm, scene=task_scene, q0=q0)
+
+
+def solve_tool_point_ik(plant, arm, p_WE, *, iterations=200, damping=0.01):
+    """Arm configuration that puts the tool point at ``p_WE``, from the home configuration.
+
+    Damped Newton steps on the tool point's translational Jacobian, kept inside the joint
+    limits.
+
+    Raises
+    ------
+    ValueError
+        The point is not reached within 1 mm.
+    """
+    p_WE = np.asarray(p_WE, dtype=float)
+    if p_WE.shape != (3,) or not np.all(np.isfinite(p_WE)):
+        raise ValueError(f"start must be 3 finite numbers (m), got {p_WE!r}")
+    context = plant.CreateDefaultContext()
+    world = plant.world_frame()
+    columns = velocity_columns(plant, arm.model_instance)
+    q = arm.home_positions.copy()
+    for _ in range(iterations):
+        plant.SetPositions(context, arm.model_instance, q)
+        error = p_WE - arm.tool_frame.CalcPoseInWorld(context).translation()
+        if np.linalg.norm(error) < 1e-6:
+            break
+        J = plant.CalcJacobianTranslationalVelocity(
+            context, JacobianWrtVariable.kV, arm.tool_frame, np.zeros(3), world, world
+        )[:, columns]
+        step = J.T @ np.linalg.solve(J @ J.T + damping**2 * np.eye(3), error)
+        q = np.clip(q + step, arm.position_lower, arm.position_upper)
+    if np.linalg.norm(error) > 1e-3:
+        raise ValueError(f"the point {p_WE.tolist()} is out of the arm's reach")
+    return q
