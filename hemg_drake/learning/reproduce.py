@@ -48,12 +48,35 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hemg_drake.learning import lqr
 from hemg_drake.learning.forward import ResidualForward
 from hemg_drake.learning.gmr import Gmr, softmax
 
 WEIGHTINGS = ("temporal", "spatial", "forward")
+TRACKERS = ("gmr", "lqr")
+# The LQR tracks a sequence of states over time: the spatial weighting predicts none.
+LQR_WEIGHTINGS = ("temporal", "forward")
+# Receding horizon of the LQR, steps (1 s at 0.01 s): several of its time constants (0.03-0.2 s
+# for the states of the tasks here), so the plan's first step is that of a longer horizon.
+DEFAULT_HORIZON = 100
+# r of R = r I, s^4/m^2 (scales with the square of the position unit). An axis whose
+# position precision is 1/sigma^2 and whose velocity is free gets the natural frequency
+# (1 / (sigma^2 r))^(1/4): 32 rad/s where the demonstrations agree to 1 mm, 10 rad/s at
+# 1 cm, 5.8 rad/s at 3 cm (docs/reproduction.md, "Trackers").
+DEFAULT_CONTROL_COST = 1.0
 # A state moving slower than STILL ** 0.5 times the fastest state counts as half still.
 STILL = 0.05
+
+
+def _check_position(x, n_position, name):
+    x = np.asarray(x, dtype=float)
+    if x.shape != (n_position,):
+        raise ValueError(
+            f"{name} must have shape ({n_position},) like the model's position, got {x.shape}"
+        )
+    if not np.all(np.isfinite(x)):
+        raise ValueError(f"{name} contains NaN or inf")
+    return x
 
 
 class HsmmGmrPolicy:
@@ -113,15 +136,7 @@ class HsmmGmrPolicy:
 
     def check_position(self, x, name="position"):
         """``x`` as a float array of shape (P,), or a ValueError naming ``name``."""
-        x = np.asarray(x, dtype=float)
-        if x.shape != (self.n_position,):
-            raise ValueError(
-                f"{name} must have shape ({self.n_position},) like the model's position, "
-                f"got {x.shape}"
-            )
-        if not np.all(np.isfinite(x)):
-            raise ValueError(f"{name} contains NaN or inf")
-        return x
+        return _check_position(x, self.n_position, name)
 
     def step(self, x, x_star, predicted):
         """One step of eqs. 12-18.
@@ -164,6 +179,192 @@ class HsmmGmrPolicy:
         return h, xdot, k, x_star + self.dt * xdot, predicted_next
 
 
+class HsmmLqrPolicy:
+    """One step of the tracking reproduction: an LQR over the HSMM's predicted state sequence.
+
+    The robot is a task-space double integrator, state s = [x, xdot], control the
+    acceleration u (:mod:`hemg_drake.learning.lqr`). At step t the HSMM gives the weights
+    h_{t+j} of its states over the next H steps (``"temporal"``: the forward variable without
+    observation, fixed by the timing; ``"forward"``: observing x_t, then predicted without
+    observation), and the LQR minimises over that horizon
+
+        sum_j sum_i h_{t+j,i} (s_{t+j} - mu_i)^T Lambda_i (s_{t+j} - mu_i) + r |u_{t+j}|^2,
+
+    Lambda_i the inverse of state i's [x, xdot] covariance block, mu_i its [x, xdot] mean:
+    stiff where the demonstrations agree, free where they vary (minimal intervention,
+    Calinon 2016). For a given x, the state's term is least at GMR's conditional velocity
+    mu_i^xdot + S_i^xdot,x (S_i^xx)^-1 (x - mu_i^x) (eq. 16), so the LQR tracks eq. 16's
+    velocity field with a position pull set by the conditional precision of x. The first
+    control is applied: s_{t+1} = A s_t + B u_t. k* is GMR's conditional stiffness at x_t
+    with the weights h_t (eqs. 15-17 for k alone), clipped to the training data's range.
+
+    With ``"temporal"`` the sequence does not depend on the motion, so the first-step gains
+    of every horizon are computed ahead (batched Riccati recursions over chunks of
+    horizons) and a step is u_t = k_t - K_t s_t. The table runs until the weights have not
+    changed (by 1e-12) for d_max + H steps (a left-to-right model then holds its last
+    state), and later steps use its last horizon; a model that has not settled by twice its
+    expected length (loops in A) gets further chunks when a step needs them. With
+    ``"forward"`` each step predicts H steps of weights and runs the H-step recursion.
+
+    Parameters
+    ----------
+    model : HSMM
+        Fitted.
+    weighting : {"temporal", "forward"}
+    dt : float
+        Step in s.
+    horizon : int
+        H, in steps (>= 1).
+    control_cost : float
+        r of R = r I in s^4/m^2 (model units: s^4 per position unit squared), > 0.
+    """
+
+    CHUNK = 256  # horizons per batched Riccati recursion of the temporal table
+
+    def __init__(
+        self,
+        model,
+        *,
+        weighting="temporal",
+        dt=0.01,
+        horizon=DEFAULT_HORIZON,
+        control_cost=DEFAULT_CONTROL_COST,
+    ):
+        if weighting not in LQR_WEIGHTINGS:
+            raise ValueError(
+                f"weighting must be one of {LQR_WEIGHTINGS} with tracker='lqr' (the spatial "
+                f"weighting predicts no state sequence), got {weighting!r}"
+            )
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be a finite number > 0, got {dt!r}")
+        if not isinstance(horizon, (int, np.integer)) or isinstance(horizon, bool) or horizon < 1:
+            raise ValueError(f"horizon must be an integer >= 1 (steps), got {horizon!r}")
+        if not (np.isfinite(control_cost) and control_cost > 0):
+            raise ValueError(f"control_cost must be a finite number > 0, got {control_cost!r}")
+        self.forward = ResidualForward(model)
+        self.weighting = weighting
+        self.dt = float(dt)
+        self.horizon = int(horizon)
+        self.control_cost = float(control_cost)
+        self.n_position = p = len(model.position_dims_)
+        self.n_stiffness = len(model.stiffness_dims_)
+        self.n_states = model.n_states
+        dims = np.concatenate([model.position_dims_, model.velocity_dims_])
+        block = model.covariances_[np.ix_(range(self.n_states), dims, dims)]
+        precisions = np.linalg.inv(block)
+        self.precisions = 0.5 * (precisions + np.swapaxes(precisions, 1, 2))
+        self.informations = np.einsum("nij,nj->ni", self.precisions, model.means_[:, dims])
+        self.A, self.B = lqr.double_integrator(p, self.dt)
+        self.R = self.control_cost * np.eye(p)
+        self.gmr = Gmr(
+            priors=model.occupancy_,
+            means=model.means_,
+            covariances=model.covariances_,
+            input_dims=model.position_dims_,
+            output_dims=np.concatenate([model.velocity_dims_, model.stiffness_dims_]),
+        )
+        self.stiffness_range = model.data_range_[:, model.stiffness_dims_]
+        self._zeros = np.zeros(self.n_states)
+        if weighting == "temporal":
+            self._max_duration = model.max_duration_
+            self._h_table = np.empty((0, self.n_states))
+            self._gain_table = np.empty((0, p, 2 * p))
+            self._feedforward_table = np.empty((0, p))
+            self._table_predicted, self._table_still = self.forward.initial(), 0
+            self._table_done = False
+            # Until the timing alone has settled (a left-to-right model), at most 2 tasks long.
+            expected = 2 * int(np.sum(model.duration_means_)) + model.max_duration_
+            while not self._table_done and len(self._gain_table) < expected:
+                self._temporal_table(self._max_duration)
+
+    def costs(self, h):
+        """Q = sum_i h_i Lambda_i, shape (..., 2P, 2P), and Q m = sum_i h_i Lambda_i mu_i."""
+        return np.tensordot(h, self.precisions, 1), h @ self.informations
+
+    def predict_weights(self, predicted, n_steps):
+        """Weights h of the next ``n_steps`` steps without observation, shape (n_steps, N)."""
+        h = np.empty((n_steps, self.n_states))
+        for j in range(n_steps):
+            h[j], predicted = self.forward.step(predicted, self._zeros)
+        return h
+
+    def _temporal_table(self, max_duration):
+        """Weights and first-step gains of the timing alone, for the horizons t0 .. t0 + CHUNK.
+
+        Extended chunk by chunk (always the same chunks, so the numbers do not depend on how
+        far a rollout went) until the weights have stayed within 1e-12 for d_max steps.
+        """
+        if self._table_done:
+            return
+        start = len(self._gain_table)
+        need = start + self.CHUNK + self.horizon + 1  # weights of the chunk's horizons
+        h = list(self._h_table)
+        while len(h) < need:
+            weights, self._table_predicted = self.forward.step(self._table_predicted, self._zeros)
+            if h and np.max(np.abs(weights - h[-1])) <= 1e-12:
+                self._table_still += 1
+            else:
+                self._table_still = 0
+            h.append(weights)
+        self._h_table = np.array(h)
+        Q, Qm = self.costs(self._h_table[start:need])
+        # Horizon t is the slice t .. t + H of the sequence (views, no copies).
+        windows = np.lib.stride_tricks.sliding_window_view
+        Q_windows = np.moveaxis(windows(Q, self.horizon + 1, axis=0), -1, 1)[: self.CHUNK]
+        Qm_windows = np.moveaxis(windows(Qm, self.horizon + 1, axis=0), -1, 1)[: self.CHUNK]
+        gains, feedforward = lqr.tracking_gains(
+            self.A, self.B, Q_windows, Qm_windows, self.R, first_only=True
+        )
+        self._gain_table = np.concatenate([self._gain_table, gains])
+        self._feedforward_table = np.concatenate([self._feedforward_table, feedforward])
+        # Constant for d_max steps beyond the last horizon: later horizons repeat the last.
+        self._table_done = self._table_still >= max_duration + self.horizon + 2
+
+    def check_position(self, x, name="position"):
+        """``x`` as a float array of shape (P,), or a ValueError naming ``name``."""
+        return _check_position(x, self.n_position, name)
+
+    def step(self, t, x, xdot, predicted):
+        """One step: the weights at x_t, the plan's first control, the next state.
+
+        Parameters
+        ----------
+        t : int
+            Step index (t dt s since the start).
+        x : array, shape (P,)
+            Current position x_t (observed by the forward weighting, input of k*).
+        xdot : array, shape (P,)
+            Current velocity of the plan xdot_t.
+        predicted : array, shape (N, d_max)
+            Predicted forward variable for this step (not used by ``"temporal"``).
+
+        Returns
+        -------
+        h : array, shape (N,)
+        k : array, shape (K,)
+        x_next, xdot_next : arrays, shape (P,)
+            A s_t + B u_t.
+        predicted_next : array, shape (N, d_max)
+        """
+        state = np.concatenate([x, xdot])
+        if self.weighting == "temporal":
+            while t >= len(self._gain_table) and not self._table_done:
+                self._temporal_table(self._max_duration)  # a model that has not settled yet
+            h = self._h_table[min(t, len(self._h_table) - 1)]
+            row = min(t, len(self._gain_table) - 1)
+            u = self._feedforward_table[row] - self._gain_table[row] @ state
+            predicted_next = predicted
+        else:
+            log_emission = self.gmr._log_input_likelihood(x[None, :])[0]
+            h, predicted_next = self.forward.step(predicted, log_emission)
+            ahead = np.concatenate([h[None], self.predict_weights(predicted_next, self.horizon)])
+            u = lqr.first_control(self.A, self.B, *self.costs(ahead), self.R, state)
+        output = h @ self.gmr._component_means(x[None, :])[0]
+        k = np.clip(output[self.n_position :], *self.stiffness_range)
+        state_next = self.A @ state + self.B @ u
+        return h, k, state_next[: self.n_position], state_next[self.n_position :], predicted_next
+
+
 @dataclass(frozen=True)
 class Reproduction:
     """A reproduced trajectory, one row per step.
@@ -189,11 +390,25 @@ class Reproduction:
     h: np.ndarray
 
 
-def reproduce(model, start, n_steps, *, dt=0.01, weighting="forward", restoring_gain=0.0):
-    """Reproduce a task from a start position, step by step (eqs. 12-18).
+def reproduce(
+    model,
+    start,
+    n_steps,
+    *,
+    dt=0.01,
+    weighting="forward",
+    restoring_gain=0.0,
+    tracker="gmr",
+    horizon=DEFAULT_HORIZON,
+    control_cost=DEFAULT_CONTROL_COST,
+):
+    """Reproduce a task from a start position, step by step.
 
-    The position observed at each step is the reproduction's own x*_t. k* is clipped to
-    the stiffness range of the training data.
+    ``tracker="gmr"``: the paper's eqs. 12-18, x*_{t+1} = x*_t + dt xdot*_t with xdot* from
+    GMR (:class:`HsmmGmrPolicy`). ``tracker="lqr"``: a receding-horizon LQR on a double
+    integrator tracks the HSMM's state sequence (:class:`HsmmLqrPolicy`), from rest at
+    ``start``. The position observed at each step is the reproduction's own x*_t. k* is
+    clipped to the stiffness range of the training data.
 
     Parameters
     ----------
@@ -206,17 +421,41 @@ def reproduce(model, start, n_steps, *, dt=0.01, weighting="forward", restoring_
     dt : float
         Step in s.
     weighting : {"temporal", "spatial", "forward"}
+        ``"spatial"`` is for ``tracker="gmr"`` only.
     restoring_gain : float
-        kappa of the cross-track attractor (1/s); see :class:`HsmmGmrPolicy`.
+        kappa of the cross-track attractor (1/s); see :class:`HsmmGmrPolicy`. ``"gmr"``
+        only: the LQR returns to the path by the states' position precision (must be 0).
+    tracker : {"gmr", "lqr"}
+    horizon : int
+        LQR horizon in steps (``"lqr"`` only).
+    control_cost : float
+        r of the LQR's control cost R = r I, s^4/m^2 (``"lqr"`` only).
 
     Returns
     -------
     Reproduction
+        With ``"lqr"``, xdot[t] is the plan's velocity at x[t] (x[t + 1] = x[t] + dt xdot[t]
+        + dt^2 / 2 u_t), xdot[0] = 0.
     """
-    policy = HsmmGmrPolicy(model, weighting=weighting, dt=dt, restoring_gain=restoring_gain)
-    x = policy.check_position(start, "start")
+    if tracker not in TRACKERS:
+        raise ValueError(f"tracker must be one of {TRACKERS}, got {tracker!r}")
     if not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
         raise ValueError(f"n_steps must be an integer >= 1, got {n_steps!r}")
+    if tracker == "lqr":
+        if restoring_gain != 0:
+            raise ValueError(
+                "restoring_gain is for tracker='gmr' only (the LQR returns to the path by "
+                f"the states' position precision): give 0, got {restoring_gain!r}"
+            )
+        return _reproduce_lqr(
+            HsmmLqrPolicy(
+                model, weighting=weighting, dt=dt, horizon=horizon, control_cost=control_cost
+            ),
+            start,
+            n_steps,
+        )
+    policy = HsmmGmrPolicy(model, weighting=weighting, dt=dt, restoring_gain=restoring_gain)
+    x = policy.check_position(start, "start")
     positions = np.empty((n_steps, policy.n_position))
     velocities = np.empty_like(positions)
     stiffness = np.empty((n_steps, policy.n_stiffness))
@@ -227,6 +466,26 @@ def reproduce(model, start, n_steps, *, dt=0.01, weighting="forward", restoring_
         weights[t], velocities[t], stiffness[t], x, predicted = policy.step(x, x, predicted)
     return Reproduction(
         t=dt * np.arange(n_steps),
+        x=positions,
+        xdot=velocities,
+        k=stiffness if policy.n_stiffness else None,
+        h=weights,
+    )
+
+
+def _reproduce_lqr(policy, start, n_steps):
+    x = policy.check_position(start, "start")
+    xdot = np.zeros_like(x)
+    positions = np.empty((n_steps, policy.n_position))
+    velocities = np.empty_like(positions)
+    stiffness = np.empty((n_steps, policy.n_stiffness))
+    weights = np.empty((n_steps, policy.n_states))
+    predicted = policy.forward.initial()
+    for t in range(n_steps):
+        positions[t], velocities[t] = x, xdot
+        weights[t], stiffness[t], x, xdot, predicted = policy.step(t, x, xdot, predicted)
+    return Reproduction(
+        t=policy.dt * np.arange(n_steps),
         x=positions,
         xdot=velocities,
         k=stiffness if policy.n_stiffness else None,

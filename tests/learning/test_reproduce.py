@@ -152,3 +152,132 @@ def test_a_state_that_holds_still_attracts_in_every_direction():
     restored = reproduce(model, start, 40, weighting="temporal", restoring_gain=4.0)
     assert abs(carried.x[-1, 0]) > 0.008
     assert abs(restored.x[-1, 0]) < 0.01 * np.exp(-4.0 * 0.39) + 1e-3
+
+
+# ---------------------------------------------------------------- tracker="lqr"
+@pytest.fixture(scope="module")
+def pull_task():
+    """A cotter-pin-like pull: hold, a 10 cm minimum-jerk rise along z, hold; 3 demos whose
+    timing and final height vary (the last by +-3 mm), and their time-normalised mean."""
+    rng = np.random.default_rng(5)
+    demos = []
+    for c in range(3):
+        t = np.arange(0.0, 2.0 + 0.1 * c, 0.01)
+        s = np.clip((t - 0.4 - 0.05 * c) / (1.0 + 0.1 * c), 0.0, 1.0)
+        height = 0.1 + 0.003 * (c - 1)
+        z = height * (10 * s**3 - 15 * s**4 + 6 * s**5)
+        x = np.column_stack([np.zeros_like(t), np.zeros_like(t), 0.12 + z])
+        x += rng.normal(0.0, 5e-4, x.shape)
+        v = np.gradient(x, 0.01, axis=0)
+        k = 20.0 + 150.0 * np.sin(np.pi * s) + rng.normal(0.0, 1.0, len(t))
+        demos.append(np.column_stack([x, v, k]))
+    n = int(round(np.mean([len(d) for d in demos])))
+    phase = np.linspace(0.0, 1.0, n)
+    mean = np.mean(
+        [np.column_stack([np.interp(phase, np.linspace(0, 1, len(d)), col) for col in d.T])
+         for d in demos],
+        axis=0,
+    )  # fmt: skip
+    model = HSMM(5, init="time", reg_covar=0.1, n_iter=20, seed=0).fit(demos)
+    return model, mean
+
+
+def window_control(A, B, Q, Qm, R, s0):
+    """First control of the H-step tracking problem, by least squares over all H controls."""
+    horizon, (n, m) = len(Q) - 1, B.shape
+    G = np.zeros(((horizon + 1) * n, horizon * m))
+    g = np.zeros((horizon + 1) * n)
+    for t in range(horizon + 1):
+        g[t * n : (t + 1) * n] = np.linalg.matrix_power(A, t) @ s0
+        for j in range(t):
+            G[t * n : (t + 1) * n, j * m : (j + 1) * m] = np.linalg.matrix_power(A, t - 1 - j) @ B
+    weights = np.zeros(((horizon + 1) * n,) * 2)
+    linear = np.concatenate(Qm)
+    for t in range(horizon + 1):
+        weights[t * n : (t + 1) * n, t * n : (t + 1) * n] = Q[t]
+    # d/du [ (Gu + g)^T W (Gu + g) - 2 (Gu + g)^T l + u^T R u ] = 0
+    hessian = G.T @ weights @ G + np.kron(np.eye(horizon), R)
+    return np.linalg.solve(hessian, G.T @ (linear - weights @ g))[:m]
+
+
+def test_lqr_tracker_is_the_receding_horizon_plan_on_the_timing(pull_task):
+    # Independent: weights from the model's forward variable, each state's precision over
+    # [x, xdot], every step's plan by batch least squares, the double integrator by hand.
+    from hemg_drake.learning.gmr import Gmr
+
+    model, mean = pull_task
+    dt, horizon, r, n = 0.01, 8, 0.5, 40
+    start = mean[0, :3] + [0.0, 0.005, 0.0]
+    result = reproduce(
+        model, start, n, dt=dt, weighting="temporal", tracker="lqr", horizon=horizon,
+        control_cost=r,
+    )  # fmt: skip
+    h = model.forward_variable(n + horizon, observe=False)
+    precisions = np.linalg.inv(model.covariances_[:, :6, :6])
+    Q = np.einsum("tn,nij->tij", h, precisions)
+    Qm = np.einsum("tn,nij,nj->ti", h, precisions, model.means_[:, :6])
+    A = np.block([[np.eye(3), dt * np.eye(3)], [np.zeros((3, 3)), np.eye(3)]])
+    B = np.vstack([0.5 * dt**2 * np.eye(3), dt * np.eye(3)])
+    gmr = Gmr(
+        priors=model.occupancy_, means=model.means_, covariances=model.covariances_,
+        input_dims=[0, 1, 2], output_dims=[6],
+    )  # fmt: skip
+    low, high = model.data_range_[:, 6]
+    s = np.concatenate([start, np.zeros(3)])
+    for t in range(n):
+        np.testing.assert_allclose(result.x[t], s[:3], rtol=0, atol=1e-10)
+        np.testing.assert_allclose(result.xdot[t], s[3:], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(result.h[t], h[t], atol=1e-12)
+        k = np.clip(gmr.predict(s[:3], weights=h[t])[0], low, high)
+        np.testing.assert_allclose(result.k[t], k, rtol=1e-10)
+        u = window_control(A, B, Q[t : t + horizon + 1], Qm[t : t + horizon + 1], r * np.eye(3), s)
+        s = A @ s + B @ u
+
+
+@pytest.mark.parametrize("weighting", ["temporal", "forward"])
+def test_lqr_tracker_follows_the_mean_demonstration_without_overshoot(pull_task, weighting):
+    model, mean = pull_task
+    result = reproduce(model, mean[0, :3], len(mean), weighting=weighting, tracker="lqr")
+    rmse = np.sqrt(np.mean(np.sum((result.x - mean[:, :3]) ** 2, axis=1)))
+    assert rmse < 0.05 * 0.1  # 5 % of the 10 cm pull
+    # The final height: demonstrated 0.217-0.223 m; no overshoot beyond the highest.
+    assert result.x[:, 2].max() < 0.223 + 1e-3
+    assert abs(result.x[-1, 2] - mean[-1, 2]) < 2e-3
+    # The stiffness follows the demonstrated one (GMR's conditional k, clipped).
+    assert np.corrcoef(result.k[:, 0], mean[:, 6])[0, 1] > 0.9
+    np.testing.assert_allclose(result.h.sum(axis=1), 1.0, rtol=1e-12)
+    np.testing.assert_array_equal(result.xdot[0], 0.0)  # from rest
+
+
+def test_lqr_tracker_returns_to_the_path_from_an_offset(pull_task):
+    # The states agree across the pull to about a millimetre: 1 cm aside is pulled back.
+    model, mean = pull_task
+    result = reproduce(model, mean[0, :3] + [0.01, 0.0, 0.0], 100, tracker="lqr",
+                       weighting="temporal")  # fmt: skip
+    assert abs(result.x[-1, 0]) < 1e-3
+
+
+def test_the_gmr_tracker_is_the_default_path(path_task):
+    model, start = path_task.model, path_task.mean[0, :3] + [0.0, 0.01, 0.0]
+    for weighting in ("temporal", "spatial", "forward"):
+        default = reproduce(model, start, 120, weighting=weighting, restoring_gain=2.0)
+        named = reproduce(model, start, 120, weighting=weighting, restoring_gain=2.0,
+                          tracker="gmr", horizon=3, control_cost=7.0)  # fmt: skip
+        for field in ("t", "x", "xdot", "k", "h"):
+            np.testing.assert_array_equal(getattr(named, field), getattr(default, field))
+
+
+def test_bad_tracker_settings_are_rejected(path_task):
+    model, start = path_task.model, path_task.mean[0, :3]
+    with pytest.raises(ValueError, match=r"tracker must be one of \('gmr', 'lqr'\), got 'LQR'"):
+        reproduce(model, start, 10, tracker="LQR")
+    with pytest.raises(ValueError, match="weighting must be one of .* with tracker='lqr'"):
+        reproduce(model, start, 10, tracker="lqr", weighting="spatial")
+    with pytest.raises(ValueError, match="restoring_gain is for tracker='gmr' only"):
+        reproduce(model, start, 10, tracker="lqr", restoring_gain=2.0)
+    with pytest.raises(ValueError, match="horizon must be an integer >= 1"):
+        reproduce(model, start, 10, tracker="lqr", horizon=0)
+    with pytest.raises(ValueError, match="control_cost must be a finite number > 0"):
+        reproduce(model, start, 10, tracker="lqr", control_cost=-1.0)
+    with pytest.raises(ValueError, match=r"start must have shape \(3,\)"):
+        reproduce(model, start[:2], 10, tracker="lqr")
