@@ -4,6 +4,7 @@ Each controller's step is a dozen numpy expressions on 7-vectors, where numpy's 
 overhead costs several times the arithmetic itself; one compiled call does the same sums in
 the same order (``cache=True``: compiled once per machine). The numpy forms stay the
 reference: ``pd_gains``/``pd_torque`` and ``Clik.qdot``, which the tests compare with these.
+The CLIK's limits and its tool-axis task are checked against references written in the tests.
 """
 
 import math
@@ -50,19 +51,30 @@ def pd_torque_into(
 
 
 @numba.njit(cache=True)
-def limited_step_into(q_next, v_next, q_d, qdot, v_max, q_lower, q_upper, period):
-    """One CLIK integration step within the velocity and position limits.
+def _room_clipped(qdot, q_d, q_lower, q_upper, period, j):
+    """Joint j's rate bounded by the room to its own position limits over one period."""
+    return min(max(qdot[j], (q_lower[j] - q_d[j]) / period), (q_upper[j] - q_d[j]) / period)
 
-    qdot is scaled uniformly (direction kept) so that no joint exceeds ``v_max``, then
-    q_next = clip(q_d + period * qdot, q_lower, q_upper) and v_next = (q_next - q_d) / period.
+
+@numba.njit(cache=True)
+def limited_step_into(q_next, v_next, q_d, qdot, v_max, q_lower, q_upper, period):
+    """One CLIK integration step within the position and velocity limits, into the buffers.
+
+    First each joint's rate is bounded by the room to its own position limits over the step,
+    ``(q_lower - q_d) / period <= rate <= (q_upper - q_d) / period``: a joint at a limit that
+    ``qdot`` pushes further out stops, and only it. Then, if a joint still exceeds ``v_max``,
+    all rates are scaled by one factor (direction kept). Finally q_next = q_d + period * rate
+    (clipped to the limits against rounding) and v_next = (q_next - q_d) / period.
     """
     n = q_d.shape[0]
     ratio = 0.0
     for j in range(n):
-        ratio = max(ratio, abs(qdot[j]) / v_max[j])
+        ratio = max(ratio, abs(_room_clipped(qdot, q_d, q_lower, q_upper, period, j)) / v_max[j])
     for j in range(n):
-        rate = qdot[j] / ratio if ratio > 1.0 else qdot[j]
-        q = min(max(q_d[j] + period * rate, q_lower[j]), q_upper[j])
+        r = _room_clipped(qdot, q_d, q_lower, q_upper, period, j)
+        if ratio > 1.0:
+            r = r / ratio
+        q = min(max(q_d[j] + period * r, q_lower[j]), q_upper[j])
         q_next[j] = q
         v_next[j] = (q - q_d[j]) / period
 
@@ -80,4 +92,120 @@ def transpose_step_into(
     for j in range(n):
         c = columns[j]
         qdot[j] = gain * (J[0, c] * e[0] + J[1, c] * e[1] + J[2, c] * e[2])
+    limited_step_into(q_next, v_next, q_d, qdot, v_max, q_lower, q_upper, period)
+
+
+@numba.njit(cache=True)
+def _solve3_into(x, A, b):
+    """x = A^-1 b for a symmetric positive-definite 3x3 A, by Cholesky (A is not changed)."""
+    l00 = math.sqrt(A[0, 0])
+    l10 = A[1, 0] / l00
+    l20 = A[2, 0] / l00
+    l11 = math.sqrt(A[1, 1] - l10 * l10)
+    l21 = (A[2, 1] - l20 * l10) / l11
+    l22 = math.sqrt(A[2, 2] - l20 * l20 - l21 * l21)
+    y0 = b[0] / l00
+    y1 = (b[1] - l10 * y0) / l11
+    y2 = (b[2] - l20 * y0 - l21 * y1) / l22
+    x[2] = y2 / l22
+    x[1] = (y1 - l21 * x[2]) / l11
+    x[0] = (y0 - l10 * x[1] - l20 * x[2]) / l00
+
+
+@numba.njit(cache=True)
+def axis_step_into(
+    q_next,
+    v_next,
+    q_d,
+    J,
+    columns,
+    p_WEo,
+    R_WE,
+    p_EoE_E,
+    p_desired,
+    gain,
+    dls,
+    damping,
+    axis_E,
+    axis_W_desired,
+    axis_gain,
+    axis_damping,
+    null_damping,
+    v_max,
+    q_lower,
+    q_upper,
+    period,
+):
+    """The CLIK step with the tool-axis task in the position task's null space (``Clik``).
+
+    ``J`` is the plant's (6, nv) spatial Jacobian of point E in W (rows: angular, then
+    translational velocity), ``p_WEo``, ``R_WE`` frame E's pose in W. With ``Jv``, ``Jw`` the
+    arm's columns of the translational and angular rows, a = R_WE axis_E, d = axis_W_desired::
+
+        qdot_p = gain Jv^T e   or   gain Jv^T (Jv Jv^T + damping^2 I)^-1 e   (dls)
+        N      = I - Jv^T (Jv Jv^T + null_damping^2 I)^-1 Jv
+        P      = I - a a^T,  e_a = angle(a, d) (a x d) / |a x d|
+        A      = P Jw N
+        qdot   = qdot_p + A^T (A A^T + axis_damping^2 I)^-1 (axis_gain e_a - P Jw qdot_p)
+
+    then the limited step. See ``Clik`` for the law's reasons.
+    """
+    n = q_d.shape[0]
+    Jw = np.empty((3, n))
+    Jv = np.empty((3, n))
+    for j in range(n):
+        c = columns[j]
+        for i in range(3):
+            Jw[i, j] = J[i, c]
+            Jv[i, j] = J[3 + i, c]
+    e = np.empty(3)
+    a = np.empty(3)
+    for i in range(3):
+        e[i] = p_desired[i] - (
+            p_WEo[i] + R_WE[i, 0] * p_EoE_E[0] + R_WE[i, 1] * p_EoE_E[1] + R_WE[i, 2] * p_EoE_E[2]
+        )
+        a[i] = R_WE[i, 0] * axis_E[0] + R_WE[i, 1] * axis_E[1] + R_WE[i, 2] * axis_E[2]
+    # The position law, eq. 21.
+    G = Jv @ Jv.T
+    y = np.empty(3)
+    if dls:
+        Gd = G.copy()
+        for i in range(3):
+            Gd[i, i] += damping * damping
+        _solve3_into(y, Gd, e)
+    else:
+        y[:] = e
+    qdot = gain * (Jv.T @ y)
+    # Jw N = Jw - (Jw Jv^T) (Jv Jv^T + null_damping^2 I)^-1 Jv, one 3x3 solve per column.
+    Gn = G.copy()
+    for i in range(3):
+        Gn[i, i] += null_damping * null_damping
+    K = Jw @ Jv.T
+    JwN = Jw.copy()
+    z = np.empty(3)
+    for j in range(n):
+        _solve3_into(z, Gn, Jv[:, j])
+        for i in range(3):
+            JwN[i, j] -= K[i, 0] * z[0] + K[i, 1] * z[1] + K[i, 2] * z[2]
+    # P keeps the angular rates that move the axis (its roll about itself is left free).
+    P = np.eye(3)
+    for i in range(3):
+        for k in range(3):
+            P[i, k] -= a[i] * a[k]
+    A = P @ JwN
+    # Axis error: the rotation vector that turns a onto d.
+    c0 = a[1] * axis_W_desired[2] - a[2] * axis_W_desired[1]
+    c1 = a[2] * axis_W_desired[0] - a[0] * axis_W_desired[2]
+    c2 = a[0] * axis_W_desired[1] - a[1] * axis_W_desired[0]
+    s = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+    cosine = a[0] * axis_W_desired[0] + a[1] * axis_W_desired[1] + a[2] * axis_W_desired[2]
+    scale = math.atan2(s, cosine) / s if s > 1e-12 else 0.0
+    r = np.empty(3)
+    r[0], r[1], r[2] = axis_gain * scale * c0, axis_gain * scale * c1, axis_gain * scale * c2
+    r -= P @ (Jw @ qdot)
+    H = A @ A.T
+    for i in range(3):
+        H[i, i] += axis_damping * axis_damping
+    _solve3_into(z, H, r)
+    qdot += A.T @ z
     limited_step_into(q_next, v_next, q_d, qdot, v_max, q_lower, q_upper, period)

@@ -7,9 +7,17 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import LeafSystem
 
 from hemg_drake._validate import as_scalar, as_vector
-from hemg_drake.control._kernels import limited_step_into, transpose_step_into
+from hemg_drake.control._kernels import axis_step_into, limited_step_into, transpose_step_into
 
 CLIK_METHODS = ("transpose", "dls")
+# Damping of the tool-axis task's solve (dimensionless, as J_w): small against the wrist's
+# singular values (about 1) so that it changes the axis rate by well under 1 % away from a
+# wrist singularity, large enough to bound the joint rates at one.
+AXIS_DAMPING = 0.05
+# Damping of the position Jacobian in the null-space projector (m): J J^T's eigenvalues are
+# 0.1 to 2 m^2 over the workspace, so N leaks at most ~1e-7 of the axis task into the tool
+# point's velocity, and N stays bounded at a singularity.
+NULL_SPACE_DAMPING = 1e-4
 
 
 class Clik(LeafSystem):
@@ -29,9 +37,10 @@ class Clik(LeafSystem):
     ``period``::
 
         e      = p_WE_desired - p_WE(q_d)
-        qdot_d = gain * J(q_d)^T e                                  (transpose)
-        qdot_d = gain * J^T (J J^T + damping^2 I)^-1 e              (dls)
-        q_d   <- clip(q_d + period * qdot_d, limits)
+        qdot_p = gain * J(q_d)^T e                                  (transpose)
+        qdot_p = gain * J^T (J J^T + damping^2 I)^-1 e              (dls)
+        qdot_d = qdot_p [+ the tool-axis task below]
+        q_d   <- q_d + period * limited(qdot_d)
 
     with ``J`` the translational Jacobian of point E (the tool point, fixed in
     ``frame_E``) in the world frame W, from the plant. The transpose law is
@@ -40,13 +49,41 @@ class Clik(LeafSystem):
     is closed on the reference ``q_d`` itself (the classic kinematic CLIK),
     so the reference does not inherit the arm's dynamics and tracking errors,
     and the measured ``state`` (the arm's ``[q; v]``) only initialises
-    ``q_d`` at the start of a simulation. ``qdot_d`` is scaled down to the
-    velocity limits, and ``q_d`` is kept a small margin inside the position
-    limits (a joint at its limit has ``qdot_d = 0``).
+    ``q_d`` at the start of a simulation.
+
+    Limits (``limited``), per joint first: ``q_d`` stays ``limit_margin``
+    inside each position limit, and a joint's rate is bounded by the room
+    left to its own limits over the step, so a joint at a limit pushed
+    further out stops while the others keep their rates. Then, if a joint
+    still exceeds its velocity limit, every rate is scaled by one factor
+    (the direction of motion kept).
+
+    Tool-axis task (``orientation_gain > 0``; off by default, and then the
+    step is exactly eq. 21's). The position law leaves the hand's
+    orientation free: with the pen on the hand, its axis tilted 1 to 23 deg
+    from vertical while drawing. With ``a = R_WE axis_E`` (the pen axis in
+    W), ``d = axis_W_desired``, ``J_w`` the angular-velocity Jacobian of
+    ``frame_E`` and ``P = I - a a^T``::
+
+        e_a    = angle(a, d) * (a x d) / |a x d|        (turns a onto d)
+        N      = I - J^T (J J^T + nu^2 I)^-1 J           (nu = 1e-4 m)
+        A      = P J_w N
+        qdot_d = qdot_p + A^T (A A^T + mu^2 I)^-1 (orientation_gain e_a - P J_w qdot_p)
+
+    so the axis error decays as ``exp(-orientation_gain t)``: the second
+    term asks the angular rates across the axis for that decay, net of what
+    the position law already turns. Why the null space of ``J``:
+    ``J qdot_d = J qdot_p`` (to ``nu^2 / sigma_min(J)^2``), so the tool
+    point moves exactly as eq. 21 says and the paper's position law is
+    untouched; the arm's 7 joints leave 4 null-space directions, of which
+    the axis needs 2 (``P`` leaves the roll about the axis itself free). ``mu``
+    (0.05) damps the solve where the wrist loses those directions. The axis
+    is undefined when ``a = -d`` exactly (then ``e_a = 0``).
 
     Discrete stability of the transpose law needs
     ``period * gain * sigma_max(J J^T) < 2``; for the Baxter arm
     ``sigma_max`` is about 2 m^2, so the default gain suits a 1 ms period.
+    The axis task needs ``period * orientation_gain <= 1`` (checked).
 
     Outputs ``q_desired`` and ``v_desired`` (``qdot_d``) match the inputs of
     :class:`~hemg_drake.control.pd.VariableGainPd`; they are the two discrete-state
@@ -71,6 +108,13 @@ class Clik(LeafSystem):
         Update period (s).
     limit_margin : float
         Distance kept inside each position limit (rad).
+    axis_E : array, shape (3,)
+        Unit vector fixed in ``frame_E``, the tool's axis (default its z, the pen's
+        axis from the hand toward the tip).
+    axis_W_desired : array, shape (3,)
+        Unit vector in W that ``axis_E`` is turned onto (default world -z, pen down).
+    orientation_gain : float
+        Rate of the tool-axis task (1/s); 0 (default) turns it off.
     """
 
     def __init__(
@@ -85,6 +129,9 @@ class Clik(LeafSystem):
         damping=0.05,
         period=1e-3,
         limit_margin=0.02,
+        axis_E=(0.0, 0.0, 1.0),
+        axis_W_desired=(0.0, 0.0, -1.0),
+        orientation_gain=0.0,
     ):
         LeafSystem.__init__(self)
         if method not in CLIK_METHODS:
@@ -94,6 +141,16 @@ class Clik(LeafSystem):
         self._damping = as_scalar("Clik damping", damping, strict=False)
         limit_margin = as_scalar("Clik limit_margin", limit_margin, strict=False)
         self._p_EoE_E = np.zeros(3) if p_EoE_E is None else as_vector("Clik p_EoE_E", p_EoE_E, 3)
+        self._axis_E = _unit_vector("Clik axis_E", axis_E)
+        self._axis_W_desired = _unit_vector("Clik axis_W_desired", axis_W_desired)
+        self._orientation_gain = as_scalar(
+            "Clik orientation_gain", orientation_gain, strict=False
+        )
+        if self._orientation_gain * self._period > 1.0:
+            raise ValueError(
+                f"Clik orientation_gain * period must be <= 1 (a stable step), got "
+                f"{self._orientation_gain} * {self._period}"
+            )
         self._plant = plant
         self._plant_context = plant.CreateDefaultContext()
         self._model = model_instance
@@ -118,6 +175,16 @@ class Clik(LeafSystem):
         self._columns = np.arange(plant.num_velocities())[self._v_columns]
         self._limits = (self._v_max, self._q_lower, self._q_upper, self._period)
         self._q_next, self._v_next = np.zeros(self._n), np.zeros(self._n)
+        self._axis_arguments = (
+            self._gain,
+            method == "dls",
+            self._damping,
+            self._axis_E,
+            self._axis_W_desired,
+            self._orientation_gain,
+            AXIS_DAMPING,
+            NULL_SPACE_DAMPING,
+        )
 
         self._p_desired = self.DeclareVectorInputPort("p_WE_desired", 3)
         self._state = self.DeclareVectorInputPort("state", 2 * self._n)
@@ -176,7 +243,31 @@ class Clik(LeafSystem):
             return
         q_next, v_next = self._q_next, self._v_next
         # The sums of qdot() and of the limits below in compiled calls (tests compare them).
-        if self._method == "transpose":
+        if self._orientation_gain > 0.0:
+            self._plant.SetPositions(self._plant_context, self._model, q_d)
+            X_WE = self._frame_E.CalcPoseInWorld(self._plant_context)
+            J = self._plant.CalcJacobianSpatialVelocity(
+                self._plant_context,
+                JacobianWrtVariable.kV,
+                self._frame_E,
+                self._p_EoE_E,
+                self._world,
+                self._world,
+            )
+            axis_step_into(
+                q_next,
+                v_next,
+                q_d,
+                J,
+                self._columns,
+                X_WE.translation(),
+                X_WE.rotation().matrix(),
+                self._p_EoE_E,
+                p_desired,
+                *self._axis_arguments,
+                *self._limits,
+            )
+        elif self._method == "transpose":
             e = p_desired - self.p_WE(q_d)
             transpose_step_into(
                 q_next, v_next, q_d, self._jacobian(), self._columns, e, self._gain, *self._limits
@@ -184,6 +275,14 @@ class Clik(LeafSystem):
         else:
             limited_step_into(q_next, v_next, q_d, self.qdot(q_d, p_desired), *self._limits)
         self._set(discrete_state, q_next, v_next)
+
+
+def _unit_vector(name, value):
+    vector = as_vector(name, value, 3)
+    norm = float(np.linalg.norm(vector))
+    if abs(norm - 1.0) > 1e-9:
+        raise ValueError(f"{name} must be a unit vector, got {vector.tolist()} (norm {norm})")
+    return vector / norm
 
 
 def velocity_columns(plant, model_instance):

@@ -143,3 +143,271 @@ def test_velocity_columns_index_like_the_plant():
         columns = velocity_columns(plant, model)
         np.testing.assert_array_equal(values[columns], plant.GetVelocitiesFromArray(model, values))
         assert isinstance(columns, slice)  # Drake numbers a model's velocities contiguously
+
+
+def _jacobian(plant, arm, q):
+    """The arm's (3, 7) translational Jacobian of the tool point, on a context of the test's."""
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, arm.model_instance, q)
+    W = plant.world_frame()
+    return plant.CalcJacobianTranslationalVelocity(
+        context, JacobianWrtVariable.kV, arm.tool_frame, np.zeros(3), W, W
+    )
+
+
+def test_a_joint_at_its_limit_stops_alone():
+    """Issue 13: joint e0 at its lower limit, pushed further down, stops; the others keep
+    the unclipped law's rates gain * J^T e (all within their velocity limits)."""
+    margin, gain, pinned = 0.02, 300.0, 2
+    _, clik, arm = make_clik()
+    q0 = np.array([0.2, -0.5, 0.0, 0.8, 0.0, 1.0, 0.0])
+    q0[pinned] = arm.position_lower[pinned] + margin  # exactly at the CLIK's limit
+    J = _jacobian(clik._plant, arm, q0)
+    # A target error along -J's column of the pinned joint pushes it outward, and is sized so
+    # that the fastest other joint runs at 80 % of its velocity limit.
+    direction = -J[:, pinned] / np.linalg.norm(J[:, pinned])
+    others = np.arange(7) != pinned
+    unit_rates = gain * J.T @ direction
+    e = direction * 0.8 / np.max(np.abs(unit_rates[others]) / arm.velocity_limit[others])
+    law = gain * J.T @ e
+    # The premise: the pinned joint alone would exceed its velocity limit by over 2x.
+    assert law[pinned] < -2.0 * arm.velocity_limit[pinned]
+    target = clik.p_WE(q0) + e
+
+    q_d, v_d, _, _ = run_clik(target, q0, 0.5e-3, gain=gain, limit_margin=margin)
+    assert v_d[pinned] == 0.0 and q_d[pinned] == q0[pinned]
+    np.testing.assert_allclose(v_d[others], law[others], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(q_d, q0 + 1e-3 * v_d, rtol=0, atol=1e-15)
+
+    # Held for a while: the pinned joint stays put, every rate and position within limits.
+    q_d, v_d, _, _ = run_clik(target, q0, 0.3, gain=gain, limit_margin=margin)
+    assert q_d[pinned] == q0[pinned]
+    assert np.all(np.abs(v_d) <= arm.velocity_limit)
+    assert np.all(q_d >= arm.position_lower + margin) and np.all(q_d <= arm.position_upper - margin)
+
+
+def _reference_limited_rates(q, qdot, v_max, lower, upper, period):
+    """The limits' rule as stated, one joint at a time (independent of the kernel)."""
+    rates = []
+    for j in range(len(q)):
+        rate = float(qdot[j])
+        if (q[j] >= upper[j] and rate > 0.0) or (q[j] <= lower[j] and rate < 0.0):
+            rate = 0.0  # at its limit and pushed outward: this joint stops
+        elif q[j] + period * rate > upper[j]:
+            rate = (upper[j] - q[j]) / period  # up to the limit, no further
+        elif q[j] + period * rate < lower[j]:
+            rate = (lower[j] - q[j]) / period
+        rates.append(rate)
+    worst = max(abs(rate) / v for rate, v in zip(rates, v_max))
+    if worst > 1.0:
+        rates = [rate / worst for rate in rates]
+    return np.array(rates)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_limits_against_the_rule_in_a_simulator(seed):
+    """Random references near the limits and random targets, one CLIK update each: the rates
+    follow the rule (per-joint reference), and the invariants hold."""
+    rng = np.random.default_rng(seed)
+    margin, gain, period = 0.02, 300.0, 1e-3
+    diagram, clik, arm = make_clik(gain=gain, limit_margin=margin)
+    lower, upper = arm.position_lower + margin, arm.position_upper - margin
+    v_max = arm.velocity_limit
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    pinned_seen = scaled_seen = 0
+    for _ in range(20):
+        q0 = rng.uniform(lower, upper)
+        at_limit = rng.random(7) < 0.3
+        q0[at_limit] = np.where(rng.random(7) < 0.5, lower, upper)[at_limit]
+        target = clik.p_WE(q0) + rng.normal(0.0, 0.03, 3)
+        context.SetTime(0.0)
+        diagram.GetInputPort("p_WE_desired").FixValue(context, target)
+        diagram.GetInputPort("state").FixValue(context, np.concatenate([q0, np.zeros(7)]))
+        simulator.Initialize()  # the initialisation event reads the state; one update at t=0
+        simulator.AdvanceTo(0.5 * period)
+        q_d = diagram.GetOutputPort("q_desired").Eval(context)
+        v_d = diagram.GetOutputPort("v_desired").Eval(context)
+        J = _jacobian(clik._plant, arm, q0)
+        law = gain * J.T @ (target - clik.p_WE(q0))
+        np.testing.assert_allclose(
+            v_d, _reference_limited_rates(q0, law, v_max, lower, upper, period), atol=1e-9
+        )
+        # Invariants, without the reference.
+        outward = ((q0 >= upper) & (law > 0)) | ((q0 <= lower) & (law < 0))
+        assert np.all(v_d[outward] == 0.0)
+        assert np.all(np.abs(v_d) <= v_max * (1 + 1e-12))
+        assert np.all((q_d >= lower) & (q_d <= upper))
+        free = ~outward & (q0 + period * law <= upper) & (q0 + period * law >= lower)
+        if np.all(np.abs(law[free]) <= v_max[free]) and np.all(free | outward):
+            np.testing.assert_allclose(v_d[free], law[free], rtol=1e-9, atol=1e-12)
+        pinned_seen += outward.any()
+        scaled_seen += np.any(np.abs(law[~outward]) > v_max[~outward])
+    assert pinned_seen >= 5 and scaled_seen >= 3
+
+
+# A configuration that holds the pen 0.6 deg from vertical over a sheet at (0.60, -0.70,
+# 0.09) (from solve_tool_point_ik), away from the wrist's singular configurations.
+Q_PEN_DOWN = np.array([0.08, -0.83, 0.04, 1.29, -0.03, 1.13, 0.0])
+
+
+def _tool_axis_and_point(plant, arm, q):
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, arm.model_instance, q)
+    X_WE = arm.tool_frame.CalcPoseInWorld(context)
+    return X_WE.rotation().matrix()[:, 2], X_WE.translation()
+
+
+def _tilt(axis_W):
+    """Angle (rad) between a tool axis and world -z."""
+    return float(np.arccos(np.clip(-axis_W[2], -1.0, 1.0)))
+
+
+def test_tool_axis_turns_down_at_the_gain_rate_with_the_tool_point_held():
+    """Target at the tool point, axis 8 deg off: the angle decays as exp(-k t) (closed form)
+    while the point stays put (the axis task lives in the position task's null space)."""
+    k = 5.0
+    q0 = Q_PEN_DOWN + np.array([0.0, 0.0, 0.0, 0.0, 0.1, 0.1, 0.0])
+    diagram, clik, arm = make_clik(orientation_gain=k)
+    plant = clik._plant
+    axis0, p0 = _tool_axis_and_point(plant, arm, q0)
+    theta0 = _tilt(axis0)
+    assert np.degrees(theta0) > 5.0
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    diagram.GetInputPort("p_WE_desired").FixValue(context, p0)
+    diagram.GetInputPort("state").FixValue(context, np.concatenate([q0, np.zeros(7)]))
+    for t in (0.1, 0.2, 0.4):
+        simulator.AdvanceTo(t - 0.5e-3)  # updates at 0, 1, ..., t - 1 ms: t / 1 ms steps
+        axis, p = _tool_axis_and_point(plant, arm, diagram.GetOutputPort("q_desired").Eval(context))
+        np.testing.assert_allclose(_tilt(axis), theta0 * np.exp(-k * t), rtol=0.03)
+        assert np.linalg.norm(p - p0) < 2e-5
+
+
+def test_tool_axis_task_leaves_the_tool_point_velocity_of_eq_21():
+    """One update from the same reference with the axis task on and off: J v_d is the same
+    (null space), the joint rates differ, and the axis turns toward the desired direction."""
+    q0 = Q_PEN_DOWN + np.array([0.1, 0.0, -0.2, 0.0, 0.2, 0.2, 0.0])
+    _, clik, arm = make_clik()
+    target = clik.p_WE(q0) + np.array([0.01, -0.005, 0.004])
+    _, v_off, _, _ = run_clik(target, q0, 0.5e-3, gain=20.0)
+    _, v_on, _, _ = run_clik(target, q0, 0.5e-3, gain=20.0, orientation_gain=2.0)
+    J = _jacobian(clik._plant, arm, q0)
+    assert np.all(np.abs(v_on) < arm.velocity_limit)  # no limit scales either step
+    np.testing.assert_allclose(J @ v_on, J @ v_off, rtol=0, atol=1e-6 * np.linalg.norm(J @ v_off))
+    assert np.linalg.norm(v_on - v_off) > 0.1
+    axis0, _ = _tool_axis_and_point(clik._plant, arm, q0)
+    axis1, _ = _tool_axis_and_point(clik._plant, arm, q0 + 0.01 * v_on)
+    assert _tilt(axis1) < _tilt(axis0)
+
+
+def test_any_tool_axis_onto_any_direction():
+    """The tool's x axis turned onto world +y, from 30+ deg away: aligned within 0.5 deg."""
+    q0 = Q_PEN_DOWN
+    diagram, clik, arm = make_clik()
+    context = clik._plant.CreateDefaultContext()
+    clik._plant.SetPositions(context, arm.model_instance, q0)
+    x_W = arm.tool_frame.CalcPoseInWorld(context).rotation().matrix()[:, 0]
+    desired = np.array([0.0, 1.0, 0.0])
+    assert np.degrees(np.arccos(x_W @ desired)) > 30.0
+    q_d, _, _, _ = run_clik(
+        clik.p_WE(q0), q0, 1.5, axis_E=[1, 0, 0], axis_W_desired=desired, orientation_gain=10.0
+    )
+    clik._plant.SetPositions(context, arm.model_instance, q_d)
+    X_WE = arm.tool_frame.CalcPoseInWorld(context)
+    assert np.degrees(np.arccos(X_WE.rotation().matrix()[:, 0] @ desired)) < 0.5
+    assert np.linalg.norm(X_WE.translation() - clik.p_WE(q0)) < 1e-4
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"axis_E": [0.0, 0.0, 2.0]}, "axis_E must be a unit vector"),
+        ({"axis_E": [0.0, 1.0]}, "axis_E must have shape"),
+        ({"axis_W_desired": [np.nan, 0.0, 1.0]}, "axis_W_desired must be finite"),
+        ({"axis_W_desired": [0.0, 0.0, 0.0]}, "axis_W_desired must be a unit vector"),
+        ({"orientation_gain": -1.0}, "orientation_gain"),
+        ({"orientation_gain": 2000.0}, "orientation_gain \\* period must be <= 1"),
+    ],
+)
+def test_bad_axis_parameters_are_named(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        make_clik(**kwargs)
+
+
+def _draw_first_stroke(orientation_gain):
+    """The drawing scene with its sheet moved toward the robot (where a vertical pen reaches
+    every stroke), the arm started pen-down by IK, plan -> Clik -> PD (K = 100) until the
+    end of stroke 1. Returns the pen tilt (rad), the tip and the contact force, logged."""
+    from pydrake.math import RigidTransform
+    from pydrake.multibody.plant import ContactModel
+    from pydrake.systems.primitives import LogVectorOutput, TrajectorySource
+    from pydrake.trajectories import PiecewisePolynomial
+
+    from hemg_drake.control.ik import solve_tool_point_ik
+    from hemg_drake.control.pd import VariableGainPd
+    from hemg_drake.tasks.drawing import add_drawing_scene, default_drawing_plan, drawing_steps
+
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
+    plant.set_contact_model(ContactModel.kPoint)
+    arm = add_baxter_arm(plant)
+    X_WT = RigidTransform([0.60, -0.70, 0.09])
+    scene = add_drawing_scene(plant, arm, X_WT=X_WT)
+    plant.Finalize()
+    plan = default_drawing_plan(X_WT=X_WT)
+    q0 = solve_tool_point_ik(
+        plant, arm, plan.points[0], axis_E=[0, 0, 1], axis_W=[0, 0, -1], angle_tolerance=0.01
+    )
+    plant.SetDefaultPositions(arm.model_instance, q0)
+    times = np.arange(plan.start_time, plan.end_time, 0.005)
+    source = builder.AddSystem(
+        TrajectorySource(PiecewisePolynomial.FirstOrderHold(times, plan.position(times).T))
+    )
+    clik = builder.AddSystem(
+        Clik(
+            plant=plant,
+            model_instance=arm.model_instance,
+            frame_E=arm.tool_frame,
+            orientation_gain=orientation_gain,
+        )
+    )
+    pd = builder.AddSystem(VariableGainPd(plant=plant, arm=arm, gain=100.0))
+    arm_state = plant.get_state_output_port(arm.model_instance)
+    builder.Connect(source.get_output_port(), clik.GetInputPort("p_WE_desired"))
+    builder.Connect(arm_state, clik.GetInputPort("state"))
+    builder.Connect(arm_state, pd.state_input)
+    builder.Connect(clik.GetOutputPort("q_desired"), pd.q_desired_input)
+    builder.Connect(clik.GetOutputPort("v_desired"), pd.v_desired_input)
+    builder.Connect(pd.torque_output, plant.get_actuation_input_port(arm.model_instance))
+    state_log = LogVectorOutput(arm_state, builder, 0.01)
+    force_log = LogVectorOutput(scene.force_output_port(builder), builder, 0.01)
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(drawing_steps(plan)[1])
+    context = simulator.get_context()
+    poses = [_tool_axis_and_point(plant, arm, q) for q in state_log.FindLog(context).data()[:7].T]
+    tilt = np.array([_tilt(axis) for axis, _ in poses])
+    p_WP = np.array([p for _, p in poses])
+    return tilt, p_WP, force_log.FindLog(context).data().T, plan
+
+
+def test_pen_stays_vertical_while_drawing_with_the_axis_task():
+    """Issue 13: stroke 1 (an 11 cm line) with the pen axis task; the measured arm's pen
+    within 5 deg of vertical whenever it touches, and the stroke drawn as planned."""
+    from hemg_drake.viz.ink import in_contact, ink_strokes
+
+    tilt, p_WP, f_WP, plan = _draw_first_stroke(orientation_gain=10.0)
+    touching = in_contact(f_WP)
+    assert touching.sum() > 100
+    assert np.degrees(tilt[touching].max()) < 5.0
+    (ink,) = ink_strokes(np.arange(len(tilt)) * 0.01, p_WP, touching)
+    # The planned line: from the first pen-down corner to the next, within 5 mm.
+    first = plan.pen_down.index(True)
+    start, end = plan.points[first + 1, :2], plan.points[first + 2, :2]
+    assert np.linalg.norm(ink[0, :2] - start) < 0.005 and np.linalg.norm(ink[-1, :2] - end) < 0.005
+    along = (ink[:, :2] - start) @ (end - start) / np.linalg.norm(end - start)
+    u = (end - start) / np.linalg.norm(end - start)
+    across = u[0] * (ink[:, 1] - start[1]) - u[1] * (ink[:, 0] - start[0])
+    assert np.all(np.abs(across) < 0.005) and np.all(np.diff(along) > -1e-4)
+    # (The position-only law from the same start: up to 12 deg on the strokes,
+    # benchmarks/bench_clik.py.)

@@ -47,36 +47,53 @@ def test_pd_kernel_rejects_nan_references():
     assert not pd_torque_into(out, np.zeros(2 * N), np.zeros(N), np.full(N, np.inf), *args)
 
 
-def _numpy_limited_step(q_d, qdot, v_max, q_lower, q_upper, period):
-    ratio = (np.abs(qdot) / v_max).max()
-    if ratio > 1.0:
-        qdot = qdot / ratio
-    q_next = np.minimum(np.maximum(q_d + period * qdot, q_lower), q_upper)
-    return q_next, (q_next - q_d) / period
-
-
-def test_clik_steps_equal_numpy(rng):
-    v_max = np.full(N, 2.0)
+def test_clik_limited_step_keeps_the_limits_invariants(rng):
+    """Brute-force check of the limits' invariants on random steps (the per-joint rule itself
+    is checked in a simulator in test_clik.py), and the transpose step = J^T e + that step."""
+    v_max = np.array([1.5, 1.5, 1.5, 1.5, 4.0, 4.0, 4.0])
     q_lower, q_upper = np.full(N, -1.0), np.full(N, 1.0)
-    limited = clipped = 0
-    for i in range(200):
-        # Every other reference next to a position limit; errors small and large.
-        q_d = rng.uniform(-1.0, 1.0, N) if i % 2 else rng.choice([-0.995, 0.995], N)
+    gain, period = 300.0, 1e-2
+    pinned = scaled = kept = 0
+    for i in range(300):
+        # Some joints exactly at a limit, others near one or anywhere; errors small and large.
+        q_d = rng.uniform(-1.0, 1.0, N)
+        at_limit = rng.random(N) < (0.4 if i % 2 else 0.1)
+        q_d[at_limit] = rng.choice([-1.0, 1.0], N)[at_limit]
         J = rng.normal(size=(3, NV))
-        e = rng.normal(0.0, 0.05 if i % 3 else 0.001, 3)
-        gain, period = 300.0, 1e-2
+        e = rng.normal(0.0, (0.05, 0.002, 0.0002)[i % 3], 3)
         qdot = gain * J[:, COLUMNS].T @ e
-        expected = _numpy_limited_step(q_d, qdot, v_max, q_lower, q_upper, period)
-        q_next, v_next = np.zeros(N), np.zeros(N)
+        q_next, v_next = np.full(N, np.nan), np.full(N, np.nan)
         limited_step_into(q_next, v_next, q_d, qdot, v_max, q_lower, q_upper, period)
-        np.testing.assert_array_equal(q_next, expected[0])
-        np.testing.assert_array_equal(v_next, expected[1])
+
+        assert np.all((q_next >= q_lower) & (q_next <= q_upper))
+        assert np.all(np.abs(v_next) <= v_max * (1 + 1e-12))
+        np.testing.assert_allclose(q_next, q_d + period * v_next, rtol=0, atol=1e-15)
+        outward = ((q_d >= q_upper) & (qdot > 0)) | ((q_d <= q_lower) & (qdot < 0))
+        assert np.all(v_next[outward] == 0.0)
+        # Never faster than the law, never against it.
+        assert np.all(np.abs(v_next) <= np.abs(qdot) + 1e-12)
+        assert np.all((v_next * qdot >= 0.0) | (np.abs(v_next) < 1e-12))
+        # The joints the position limits leave alone share one scale factor s <= 1 ...
+        lands_inside = (q_d + period * qdot <= q_upper) & (q_d + period * qdot >= q_lower)
+        free = ~outward & lands_inside & (qdot != 0.0)
+        # (v_next = (q_next - q_d) / period rounds to ~1e-14 rad/s.)
+        if free.any():
+            big = np.argmax(np.abs(qdot) * free)
+            s = v_next[big] / qdot[big]
+            np.testing.assert_allclose(v_next[free], s * qdot[free], rtol=0, atol=1e-12)
+            # ... which is 1 when nothing but the pinned joints exceeds a velocity limit ...
+            if np.all(outward | lands_inside) and np.all(np.abs(qdot[~outward]) <= v_max[~outward]):
+                np.testing.assert_allclose(v_next[free], qdot[free], rtol=0, atol=1e-12)
+                kept += outward.any()
+            # ... and no smaller than it must be: some joint ends at a velocity limit.
+            elif s < 1.0 - 1e-9:
+                assert np.isclose(np.abs(v_next) / v_max, 1.0, rtol=1e-12).any()
+                scaled += 1
+        pinned += outward.any()
+
         # The transpose law sums J^T e in its own order: equal to rounding.
-        transpose_step_into(
-            q_next, v_next, q_d, J, COLUMNS, e, gain, v_max, q_lower, q_upper, period
-        )
-        np.testing.assert_allclose(q_next, expected[0], rtol=0, atol=1e-14)
-        np.testing.assert_allclose(v_next, expected[1], rtol=0, atol=1e-12)
-        limited += np.abs(qdot).max() > 2.0
-        clipped += np.any((q_next == q_lower) | (q_next == q_upper))
-    assert limited > 20 and clipped > 20, "both limits should be exercised"
+        q_t, v_t = np.zeros(N), np.zeros(N)
+        transpose_step_into(q_t, v_t, q_d, J, COLUMNS, e, gain, v_max, q_lower, q_upper, period)
+        np.testing.assert_allclose(q_t, q_next, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(v_t, v_next, rtol=0, atol=1e-10)
+    assert pinned > 50 and scaled > 20 and kept > 10, "each case should be exercised"
