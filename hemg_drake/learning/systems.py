@@ -1,9 +1,14 @@
-"""The HSMM-GMR reproducer (eqs. 12-18) and the tracking force (eq. 23) as Drake systems."""
+"""The HSMM reproducers (eqs. 12-18, and an LQR tracker) and the tracking force (eq. 23)."""
 
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
-from hemg_drake.learning.reproduce import HsmmGmrPolicy
+from hemg_drake.learning.reproduce import (
+    DEFAULT_CONTROL_COST,
+    DEFAULT_HORIZON,
+    HsmmGmrPolicy,
+    HsmmLqrPolicy,
+)
 
 
 class HsmmGmrReproducer(LeafSystem):
@@ -87,6 +92,112 @@ class HsmmGmrReproducer(LeafSystem):
         discrete_state.set_value(self._k_star_state, k)
         discrete_state.set_value(self._h_state, h)
         discrete_state.set_value(self._forward_state, predicted_next.ravel())
+
+
+class HsmmLqrReproducer(LeafSystem):
+    """Re-plans an LQR over the HSMM's predicted state sequence from the measured tool point.
+
+    .. pydrake_system::
+
+        name: HsmmLqrReproducer
+        input_ports:
+        - p_WE
+        output_ports:
+        - x_star
+        - xdot_star
+        - k_star
+        - h
+
+    Units: m, m/s, the stiffness channel's units (N/m); h is dimensionless. The tracking
+    alternative to eqs. 15-18 (docs/reproduction.md, "Trackers"): one step of
+    :class:`hemg_drake.learning.reproduce.HsmmLqrPolicy` per period. At t_k = k dt the
+    system reads ``p_WE`` as x_k, takes the plan's state s_k = [x_k, xdot*_k] (the velocity
+    is the plan's own: only the position is measured), plans H steps ahead on the HSMM's
+    weights (eq. 12; the stiffness-and-precision cost of each active state) and applies
+    the first acceleration u_k of the double integrator: it stores h_k, k*_k (GMR's
+    conditional stiffness at x_k, eqs. 15-17, clipped to the training range) and
+    [x*_{k+1}, xdot*_{k+1}] = A s_k + B u_k. With ``p_WE`` fed from ``x_star`` this is
+    exactly :func:`hemg_drake.learning.reproduce.reproduce` with ``tracker="lqr"``.
+
+    Because every plan starts from the measured position, an arm held back (the cotter
+    pin's detent) keeps x* within one step of it, x*_{k+1} - p_WE = dt xdot*_k + dt^2 / 2
+    u_k: the reference cannot run away, unlike eq. 18 integrated on a stuck position.
+
+    With ``weighting="temporal"`` the gains of every horizon are computed in the
+    constructor and a step is one affine feedback (about 10 us); with ``"forward"`` each
+    step predicts H steps of weights and runs the H-step Riccati recursion (about 2 ms at
+    H = 100, N = 18; ``benchmarks/bench_tracker.py``).
+
+    Every output is a state output (no direct feedthrough). Before the first update
+    ``x_star`` is ``start``, ``xdot_star`` zero (the plan starts at rest), and ``k_star``
+    and ``h`` those of step 0. The discrete state also holds the predicted forward variable
+    and the step index.
+
+    Parameters
+    ----------
+    model : HSMM
+        Fitted; its layout gives P (position size) and K (stiffness size).
+    start : array, shape (P,)
+        x*_0 in m.
+    dt : float
+        Period in s (Table I: 0.01).
+    weighting : {"temporal", "forward"}
+        The state sequence: by the timing alone, or the forward variable observing p_WE.
+    horizon : int
+        H, steps planned ahead (default 100: 1 s at 0.01 s).
+    control_cost : float
+        r of the control cost R = r I, s^4/m^2 (default 1).
+    """
+
+    def __init__(
+        self,
+        *,
+        model,
+        start,
+        dt=0.01,
+        weighting="forward",
+        horizon=DEFAULT_HORIZON,
+        control_cost=DEFAULT_CONTROL_COST,
+    ):
+        LeafSystem.__init__(self)
+        self._policy = HsmmLqrPolicy(
+            model, weighting=weighting, dt=dt, horizon=horizon, control_cost=control_cost
+        )
+        start = self._policy.check_position(start, "start")
+        xdot = np.zeros_like(start)
+        predicted = self._policy.forward.initial()
+        h, k, _, _, _ = self._policy.step(0, start, xdot, predicted)
+        self._forward_shape = predicted.shape
+
+        self._p_WE_input = self.DeclareVectorInputPort("p_WE", len(start))
+        self._x_star_state = self.DeclareDiscreteState(start)
+        self._xdot_star_state = self.DeclareDiscreteState(xdot)
+        self._k_star_state = self.DeclareDiscreteState(k)
+        self._h_state = self.DeclareDiscreteState(h)
+        self._forward_state = self.DeclareDiscreteState(predicted.ravel())
+        self._step_state = self.DeclareDiscreteState(1)  # index k of the next update
+        self.DeclarePeriodicDiscreteUpdateEvent(
+            period_sec=dt, offset_sec=0.0, update=self._calc_step
+        )
+        self._x_star_output = self.DeclareStateOutputPort("x_star", self._x_star_state)
+        self._xdot_star_output = self.DeclareStateOutputPort("xdot_star", self._xdot_star_state)
+        self._k_star_output = self.DeclareStateOutputPort("k_star", self._k_star_state)
+        self._h_output = self.DeclareStateOutputPort("h", self._h_state)
+
+    def _calc_step(self, context, discrete_state):
+        p_WE = self._policy.check_position(self._p_WE_input.Eval(context), "p_WE")
+        xdot = context.get_discrete_state(self._xdot_star_state).get_value()
+        predicted = context.get_discrete_state(self._forward_state).get_value()
+        step = int(context.get_discrete_state(self._step_state).get_value()[0])
+        h, k, x_next, xdot_next, predicted_next = self._policy.step(
+            step, p_WE, xdot, predicted.reshape(self._forward_shape)
+        )
+        discrete_state.set_value(self._x_star_state, x_next)
+        discrete_state.set_value(self._xdot_star_state, xdot_next)
+        discrete_state.set_value(self._k_star_state, k)
+        discrete_state.set_value(self._h_state, h)
+        discrete_state.set_value(self._forward_state, predicted_next.ravel())
+        discrete_state.set_value(self._step_state, [step + 1.0])
 
 
 class TrackingForce(LeafSystem):

@@ -1,4 +1,4 @@
-"""HsmmGmrReproducer and TrackingForce in Drake diagrams, against the numpy reproduction."""
+"""HsmmGmrReproducer, HsmmLqrReproducer and TrackingForce in Drake diagrams."""
 
 import numpy as np
 import pytest
@@ -7,7 +7,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
 from hemg_drake.learning.reproduce import HsmmGmrPolicy, reproduce
-from hemg_drake.learning.systems import HsmmGmrReproducer, TrackingForce
+from hemg_drake.learning.systems import HsmmGmrReproducer, HsmmLqrReproducer, TrackingForce
 
 DT = 0.01
 
@@ -138,4 +138,93 @@ def test_bad_parameters_and_inputs_are_rejected(path_task):
     simulator = Simulator(reproducer)
     reproducer.GetInputPort("p_WE").FixValue(simulator.get_mutable_context(), [0.0, np.nan, 0.0])
     with pytest.raises(ValueError, match="p_WE contains NaN"):
+        simulator.AdvanceTo(0.5 * DT)
+
+
+# ------------------------------------------------------------------- HsmmLqrReproducer
+@pytest.mark.parametrize("weighting, horizon", [("temporal", 100), ("forward", 20)])
+def test_lqr_reproducer_in_a_simulator_equals_the_numpy_tracker(path_task, weighting, horizon):
+    start, n_steps = path_task.mean[0, :3] + [0.0, 0.01, 0.0], 60
+    builder = DiagramBuilder()
+    reproducer = builder.AddSystem(
+        HsmmLqrReproducer(
+            model=path_task.model, start=start, dt=DT, weighting=weighting, horizon=horizon
+        )
+    )
+    builder.Connect(reproducer.GetOutputPort("x_star"), reproducer.GetInputPort("p_WE"))
+    log = run(builder.Build(), {"r": reproducer}, n_steps)
+
+    expected = reproduce(
+        path_task.model, start, n_steps + 1, dt=DT, weighting=weighting, tracker="lqr",
+        horizon=horizon,
+    )  # fmt: skip
+    # After the update at t_k the state holds h_k, k*_k and the plan's next state.
+    np.testing.assert_allclose(log["r", "x_star"], expected.x[1:], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(log["r", "xdot_star"], expected.xdot[1:], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(log["r", "k_star"], expected.k[:-1], rtol=1e-9)
+    np.testing.assert_allclose(log["r", "h"], expected.h[:-1], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("weighting", ["temporal", "forward"])
+def test_lqr_reference_stays_by_an_arm_held_back(path_task, weighting):
+    # The arm is stuck at the start (p_WE constant) while the task moves 13 cm on.
+    start = path_task.mean[0, :3]
+    n_steps = 300
+
+    def held(reproducer):
+        builder = DiagramBuilder()
+        builder.AddSystem(reproducer)
+        source = builder.AddSystem(ConstantVectorSource(start))
+        builder.Connect(source.get_output_port(), reproducer.GetInputPort("p_WE"))
+        return run(builder.Build(), {"r": reproducer}, n_steps)
+
+    lqr_log = held(HsmmLqrReproducer(model=path_task.model, start=start, weighting=weighting))
+    gmr_log = held(HsmmGmrReproducer(model=path_task.model, start=start, weighting=weighting))
+    gmr_x = gmr_log["r", "x_star"]
+
+    x_star, xdot_star = lqr_log["r", "x_star"], lqr_log["r", "xdot_star"]
+    # Eq. 18 on the stuck position runs away with the task; the re-planned reference does not.
+    assert np.linalg.norm(gmr_x[-1] - start) > 0.05
+    assert np.max(np.linalg.norm(x_star - start, axis=1)) < 0.01
+    # Each plan starts at the measured p_WE: x*_{k+1} = p_WE + dt (xdot*_k + xdot*_{k+1}) / 2
+    # (the double integrator under a constant acceleration, written out here).
+    previous = np.vstack([np.zeros(3), xdot_star[:-1]])
+    np.testing.assert_allclose(
+        x_star, start + 0.5 * DT * (previous + xdot_star), rtol=0, atol=1e-12
+    )
+
+
+def test_lqr_reproducer_ports_and_initial_outputs(path_task):
+    model, start = path_task.model, path_task.mean[0, :3]
+    reproducer = HsmmLqrReproducer(model=model, start=start, weighting="temporal")
+    context = reproducer.CreateDefaultContext()
+    sizes = {
+        name: reproducer.GetOutputPort(name).size()
+        for name in ("x_star", "xdot_star", "k_star", "h")
+    }
+    assert sizes == {"x_star": 3, "xdot_star": 3, "k_star": 1, "h": model.n_states}
+    assert reproducer.GetInputPort("p_WE").size() == 3
+    np.testing.assert_array_equal(reproducer.GetOutputPort("x_star").Eval(context), start)
+    np.testing.assert_array_equal(reproducer.GetOutputPort("xdot_star").Eval(context), 0.0)
+    first = reproduce(model, start, 1, weighting="temporal", tracker="lqr")
+    np.testing.assert_allclose(reproducer.GetOutputPort("k_star").Eval(context), first.k[0])
+    np.testing.assert_allclose(reproducer.GetOutputPort("h").Eval(context), first.h[0])
+
+
+def test_lqr_reproducer_rejects_bad_parameters_and_inputs(path_task):
+    model, start = path_task.model, path_task.mean[0, :3]
+    with pytest.raises(ValueError, match="weighting must be one of .* with tracker='lqr'"):
+        HsmmLqrReproducer(model=model, start=start, weighting="spatial")
+    with pytest.raises(ValueError, match="horizon must be an integer >= 1"):
+        HsmmLqrReproducer(model=model, start=start, horizon=2.5)
+    with pytest.raises(ValueError, match="control_cost must be a finite number > 0"):
+        HsmmLqrReproducer(model=model, start=start, control_cost=np.nan)
+    with pytest.raises(ValueError, match="dt must be a finite number > 0"):
+        HsmmLqrReproducer(model=model, start=start, dt=0.0)
+    with pytest.raises(ValueError, match="start must have shape"):
+        HsmmLqrReproducer(model=model, start=start[:2])
+    reproducer = HsmmLqrReproducer(model=model, start=start, weighting="temporal")
+    simulator = Simulator(reproducer)
+    reproducer.GetInputPort("p_WE").FixValue(simulator.get_mutable_context(), [np.inf, 0.0, 0.0])
+    with pytest.raises(ValueError, match="p_WE contains NaN or inf"):
         simulator.AdvanceTo(0.5 * DT)
