@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test bench clean
+.PHONY: install demo test bench clean clean-demo
 
 # The stamp makes a second run instant; editing pyproject.toml reinstalls.
 $(STAMP): pyproject.toml
@@ -25,5 +25,17 @@ test: install
 bench: install
 	for f in benchmarks/bench_*.py; do echo "== $$f"; $(PY) $$f || exit 1; done
 
+# Caches and build outputs only. runs/ is left alone: the README has users keep their own
+# demonstrations and models there (runs/pin/ ...), and a deleted demonstration is not
+# rebuilt by anything.
 clean:
-	rm -rf runs .pytest_cache
+	rm -rf .pytest_cache build dist *.egg-info
+	find . -path ./$(VENV) -prune -o -name __pycache__ -type d -prune -exec rm -rf {} +
+
+# What `make demo` writes, and nothing else: runs/cotter_pin/, runs/drawing/ and
+# runs/metrics.json (hemg_drake.pipeline.run_demo's out_dir "runs", one folder per task;
+# keep this list in step with it). The next `make demo` would overwrite them anyway, so
+# removing them loses nothing a user made; their own folders under runs/ stay.
+DEMO_OUTPUTS := runs/cotter_pin runs/drawing runs/metrics.json
+clean-demo:
+	rm -rf $(DEMO_OUTPUTS)
