@@ -18,7 +18,7 @@ value function V_t(s) = s^T P_t s - 2 s^T q_t + const from P_H = Q_H, q_H = Q_H 
 
     S_t = R + B^T P_{t+1} B
     K_t = S_t^-1 B^T P_{t+1} A,          k_t = S_t^-1 B^T q_{t+1}
-    P_t = Q_t + (A - B K_t)^T P_{t+1} (A - B K_t) + K_t^T R K_t     (Joseph form: symmetric)
+    P_t = Q_t + A^T P_{t+1} (A - B K_t)
     q_t = Q_t m_t + (A - B K_t)^T q_{t+1}.
 
 Every function takes leading batch dimensions, so many horizons are solved at once.
@@ -80,29 +80,35 @@ def tracking_gains(A, B, Q, Qm, R, *, first_only=False):
     n, m = B.shape
     if horizon < 1:
         raise ValueError(f"the horizon must have at least 1 step, got Q of shape {Q.shape}")
+    # The affine recursion as a linear one on z = [s, 1] (fewer numpy calls, which is what a
+    # step costs at this size): V_t(z) = z^T [[P_t, -q_t], [-q_t^T, c_t]] z, and the gain on
+    # z is [K_t, -k_t].
     batch = Q.shape[:-3]
+    A_z = np.eye(n + 1)
+    A_z[:n, :n] = A
+    B_z = np.zeros((n + 1, m))
+    B_z[:n] = B
+    A_zT, B_zT = A_z.T, B_z.T
+    Q_z = np.zeros((*batch, horizon + 1, n + 1, n + 1))
+    Q_z[..., :n, :n] = Q
+    Q_z[..., :n, n] = -Qm
+    Q_z[..., n, :n] = -Qm
     if not first_only:
         K = np.empty((*batch, horizon, m, n))
         k = np.empty((*batch, horizon, m))
-    P = Q[..., horizon, :, :]
-    q = Qm[..., horizon, :]
-    Bt = B.T
+    P = Q_z[..., horizon, :, :]
     for t in range(horizon - 1, -1, -1):
-        BtP = Bt @ P  # (..., m, n)
-        S = R + BtP @ B
-        # One solve for the gain and the feedforward: S^-1 [B^T P A, B^T q].
-        rhs = np.concatenate([BtP @ A, (Bt @ q[..., None])], axis=-1)
-        solution = np.linalg.solve(S, rhs)
-        gain, feedforward = solution[..., :n], solution[..., n]
-        if not first_only:
-            K[..., t, :, :] = gain
-            k[..., t, :] = feedforward
-        if first_only and t == 0:
-            return gain, feedforward
-        closed = A - B @ gain
-        closed_T = np.swapaxes(closed, -1, -2)
-        P = Q[..., t, :, :] + closed_T @ P @ closed + np.swapaxes(gain, -1, -2) @ R @ gain
-        q = Qm[..., t, :] + (closed_T @ q[..., None])[..., 0]
+        PB = P @ B_z  # (..., n + 1, m)
+        gain = np.linalg.solve(R + B_zT @ PB, np.swapaxes(PB, -1, -2) @ A_z)
+        if first_only:
+            if t == 0:
+                return gain[..., :n], -gain[..., n]
+        else:
+            K[..., t, :, :] = gain[..., :n]
+            k[..., t, :] = -gain[..., n]
+        # P_t = Q_t + A^T (P A - P B S^-1 B^T P A), symmetrised against rounding.
+        P = Q_z[..., t, :, :] + A_zT @ (P @ A_z - PB @ gain)
+        P = 0.5 * (P + np.swapaxes(P, -1, -2))
     return K, k
 
 
