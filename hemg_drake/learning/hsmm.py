@@ -2,6 +2,7 @@
 
 import inspect
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -732,6 +733,51 @@ class HSMM:
     def aic(self, X, lengths=None):
         """Akaike information criterion: -2 log L + 2 n_parameters_. Lower is better."""
         return -2.0 * self.score(self._sequences(X, lengths)) + 2.0 * self.n_parameters_
+
+    def state_order(self, threshold=0.9):
+        """The states in the order the model's timing alone visits them, or None.
+
+        The order is fixed by the timing when pi puts at least ``threshold`` on one state,
+        each state reached then moves on to one next state with probability at least
+        ``threshold`` (or is never left: a zero row), and no state comes back before every
+        state has been visited. Left-to-right models (init "time", "polyline") are such
+        chains; k-means models often are not (several start states, branches, cycles).
+
+        Returns
+        -------
+        list of int or None
+        """
+        self._check_fitted()
+        state = int(np.argmax(self.startprob_))
+        if self.startprob_[state] < threshold:
+            return None
+        order = [state]
+        while len(order) < self.n_states:
+            row = self.transmat_[state]
+            if row.sum() == 0:
+                break
+            state = int(np.argmax(row))
+            if row[state] < threshold * row.sum() or state in order:
+                return None
+            order.append(state)
+        return order
+
+    def check_weighting(self, weighting):
+        """Warn (``UserWarning``) if a reproduction ``weighting`` is known to fail here.
+
+        ``"temporal"`` weighs the states by the timing alone (eq. 12 without observations):
+        when the timing does not fix the state sequence (:meth:`state_order` is None) it
+        blends states from different parts of the task. Measured on LASA (N = 10, init
+        "kmeans"): position RMSE 4.5-18 mm on such models against 1-2 mm with "forward".
+        """
+        if weighting == "temporal" and self.state_order() is None:
+            warnings.warn(
+                "temporal weighting follows the HSMM's timing alone, and this model's timing "
+                "does not fix its state sequence (several likely start states, branching or "
+                "cyclic transitions; HSMM.state_order() is None): the reproduction can be "
+                "wildly wrong. Use weighting='forward', or fit with init='time' or 'polyline'",
+                stacklevel=2,
+            )
 
     def _log_emission(self, demo_or_n_steps, observe):
         """(T, N) emission log-likelihoods, zeros when not observing."""

@@ -3,6 +3,7 @@ decode (against brute force), sample, information criteria, old files."""
 
 import itertools
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -172,3 +173,30 @@ def test_models_written_before_the_new_defaults_still_load(models, tmp_path):
     assert loaded.min_duration_std == 1.0 and loaded.tol == 1e-4
     np.testing.assert_array_equal(loaded.means_, model.means_)
     assert not any(isinstance(v, np.ndarray) and v.dtype == object for v in arrays.values())
+
+
+def test_temporal_weighting_warns_where_the_timing_does_not_fix_the_states(models):
+    chain = known_model(models)  # 0 -> 1 -> 0: visits both states, then cycles
+    assert chain.state_order() == [0, 1]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        chain.check_weighting("temporal")
+    left_to_right = models.set_parameters(
+        means=np.zeros((3, 1)), covariances=np.ones((3, 1, 1)), startprob=[0.0, 1.0, 0.0],
+        transmat=[[0, 0, 0], [0.05, 0, 0.95], [1, 0, 0]], duration_means=[5, 5, 5],
+        duration_stds=[1, 1, 1], max_duration=20,
+    )  # fmt: skip
+    assert left_to_right.state_order() == [1, 2, 0]
+    for startprob, transmat in [
+        ([0.5, 0.5, 0.0], left_to_right.transmat_),  # two likely starts
+        ([0.0, 1.0, 0.0], [[0, 0, 0], [0.4, 0, 0.6], [1, 0, 0]]),  # a branch
+        ([0.0, 1.0, 0.0], [[0, 1, 0], [0, 0, 1], [0, 1, 0]]),  # 1 -> 2 -> 1, 0 never reached
+    ]:
+        left_to_right.startprob_ = np.array(startprob, float)
+        left_to_right.transmat_ = np.array(transmat, float)
+        assert left_to_right.state_order() is None
+        with pytest.warns(UserWarning, match="temporal weighting follows the HSMM's timing"):
+            left_to_right.check_weighting("temporal")
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            left_to_right.check_weighting("forward")
