@@ -99,3 +99,27 @@ def test_bad_input_is_rejected():
         model.predict(np.array([np.nan]))
     with pytest.raises(ValueError, match=r"weights must have shape \(2,\) or \(1, 2\)"):
         model.predict(np.zeros(1), weights=np.ones(3) / 3)
+
+
+def test_predictive_covariance_of_a_long_batch_agrees_with_the_gmr_package():
+    # 100 queries: the per-component path of the log-density (64 or more samples).
+    rng = np.random.default_rng(8)
+    mixture = random_mixture(rng, 5, 4)
+    inputs = np.array([0, 2])
+    model = Gmr(**mixture, input_dims=inputs)
+    reference = gmr.GMM(n_components=5, random_state=0, **mixture)
+    queries = rng.standard_normal((100, 2))
+    means, covs = model.predict(queries)
+    np.testing.assert_allclose(model.responsibilities(queries)[:3], [
+        reference.condition(inputs, q).priors for q in queries[:3]], rtol=1e-8)
+    for query, mean, cov in zip(queries, means, covs):
+        collapsed = reference.condition(inputs, query).to_mvn()
+        np.testing.assert_allclose(mean, collapsed.mean, rtol=1e-8, atol=1e-12)
+        np.testing.assert_allclose(cov, collapsed.covariance, rtol=1e-8, atol=1e-12)
+    from scipy.stats import multivariate_normal
+
+    x = rng.standard_normal((100, 4))
+    expected = np.stack([multivariate_normal(m, c).logpdf(x)
+                         for m, c in zip(mixture["means"], mixture["covariances"])], axis=1)
+    np.testing.assert_allclose(gaussian_log_pdf(x, mixture["means"], mixture["covariances"]),
+                               expected, rtol=1e-12)
