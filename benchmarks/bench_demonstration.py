@@ -23,7 +23,6 @@ the plant, SceneGraph, the framework).
 """
 
 import collections
-import dataclasses as dc
 import functools
 import gc
 import inspect
@@ -38,12 +37,11 @@ from pydrake.systems.primitives import ConstantVectorSource
 
 from hemg_drake.control.clik import velocity_columns
 from hemg_drake.diagrams.demonstration import build_demonstration_diagram
-from hemg_drake.diagrams.slave import SCENE_BUILDERS, solve_arm_positions
+from hemg_drake.diagrams.station import SCENE_BUILDERS, solve_tool_point_ik
 from hemg_drake.robots.baxter import FLOOR_Z, add_baxter_arm
-from hemg_drake.scenario import load_scenario
+from hemg_drake.scenario import load_scenario, shipped_scenario
 from hemg_drake.viz.recording import ReplayRecorder
 
-SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 REPEATS = 3
 
 
@@ -79,9 +77,13 @@ def plant_alone(scenario):
     builder = DiagramBuilder()
     plant, _ = AddMultibodyPlant(scenario.plant, builder)
     arm = add_baxter_arm(plant)
-    SCENE_BUILDERS[scenario.task](plant, arm)
+    scene = SCENE_BUILDERS[scenario.task](
+        plant, arm, params=scenario.scene_params(), X_WT=scenario.X_WT()
+    )
     plant.Finalize()
-    q = solve_arm_positions(plant, arm, scenario.task_plan().points[0])
+    if hasattr(scene, "add_systems"):
+        scene.add_systems(builder)  # the pin's detent
+    q = solve_tool_point_ik(plant, arm, scenario.task_plan().points[0])
     plant.SetDefaultPositions(arm.model_instance, q)
     gravity = plant.CalcGravityGeneralizedForces(plant.CreateDefaultContext())
     hold = builder.AddSystem(
@@ -169,12 +171,9 @@ def time_by_system(scenario):
 def main():
     print(f"demonstration diagram, 1 ms plant step, whole demonstrations, best of {REPEATS}")
     for name in ("cotter_pin", "drawing"):
-        scenario = load_scenario(SCENARIOS / f"{name}.yaml")
+        scenario = load_scenario(shipped_scenario(name))
         warm_up(scenario)
-        slower = scenario.replaced(
-            master=dc.replace(scenario.master, period=2e-3),
-            clik=dc.replace(scenario.clik, period=2e-3),
-        )
+        slower = scenario.replaced(["master.period=2e-3", "clik.period=2e-3"])
         variants = (
             ("recorder off", scenario, False),
             ("recorder on ", scenario, True),
@@ -196,7 +195,7 @@ def main():
         print(f"{name:10s} plant alone : real-time factor {duration / wall:4.2f}x wall (floor)")
 
     for name in ("cotter_pin", "drawing"):
-        scenario = load_scenario(SCENARIOS / f"{name}.yaml")
+        scenario = load_scenario(shipped_scenario(name))
         wall, systems = time_by_system(scenario)
         python = sum(seconds for seconds, _ in systems.values())
         print(

@@ -74,4 +74,14 @@ def load_npz(path, *, kind):
         with np.load(path, allow_pickle=False) as archive:
             return {name: archive[name] for name in archive.files}
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as error:
-        raise ValueError(f"{path}: not a readable NPZ file ({kind} expected): {error}") from None
+        # numpy's own message may advise allow_pickle=True: never pass that advice on.
+        reason = "not an NPZ archive (neither a zip archive nor numpy data)" if "pickle" in str(
+            error
+        ) else _reason(error)
+        raise ValueError(f"{path}: not a readable NPZ file ({kind} expected): {reason}") from None
+
+
+def _reason(error):
+    if isinstance(error, zipfile.BadZipFile):
+        return "not a zip archive (truncated, or another kind of file)"
+    return (str(error).strip().splitlines() or [type(error).__name__])[0]

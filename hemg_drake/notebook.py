@@ -1,4 +1,4 @@
-"""Small helpers for the walkthroughs in ``notebooks/``: the scale switch, the repository's
+"""Small helpers for the walkthroughs in ``notebooks/``: the scale switch, the shipped
 scenarios, inline replays, and stripping outputs before a commit.
 
 The test suite executes every notebook with ``HEMG_DRAKE_NOTEBOOK_SCALE=small`` so that each
@@ -14,7 +14,7 @@ import os
 from pathlib import Path
 
 from hemg_drake.fileio import write_text_atomic
-from hemg_drake.pipeline import SCENARIOS_DIR
+from hemg_drake.scenario import shipped_scenario
 
 SCALE_VARIABLE = "HEMG_DRAKE_NOTEBOOK_SCALE"
 SCALES = ("full", "small")
@@ -42,18 +42,15 @@ def at_scale(*, full, small):
 
 
 def scenario_file(name):
-    """Path of the repository's scenario ``scenarios/<name>.yaml``, wherever the notebook runs.
+    """Path of the shipped scenario ``name`` (``"cotter_pin"``, ``"drawing"``), wherever the
+    notebook runs (the scenarios are package data).
 
     Raises
     ------
     FileNotFoundError
         No such scenario; the message lists those there are.
     """
-    path = SCENARIOS_DIR / f"{name}.yaml"
-    if not path.is_file():
-        known = sorted(p.stem for p in SCENARIOS_DIR.glob("*.yaml"))
-        raise FileNotFoundError(f"no scenario {name!r} in {SCENARIOS_DIR}; there are {known}")
-    return path
+    return shipped_scenario(name)
 
 
 def replay_iframe(replay, *, height=480):

@@ -75,7 +75,7 @@ def test_scenario_file_finds_the_repository_scenarios():
 
 
 def test_unknown_scenario_lists_the_known_ones():
-    with pytest.raises(FileNotFoundError, match="no scenario 'juggling'.*cotter_pin"):
+    with pytest.raises(FileNotFoundError, match="no shipped scenario named 'juggling'.*cotter_pin"):
         scenario_file("juggling")
 
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from hemg_drake.learning.demos import (
+    ALL_FIELDS,
     FORMAT_VERSION,
     Demonstration,
     load_dataset,
@@ -26,6 +27,10 @@ def make_demo(seed, length):
         activation=rng.uniform(0, 1, length),
         gain=rng.uniform(10, 200, length),
         f_WE=rng.normal(size=(length, 3)),
+        p_WE_desired=rng.normal(size=(length, 3)),
+        emg_time=np.arange(2 * length) * 0.005,
+        emg=rng.integers(-128, 128, size=(2 * length, 8)).astype(float),
+        muscle_activation=rng.uniform(0, 1, 2 * length),
     )
 
 
@@ -41,7 +46,7 @@ def test_round_trip_is_exact(tmp_path, demos):
     assert len(loaded) == 2
     for before, after in zip(demos, loaded):
         assert after.seed == before.seed and len(after) == len(before)
-        for name in ("time", "p_WE", "v_WE", "p_MS", "envelope", "activation", "gain", "f_WE"):
+        for name in ALL_FIELDS:
             assert getattr(after, name).tobytes() == getattr(before, name).tobytes()
     assert metadata["scenario"] == "task: drawing\n"
     assert metadata["seeds"] == [3, 4] and metadata["format_version"] == FORMAT_VERSION
@@ -66,6 +71,11 @@ def test_demonstration_rejects_bad_arrays():
         Demonstration(**{**fields, "p_WE": np.zeros((10, 2))})
     with pytest.raises(ValueError, match="'gain'.*NaN"):
         Demonstration(**{**fields, "gain": np.full(10, np.nan)})
+    # The 200 Hz fields share their own length, not the log's.
+    with pytest.raises(ValueError, match="'muscle_activation'.*shape \\(20,\\)"):
+        Demonstration(**{**fields, "muscle_activation": np.zeros(19)})
+    with pytest.raises(ValueError, match="'emg'.*shape \\(20, 8\\)"):
+        Demonstration(**{**fields, "emg": np.zeros((20, 4))})
 
 
 def test_save_replaces_atomically_and_failure_keeps_the_old_file(tmp_path, demos):
@@ -106,8 +116,9 @@ def test_damaged_files_give_clear_errors(tmp_path, demos):
         load_dataset(truncated)
     text = tmp_path / "text.npz"
     text.write_text("time,x\n0,1\n")
-    with pytest.raises(ValueError, match="not a readable"):
+    with pytest.raises(ValueError, match="not a readable") as error:
         load_dataset(text)
+    assert "pickle" not in str(error.value)  # never advise allow_pickle
     no_metadata = _write_npz(tmp_path / "a.npz", **{"demo0.time": arrays["demo0.time"]})
     with pytest.raises(ValueError, match="no 'metadata'"):
         load_dataset(no_metadata)
@@ -115,13 +126,19 @@ def test_damaged_files_give_clear_errors(tmp_path, demos):
     with pytest.raises(ValueError, match="JSON"):
         load_dataset(bad_json)
     future = _write_npz(tmp_path / "c.npz", **{**arrays, "metadata": _metadata(format_version=99)})
-    with pytest.raises(ValueError, match="format version 99"):
+    with pytest.raises(ValueError, match="format 99, this hemg_drake reads format 2"):
         load_dataset(future)
+    old = _write_npz(tmp_path / "old.npz", **{**arrays, "metadata": _metadata(format_version=1)})
+    with pytest.raises(ValueError, match="format 1.*record it again with hemg-drake demonstrate"):
+        load_dataset(old)
+    model_like = _write_npz(tmp_path / "m.npz", means=np.zeros(3), metadata=np.array("{}"))
+    with pytest.raises(ValueError, match="no format_version; not a hemg_drake dataset"):
+        load_dataset(model_like)
     missing = {k: v for k, v in arrays.items() if k != "demo0.gain"}
     with pytest.raises(ValueError, match="missing array 'demo0.gain'"):
         load_dataset(_write_npz(tmp_path / "d.npz", **missing))
     wrong = {**arrays, "demo0.p_WE": arrays["demo0.p_WE"][:, :2]}
-    with pytest.raises(ValueError, match="demonstration 0.*p_WE"):
+    with pytest.raises(ValueError, match="demonstration 1: .*p_WE"):
         load_dataset(_write_npz(tmp_path / "e.npz", **wrong))
     seeds = {**arrays, "metadata": _metadata(seeds=[1, 2])}
     with pytest.raises(ValueError, match="one seed each"):
