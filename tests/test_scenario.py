@@ -1,64 +1,348 @@
-"""Scenario loading: the shipped files, defaults, round trip, and errors that name the key."""
+"""Scenarios: the shipped files, one source per default, --set overrides, the placed scene,
+and errors that name the file (or the override) and the key."""
 
+import dataclasses as dc
+import inspect
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from hemg_drake.scenario import Scenario, load_scenario, parse_scenario
+from hemg_drake.control.clik import Clik
+from hemg_drake.emg.envelope import RmsEnvelope
+from hemg_drake.emg.gain import VariableGain
+from hemg_drake.learning.hsmm import HSMM
+from hemg_drake.learning.reproduce import reproduce
+from hemg_drake.scenario import (
+    Scenario,
+    load_scenario,
+    parse_scenario,
+    shipped_scenario,
+)
+from hemg_drake.tasks.plan import TaskPlan
+from hemg_drake.teleop.feedback import ForceFeedback
+from hemg_drake.teleop.mapping import WorkspaceMap, WorkspaceMapping
+from hemg_drake.teleop.master import MasterDynamics
+from hemg_drake.teleop.operator import OperatorModel
 
-SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+import hemg_drake
+
+
+def signature_defaults(function):
+    """Every keyword default of ``function``, read from its signature here (not through
+    the scenario module's helpers)."""
+    return {
+        name: parameter.default
+        for name, parameter in inspect.signature(function).parameters.items()
+        if parameter.default is not inspect.Parameter.empty
+    }
+
+
+def as_plain(value):
+    """Tuples and arrays as lists of floats, so a signature's (0.16, 0.12, 0.12) compares
+    with a scenario's [0.16, 0.12, 0.12]."""
+    if isinstance(value, (tuple, list, np.ndarray)):
+        return [float(v) for v in value]
+    return value
+
+
+def Rz(yaw_deg):
+    """Rotation about +z by ``yaw_deg`` degrees, written out."""
+    c, s = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+# --- the shipped scenarios ---------------------------------------------------------------
 
 
 @pytest.mark.parametrize(
-    "name, task, demos, states", [("cotter_pin", "cotter_pin", 4, 4), ("drawing", "drawing", 3, 18)]
+    "name, demos, states, positions, init",
+    [("cotter_pin", 4, 4, "tool", "time"), ("drawing", 3, 18, "reference", "polyline")],
 )
-def test_shipped_scenarios_match_the_paper(name, task, demos, states):
-    scenario = load_scenario(SCENARIOS / f"{name}.yaml")
-    assert scenario.task == task
-    assert (scenario.num_demonstrations, scenario.num_states) == (demos, states)
+def test_shipped_scenarios_load_from_the_package(name, demos, states, positions, init):
+    path = shipped_scenario(name)
+    # Shipped inside the package (found with importlib.resources), not beside the checkout.
+    assert path.parent == Path(hemg_drake.__file__).parent / "scenarios"
+    scenario = load_scenario(path)
+    assert scenario.task == name
+    assert scenario.num_demonstrations == demos
+    assert scenario.learning.num_states == states
+    assert (scenario.learning.positions, scenario.learning.init) == (positions, init)
     assert scenario.log_period == 0.01 and scenario.plant.time_step == 1e-3
     assert scenario.emg.window == 20 and scenario.emg.A_emg == -0.6981
+    assert scenario.emg.k_max == 200.0 and scenario.mapping.scale == 2.0
+    assert len(scenario.scene.position) == 3
+    assert scenario.reproduction.weighting == "temporal"
+    assert scenario.reproduction.restoring_gain == 2.0
+    assert len(scenario.reproduction.start_offsets) == 1
     seeds = scenario.seeds()
-    assert len(set(seeds)) == demos and seeds[0] == scenario.seed
+    assert seeds == list(range(scenario.seed, scenario.seed + demos))
+
+
+def test_unknown_shipped_scenario():
+    with pytest.raises(FileNotFoundError, match="no shipped scenario named 'welding'"):
+        shipped_scenario("welding")
+
+
+# --- every default exists once: the scenario's equal the systems' ------------------------
+
+
+@pytest.mark.parametrize(
+    "section, function, names",
+    [
+        ("clik", Clik.__init__, ["gain", "method", "damping", "period"]),
+        (
+            "master",
+            MasterDynamics.__init__,
+            ["mass", "damping", "friction", "peak_force", "workspace_size",
+             "wall_stiffness", "wall_damping", "period"],
+        ),  # fmt: skip
+        (
+            "operator",
+            OperatorModel.__init__,
+            ["hand_stiffness", "hand_damping", "max_hand_force", "rest_activation",
+             "free_activation", "forceful_activation", "co_contraction_gain",
+             "activation_time_constant", "period"],
+        ),  # fmt: skip
+        ("operator", TaskPlan.perturbed, ["timing_std", "effort_std"]),
+        ("emg", RmsEnvelope.__init__, ["window", "per_channel"]),
+        ("emg", VariableGain.__init__, ["A_emg", "k_min", "k_max"]),
+        ("feedback", ForceFeedback.__init__, ["mode", "gain", "stiffness", "damping", "peak_force"]),
+        ("learning", HSMM.__init__, ["init", "reg_covar", "n_iter"]),
+        ("reproduction", reproduce, ["weighting", "restoring_gain"]),
+        ("mapping", WorkspaceMap.__init__, ["delay_steps"]),
+    ],
+)
+def test_every_default_is_the_systems_own(section, function, names):
+    config = getattr(Scenario(), section)
+    expected = signature_defaults(function)
+    for name in names:
+        assert as_plain(getattr(config, name)) == as_plain(expected[name]), f"{section}.{name}"
+
+
+def test_defaults_that_issue_13_found_twice():
+    # The values that used to differ between the scenario and the library.
+    scenario = Scenario()
+    assert scenario.operator.period == 0.005
+    assert scenario.emg.k_max == signature_defaults(VariableGain.__init__)["k_max"]
+    assert scenario.reproduction.weighting == signature_defaults(reproduce)["weighting"]
+    assert scenario.operator.path_std == [signature_defaults(TaskPlan.perturbed)["path_std"]] * 3
+    assert scenario.mapping.scale == WorkspaceMapping().scale
+
+
+def test_operator_section_builds_the_default_operator_model():
+    # Every OperatorModel parameter with a default is in the scenario, and nothing else.
+    expected = signature_defaults(OperatorModel.__init__)
+    assert Scenario().operator.model_parameters() == expected
+
+
+def test_plant_defaults_to_live_output_ports_and_yaml_can_sample_them():
+    plant = parse_scenario("").plant
+    assert plant.time_step == 1e-3 and not plant.use_sampled_output_ports
+    assert plant.contact_model == "point"
+    sampled = parse_scenario("plant: {use_sampled_output_ports: true}\n").plant
+    assert sampled.use_sampled_output_ports and sampled.time_step == 1e-3
 
 
 def test_partial_sections_keep_the_other_defaults():
     scenario = parse_scenario("emg: {k_max: 300}\nmapping: {scale: 3}\n")
     assert scenario.emg.k_max == 300.0 and scenario.emg.k_min == Scenario().emg.k_min
     assert scenario.mapping.scale == 3.0
-    assert scenario.mapping.offset == Scenario().mapping.offset
+    assert scenario.mapping.scene_offset == Scenario().mapping.scene_offset
 
 
-def test_plant_defaults_to_live_output_ports_and_yaml_can_sample_them():
-    plant = parse_scenario("").plant
-    assert plant.time_step == 1e-3 and not plant.use_sampled_output_ports
-    sampled = parse_scenario("plant: {use_sampled_output_ports: true}\n").plant
-    assert sampled.use_sampled_output_ports and sampled.time_step == 1e-3
+# --- overrides ---------------------------------------------------------------------------
 
 
-def test_yaml_round_trip():
-    scenario = parse_scenario("task: drawing\nseed: 7\noperator: {path_std: [0.001, 0.002, 0]}\n")
-    again = parse_scenario(scenario.to_yaml())
-    assert again.to_yaml() == scenario.to_yaml()
-    assert again.operator.path_std == [0.001, 0.002, 0.0] and again.seed == 7
+@pytest.mark.parametrize(
+    "override, key, value",
+    [
+        ("emg.k_max=150", "emg.k_max", 150.0),
+        ("scene.position=[0.65,-0.80,0.12]", "scene.position", [0.65, -0.80, 0.12]),
+        ("scene.yaw_deg=-20", "scene.yaw_deg", -20.0),
+        ("scene.cotter_pin.hold_force=40", "scene.cotter_pin.hold_force", 40.0),
+        ("scene.drawing.pen_stiffness=5000", "scene.drawing.pen_stiffness", 5000.0),
+        ("learning.num_states=6", "learning.num_states", 6),
+        ("learning.init=kmeans", "learning.init", "kmeans"),
+        ("learning.reg_covar=0.3", "learning.reg_covar", 0.3),
+        ("reproduction.weighting=forward", "reproduction.weighting", "forward"),
+        ("reproduction.start_offsets=[[0, 0.01, 0]]", "reproduction.start_offsets", [[0, 0.01, 0]]),
+        ("reproduction.tracking_gains=[20, 5]", "reproduction.tracking_gains", [20.0, 5.0]),
+        ("mapping.delay_steps=25", "mapping.delay_steps", 25),
+        ("mapping.rpy_deg=[90, 0, 0]", "mapping.rpy_deg", [90.0, 0.0, 0.0]),
+        ("plant.time_step=0.0005", "plant.time_step", 0.0005),
+        ("simulator.target_realtime_rate=1.0", "simulator.target_realtime_rate", 1.0),
+        ("operator.path_std=[0, 0, 0.001]", "operator.path_std", [0.0, 0.0, 0.001]),
+        ("num_demonstrations=2", "num_demonstrations", 2),
+    ],
+)
+def test_override_sets_the_key(override, key, value):
+    scenario = load_scenario(shipped_scenario("cotter_pin"), overrides=[override])
+    node = scenario
+    for name in key.split("."):
+        node = getattr(node, name)
+    assert node == value
+    # Scenario.replaced gives the same scenario as the file read with the override.
+    replaced = load_scenario(shipped_scenario("cotter_pin")).replaced([override])
+    assert replaced.to_yaml() == scenario.to_yaml()
 
 
-def test_plan_override_becomes_the_task_plan():
-    scenario = parse_scenario(
-        "plan:\n  times: [0, 1, 3]\n  points: [[0.6, -0.8, 0.1], [0.7, -0.8, 0.1], [0.7, -0.7, 0.1]]\n"
-        "  kinds: [free, forceful]\n  effort: [1.0, 1.5]\n"
+def test_override_keeps_the_files_other_keys_and_later_overrides_win():
+    file = load_scenario(shipped_scenario("cotter_pin"))
+    scenario = load_scenario(
+        shipped_scenario("cotter_pin"), overrides=["emg.k_max=150", "emg.k_max=170"]
     )
-    plan = scenario.task_plan()
-    np.testing.assert_allclose(plan.position(3.0), [0.7, -0.7, 0.1])
-    assert plan.kinds == ("free", "forceful") and plan.pen_down == (False, False)
-    np.testing.assert_allclose(plan.effort, [1.0, 1.5])
+    assert scenario.emg.k_max == 170.0
+    assert scenario.emg.k_min == file.emg.k_min == 10.0
+    assert scenario.mapping.scene_offset == file.mapping.scene_offset == [0.0, 0.0, 0.05]
+    assert scenario.seed == file.seed == 1
+    # The copy is new: the original is unchanged.
+    assert file.replaced(["seed=7"]).seed == 7 and file.seed == 1
+
+
+def test_override_of_a_section_given_in_yaml():
+    scenario = parse_scenario("", overrides=["emg={k_max: 120, window: 30}"])
+    assert (scenario.emg.k_max, scenario.emg.window) == (120.0, 30)
+    assert scenario.emg.k_min == Scenario().emg.k_min
+
+
+@pytest.mark.parametrize(
+    "override, words",
+    [
+        ("emg.kmax=150", ["emg.kmax"]),
+        ("scenes.position=[0, 0, 0]", ["scenes"]),
+        ("scene.cotter_pin.grip=3", ["scene.cotter_pin.grip"]),
+        ("scene.position=[0.65,", ["malformed YAML"]),
+        ("emg.k_max", ["key=value"]),
+        ("=3", ["key=value"]),
+        ("emg..k_max=3", ["key=value"]),
+        ("emg=3", ["emg", "mapping"]),
+        ("duration.seconds=3", ["duration", "holds a value, not a section"]),
+        ("emg.k_max=high", ["emg.k_max", "number"]),
+        ("learning.num_states=2.5", ["learning.num_states", "integer"]),
+        ("emg.k_max=-5", ["emg.k_max", "negative"]),
+        ("mapping.scale=0", ["mapping.scale", "positive"]),
+        ("master.mass=.nan", ["master.mass", "finite"]),
+        ("operator.rest_activation=1.5", ["operator.rest_activation", "[0, 1]"]),
+        ("learning.init=random", ["learning.init", "random"]),
+        ("reproduction.weighting=backward", ["reproduction.weighting", "backward"]),
+        ("scene.position=[0.65, -0.80]", ["scene.position", "3 numbers"]),
+        ("mapping.rpy_deg=[90, 0]", ["mapping.rpy_deg", "3 numbers"]),
+        ("reproduction.tracking_gains=[50]", ["reproduction.tracking_gains", "2 numbers"]),
+        ("reproduction.start_offsets=[[0, 0]]", ["reproduction.start_offsets"]),
+        ("scene.cotter_pin.hold_force=-1", ["scene.cotter_pin"]),
+    ],
+)
+def test_bad_override_is_one_line_naming_the_override_and_key(override, words):
+    with pytest.raises(ValueError) as error:
+        load_scenario(shipped_scenario("cotter_pin"), overrides=[override])
+    message = str(error.value)
+    assert "\n" not in message
+    assert f"--set {override}" in message
+    for word in words:
+        assert word in message
+
+
+def test_bad_override_through_replaced_names_its_source():
+    with pytest.raises(ValueError, match=r"^--set emg\.kmax=1: .*emg\.kmax"):
+        Scenario().replaced(["emg.kmax=1"])
+
+
+# --- a moved and turned scene moves the plan and the workspace map -----------------------
+
+
+@pytest.mark.parametrize("task", ["cotter_pin", "drawing"])
+@pytest.mark.parametrize("yaw_deg", [0.0, 30.0, -90.0])
+def test_moved_scene_moves_the_plan_and_the_map(task, yaw_deg):
+    home = load_scenario(shipped_scenario(task))
+    p_WT_home = np.array(home.scene.position)
+    p_WT = np.array([0.60, -0.75, 0.15])
+    moved = home.replaced([f"scene.position={p_WT.tolist()}", f"scene.yaw_deg={yaw_deg}"])
+    R = Rz(yaw_deg)
+
+    # Plan: every waypoint is the home waypoint, taken in the scene frame, turned and moved.
+    plan_home, plan = home.task_plan(), moved.task_plan()
+    np.testing.assert_array_equal(plan.times, plan_home.times)
+    expected = p_WT + (np.asarray(plan_home.points) - p_WT_home) @ R.T
+    np.testing.assert_allclose(plan.points, expected, rtol=0, atol=1e-12)
+
+    # Map: the workspace centre is scene_offset in the scene frame; the master turns too.
+    mapping = moved.workspace_mapping()
+    offset_T = np.array(home.mapping.scene_offset)
+    np.testing.assert_allclose(mapping.p_WMo, p_WT + R @ offset_T, rtol=0, atol=1e-12)
+    R_WM_home = home.workspace_mapping().R_WM.matrix()
+    np.testing.assert_allclose(mapping.R_WM.matrix(), R @ R_WM_home, rtol=0, atol=1e-12)
+    # So a stylus point maps onto the same place relative to the scene as at home.
+    p_MS = np.array([0.01, -0.02, 0.03])
+    at_home = home.workspace_mapping().master_to_slave(p_MS) - p_WT_home
+    np.testing.assert_allclose(
+        mapping.master_to_slave(p_MS), p_WT + R @ at_home, rtol=0, atol=1e-12
+    )
+
+
+def test_home_scene_is_where_the_tasks_default_plans_stand():
+    from hemg_drake.tasks.cotter_pin import DEFAULT_POSITION, default_cotter_pin_plan
+
+    # An empty scene.position is the task's default position, unturned.
+    np.testing.assert_allclose(Scenario().X_WT().translation(), DEFAULT_POSITION)
+    np.testing.assert_allclose(Scenario().task_plan().points, default_cotter_pin_plan().points)
 
 
 def test_default_rotation_is_the_mappings_behind_the_robot():
     from hemg_drake.teleop.mapping import R_WM_BEHIND_ROBOT
 
     np.testing.assert_allclose(Scenario().R_WM().matrix(), R_WM_BEHIND_ROBOT.matrix(), atol=1e-12)
+
+
+def test_plan_override_is_in_the_scene_frame():
+    text = (
+        "scene: {position: [0.6, -0.8, 0.1], yaw_deg: 90}\n"
+        "plan:\n  times: [0, 1, 3]\n  points: [[0, 0, 0], [0.1, 0, 0], [0.1, 0.1, 0.02]]\n"
+        "  kinds: [free, forceful]\n  effort: [1.0, 1.5]\n"
+    )
+    plan = parse_scenario(text).task_plan()
+    # Turned 90 deg about z: scene +x is world +y, scene +y is world -x.
+    np.testing.assert_allclose(plan.position(0.0), [0.6, -0.8, 0.1], atol=1e-12)
+    np.testing.assert_allclose(plan.position(1.0), [0.6, -0.7, 0.1], atol=1e-12)
+    np.testing.assert_allclose(plan.position(3.0), [0.5, -0.7, 0.12], atol=1e-12)
+    assert plan.kinds == ("free", "forceful") and plan.pen_down == (False, False)
+    np.testing.assert_allclose(plan.effort, [1.0, 1.5])
+
+
+# --- files that are not scenarios --------------------------------------------------------
+
+
+@pytest.mark.parametrize("text", ["", "   \n", "# nothing but a comment\n"])
+def test_empty_file_is_refused(tmp_path, text):
+    path = tmp_path / "empty.yaml"
+    path.write_text(text)
+    with pytest.raises(ValueError) as error:
+        load_scenario(path)
+    message = str(error.value)
+    assert message.startswith(str(path)) and "empty" in message and "\n" not in message
+
+
+def test_folder_is_refused(tmp_path):
+    with pytest.raises(ValueError) as error:
+        load_scenario(tmp_path)
+    message = str(error.value)
+    assert message.startswith(str(tmp_path)) and "is a folder" in message
+    assert "not found" not in message
+
+
+def test_non_utf8_file_is_refused(tmp_path):
+    path = tmp_path / "latin1.yaml"
+    path.write_bytes("task: drawing\n# Müller\n".encode("latin-1"))
+    with pytest.raises(ValueError) as error:
+        load_scenario(path)
+    message = str(error.value)
+    assert message.startswith(str(path)) and "not UTF-8" in message and "\n" not in message
+
+
+def test_missing_file():
+    with pytest.raises(FileNotFoundError, match="nowhere.yaml"):
+        load_scenario("nowhere.yaml")
 
 
 @pytest.mark.parametrize(
@@ -68,19 +352,27 @@ def test_default_rotation_is_the_mappings_behind_the_robot():
         ("- 3\n", ["top level", "mapping"]),
         ("emg: {windw: 3}", ["emg.windw"]),
         ("plant: {step: 0.001}", ["plant.step"]),
+        ("scene: {drawing: {ink: blue}}", ["scene.drawing.ink"]),
         ("emg: {k_max: high}", ["emg.k_max", "number"]),
         ("num_demonstrations: 2.5", ["num_demonstrations", "integer"]),
         ("operator: {path_std: [0.1, a, 0]}", ["operator.path_std[1]"]),
         ("task: welding", ["task", "welding", "cotter_pin"]),
         ("clik: {method: newton}", ["clik.method"]),
         ("feedback: {mode: voice}", ["feedback.mode"]),
-        ("duration: -2", ["duration", "negative"]),
+        ("learning: {positions: master}", ["learning.positions"]),
+        ("reproduction: {observe: both}", ["reproduction.observe"]),
+        ("duration: -2", ["duration", "positive"]),
+        ("seed: -1", ["seed", "negative"]),
         ("master: {mass: .nan}", ["master.mass", "finite"]),
         ("mapping: {scale: .inf}", ["mapping.scale", "finite"]),
         ("mapping: {scale: 0}", ["mapping.scale", "positive"]),
-        ("mapping: {offset: [1, 2]}", ["mapping.offset", "3 numbers"]),
+        ("learning: {num_states: 0}", ["learning.num_states", "positive"]),
+        ("scene: {position: [1, 2]}", ["scene.position", "3 numbers"]),
+        ("scene: {yaw_deg: .inf}", ["scene.yaw_deg", "finite"]),
+        ("mapping: {scene_offset: [1, 2]}", ["mapping.scene_offset", "3 numbers"]),
         ("operator: {forceful_activation: 1.5}", ["operator.forceful_activation", "[0, 1]"]),
         ("emg: {k_min: 300, k_max: 200}", ["emg.k_min", "emg.k_max"]),
+        ("emg: {calibration_duration: 0.05}", ["emg.calibration_duration", "emg.window"]),
         ("plant: {time_step: 0.01}", ["plant.time_step", "0.001"]),
         ("log_period: 0.0105", ["log_period", "multiple"]),
         ("plan: {times: [0, 1], points: [[0, 0, 0]], kinds: [free]}", ["plan", "points"]),
@@ -98,12 +390,34 @@ def test_bad_scenarios_name_the_file_and_key(tmp_path, text, words):
         assert word in message
 
 
-def test_missing_file():
-    with pytest.raises(FileNotFoundError, match="nowhere.yaml"):
-        load_scenario("nowhere.yaml")
+# --- round trip --------------------------------------------------------------------------
 
 
-def test_empty_file_is_all_defaults(tmp_path):
-    path = tmp_path / "empty.yaml"
-    path.write_text("# nothing\n")
-    assert load_scenario(path).to_yaml() == Scenario().to_yaml()
+def test_defaults_round_trip():
+    assert parse_scenario(Scenario().to_yaml()).to_yaml() == Scenario().to_yaml()
+    # And the defaults are what an (almost) empty file gives.
+    assert parse_scenario("task: cotter_pin\n").to_yaml() == Scenario().to_yaml()
+
+
+@pytest.mark.parametrize("name", ["cotter_pin", "drawing"])
+def test_yaml_round_trip_keeps_every_key(name):
+    scenario = load_scenario(
+        shipped_scenario(name),
+        overrides=[
+            "seed=7",
+            "scene.yaw_deg=15",
+            "operator.path_std=[0.001, 0.002, 0]",
+            "reproduction.start_offsets=[[0.01, 0, 0], [0, 0.02, 0]]",
+            "plan={times: [0, 1], points: [[0, 0, 0], [0, 0, 0.1]], kinds: [free]}",
+            "plant.use_sampled_output_ports=true",
+        ],
+    )
+    again = parse_scenario(scenario.to_yaml())
+    assert again.to_yaml() == scenario.to_yaml()
+    assert dc.asdict(again.operator) == dc.asdict(scenario.operator)
+    assert dc.asdict(again.reproduction) == dc.asdict(scenario.reproduction)
+    assert dc.asdict(again.scene) == dc.asdict(scenario.scene)
+    assert dc.asdict(again.plan) == dc.asdict(scenario.plan)
+    assert again.plant.use_sampled_output_ports
+    assert (again.seed, again.task) == (7, name)
+    np.testing.assert_array_equal(again.task_plan().points, scenario.task_plan().points)
