@@ -264,8 +264,12 @@ def _tilt(axis_W):
 
 
 def test_tool_axis_turns_down_at_the_gain_rate_with_the_tool_point_held():
-    """Target at the tool point, axis 8 deg off: the angle decays as exp(-k t) (closed form)
-    while the point stays put (the axis task lives in the position task's null space)."""
+    """Target at the tool point, axis 8 deg off: the angle decays as exp(-k t) (closed form;
+    slowed by at most the damping's factor s^2 / (s^2 + mu^2), s >= 0.38 the smaller
+    singular value of the axis task here) while the point stays put (the axis task lives in
+    the position task's null space)."""
+    from hemg_drake.control.clik import AXIS_DAMPING
+
     k = 5.0
     q0 = Q_PEN_DOWN + np.array([0.0, 0.0, 0.0, 0.0, 0.1, 0.1, 0.0])
     diagram, clik, arm = make_clik(orientation_gain=k)
@@ -280,7 +284,8 @@ def test_tool_axis_turns_down_at_the_gain_rate_with_the_tool_point_held():
     for t in (0.1, 0.2, 0.4):
         simulator.AdvanceTo(t - 0.5e-3)  # updates at 0, 1, ..., t - 1 ms: t / 1 ms steps
         axis, p = _tool_axis_and_point(plant, arm, diagram.GetOutputPort("q_desired").Eval(context))
-        np.testing.assert_allclose(_tilt(axis), theta0 * np.exp(-k * t), rtol=0.03)
+        slowest = k * 0.38**2 / (0.38**2 + AXIS_DAMPING**2)
+        assert theta0 * np.exp(-k * t) * 0.99 < _tilt(axis) < theta0 * np.exp(-slowest * t) * 1.01
         assert np.linalg.norm(p - p0) < 2e-5
 
 
