@@ -4,9 +4,10 @@ import dataclasses as dc
 
 import numpy as np
 from pydrake.math import RotationMatrix
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import AffineSystem, DiscreteTimeDelay, Multiplexer
 
-from hemg_drake._validate import as_scalar, as_vector
+from hemg_drake._validate import all_finite, as_scalar, as_vector
 
 # The operator stands behind the robot and faces the way it faces, so the device's
 # right (+x_M) is the robot's right (-y_W), up (+y_M) is up (+z_W), and towards the
@@ -100,6 +101,12 @@ class WorkspaceMapping:
             for o, (r0, r1, r2) in zip(self._p_WMo_list, self._R_rows)
         ]
 
+    def velocity_to_slave_floats(self, v_MS):
+        """:meth:`velocity_to_slave` on a list of 3 floats, returning one."""
+        x, y, z = v_MS
+        scale = self.scale
+        return [scale * (r0 * x + r1 * y + r2 * z) for r0, r1, r2 in self._R_rows]
+
     def force_to_master_floats(self, f_W, gain=1.0):
         """``gain`` times :meth:`force_to_master` on a list of 3 floats, returning one."""
         x, y, z = f_W
@@ -111,7 +118,52 @@ class WorkspaceMapping:
         return self.scale * self._rotate_to_world(f_M)
 
 
-class WorkspaceMap(LeafSystem):
+class _MasterToSlave(LeafSystem):
+    """The map of one stylus sample, inside :class:`WorkspaceMap` (memoryless).
+
+    Inputs ``p_MS`` and ``v_MS`` (no delay), or ``sample``, the delayed 6-vector
+    [p_MS - p_MS_rest; v_MS] (the delay's zero state is then the rest pose).
+    """
+
+    def __init__(self, mapping, p_MS_rest=None):
+        LeafSystem.__init__(self)
+        self.mapping = mapping
+        if p_MS_rest is None:
+            self._p_MS_rest = None
+            self._p_MS_input = self.DeclareVectorInputPort("p_MS", 3)
+            self._v_MS_input = self.DeclareVectorInputPort("v_MS", 3)
+        else:
+            self._p_MS_rest = [float(value) for value in p_MS_rest]
+            self._sample_input = self.DeclareVectorInputPort("sample", 6)
+        inputs = {self.all_input_ports_ticket()}
+        self.DeclareVectorOutputPort(
+            "p_WE_desired", 3, self._calc_p_WE, prerequisites_of_calc=inputs
+        )
+        self.DeclareVectorOutputPort(
+            "v_WE_desired", 3, self._calc_v_WE, prerequisites_of_calc=inputs
+        )
+
+    def _floats(self, context, name):
+        if self._p_MS_rest is None:
+            port = self._p_MS_input if name == "p_MS" else self._v_MS_input
+            values = port.Eval(context).tolist()
+        elif name == "p_MS":
+            offset = self._sample_input.Eval(context).tolist()[:3]
+            values = [o + r for o, r in zip(offset, self._p_MS_rest)]
+        else:
+            values = self._sample_input.Eval(context).tolist()[3:]
+        if not all_finite(values):
+            raise ValueError(f"{name} must be finite, got {values}")
+        return values
+
+    def _calc_p_WE(self, context, output):
+        output.SetFromVector(self.mapping.master_to_slave_floats(self._floats(context, "p_MS")))
+
+    def _calc_v_WE(self, context, output):
+        output.SetFromVector(self.mapping.velocity_to_slave_floats(self._floats(context, "v_MS")))
+
+
+class WorkspaceMap(Diagram):
     """The master's stylus motion mapped into the slave's desired end-effector motion.
 
     .. pydrake_system::
@@ -126,20 +178,28 @@ class WorkspaceMap(LeafSystem):
 
     Ports: ``p_MS`` (3, m) and ``v_MS`` (3, m/s) the stylus tip in M; ``p_WE_desired``
     (3, m) and ``v_WE_desired`` (3, m/s) the slave end-effector target in W, by
-    :class:`WorkspaceMapping` (``mapping``).
+    :class:`WorkspaceMapping` (``mapping``). A NaN or infinite input raises ValueError when
+    it reaches the map (after the delay, if any).
 
     Timing: with ``delay_steps`` = 0 (default) the map is memoryless (direct feedthrough).
     With ``delay_steps`` = n > 0 it models a constant transport delay of the teleoperation
-    channel: a FIFO of n samples in discrete state, shifted by a periodic update every
-    ``period`` (s). For an input held between sample instants on the same grid (the
-    :class:`~hemg_drake.teleop.master.HapticMaster`'s outputs), the output at time t is
-    exactly the mapped input at t - n * period; before the first n samples it is the map of
-    ``p_MS_initial`` at rest. (Drake's ``DiscreteTimeDelay`` with n steps samples and holds
-    its input first, so on such an input it delays by n + 1 periods.)
+    channel with Drake's ``DiscreteTimeDelay`` (period ``period``, n - 1 steps: it samples
+    and holds first, one more period on a signal held on the same grid). For an input held
+    between sample instants on that grid (the
+    :class:`~hemg_drake.teleop.master.HapticMaster`'s outputs), the output at time t is the
+    mapped input at t - n * period; until the n-th sample (at t = (n - 1) period) it is the
+    map of ``p_MS_initial`` at rest. Drake's delay starts at zero, so it carries the
+    offset from that rest pose, [p_MS - p_MS_initial; v_MS] (exact for a zero
+    ``p_MS_initial``, otherwise to one rounding of the offset).
+
+    Structure (a small Diagram): ``Multiplexer`` -> ``AffineSystem`` (the offset) ->
+    ``DiscreteTimeDelay`` -> the map, a LeafSystem evaluated when its outputs are read;
+    without delay, the map alone. Measured against the FIFO of Python discrete state that
+    it replaced (``benchmarks/bench_teleop.py``): see ``docs/teleop.md``.
     """
 
     def __init__(self, *, mapping, delay_steps=0, period=1e-3, p_MS_initial=(0.0, 0.0, 0.0)):
-        LeafSystem.__init__(self)
+        Diagram.__init__(self)
         if not isinstance(mapping, WorkspaceMapping):
             raise ValueError(f"mapping must be a WorkspaceMapping, got {type(mapping).__name__}")
         try:
@@ -150,46 +210,27 @@ class WorkspaceMap(LeafSystem):
             raise ValueError(f"delay_steps must be a non-negative integer, got {delay_steps!r}")
         self.mapping = mapping
         self.delay_steps = steps
-        self._p_MS_input = self.DeclareVectorInputPort("p_MS", 3)
-        self._v_MS_input = self.DeclareVectorInputPort("v_MS", 3)
-        if self.delay_steps == 0:
-            prerequisites = {self.all_input_ports_ticket()}
+        builder = DiagramBuilder()
+        if steps == 0:
+            to_slave = builder.AddNamedSystem("map", _MasterToSlave(mapping))
+            for name in ("p_MS", "v_MS"):
+                builder.ExportInput(to_slave.GetInputPort(name), name)
         else:
-            p_initial = as_vector("p_MS_initial", p_MS_initial, 3)
-            at_rest = np.concatenate([p_initial, np.zeros(3)])
-            # The FIFO holds n master samples [p_MS; v_MS], oldest first; the oldest is output.
-            self.DeclareDiscreteState(np.tile(at_rest, self.delay_steps))
-            self.DeclarePeriodicDiscreteUpdateEvent(
-                period_sec=as_scalar("period", period), offset_sec=0.0, update=self._update
+            p_rest = as_vector("p_MS_initial", p_MS_initial, 3)
+            join = builder.AddNamedSystem("join", Multiplexer([3, 3]))
+            # y = u - [p_MS_initial; 0], without state (A, B, f0 and C are empty).
+            no_state = (np.zeros((0, 0)), np.zeros((0, 6)), np.zeros(0), np.zeros((6, 0)))
+            shift = np.concatenate([-p_rest, np.zeros(3)])
+            offset = builder.AddNamedSystem("offset", AffineSystem(*no_state, np.eye(6), shift))
+            delay = builder.AddNamedSystem(
+                "delay", DiscreteTimeDelay(as_scalar("period", period), steps - 1, 6)
             )
-            prerequisites = {self.xd_ticket()}
-        self._p_WE_desired_output = self.DeclareVectorOutputPort(
-            "p_WE_desired", 3, self._calc_p_WE_desired, prerequisites_of_calc=prerequisites
-        )
-        self._v_WE_desired_output = self.DeclareVectorOutputPort(
-            "v_WE_desired", 3, self._calc_v_WE_desired, prerequisites_of_calc=prerequisites
-        )
-
-    def _master_sample(self, context, port, rows):
-        """``port``'s value on the output side: the current input, or the FIFO's oldest."""
-        if self.delay_steps == 0:
-            return port.Eval(context)
-        return context.get_discrete_state_vector().value()[rows]
-
-    def _update(self, context, discrete_state):
-        fifo = context.get_discrete_state_vector().value()
-        newest = np.concatenate(
-            [
-                as_vector("p_MS", self._p_MS_input.Eval(context), 3),
-                as_vector("v_MS", self._v_MS_input.Eval(context), 3),
-            ]
-        )
-        discrete_state.set_value(np.concatenate([fifo[6:], newest]))
-
-    def _calc_p_WE_desired(self, context, output):
-        p_MS = self._master_sample(context, self._p_MS_input, slice(0, 3))
-        output.SetFromVector(self.mapping.master_to_slave_floats(p_MS.tolist()))
-
-    def _calc_v_WE_desired(self, context, output):
-        v_MS = self._master_sample(context, self._v_MS_input, slice(3, 6))
-        output.SetFromVector(self.mapping.velocity_to_slave(v_MS))
+            to_slave = builder.AddNamedSystem("map", _MasterToSlave(mapping, p_rest))
+            builder.Connect(join.get_output_port(), offset.get_input_port())
+            builder.Connect(offset.get_output_port(), delay.get_input_port())
+            builder.Connect(delay.get_output_port(), to_slave.GetInputPort("sample"))
+            builder.ExportInput(join.get_input_port(0), "p_MS")
+            builder.ExportInput(join.get_input_port(1), "v_MS")
+        for name in ("p_WE_desired", "v_WE_desired"):
+            builder.ExportOutput(to_slave.GetOutputPort(name), name)
+        builder.BuildInto(self)
