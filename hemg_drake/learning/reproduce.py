@@ -64,6 +64,11 @@ DEFAULT_HORIZON = 100
 # (1 / (sigma^2 r))^(1/4): 32 rad/s where the demonstrations agree to 1 mm, 10 rad/s at
 # 1 cm, 5.8 rad/s at 3 cm (docs/reproduction.md, "Trackers").
 DEFAULT_CONTROL_COST = 1.0
+# How far the online tracker's plan may lead the measured tool point, m (HsmmLqrReproducer):
+# an arm held back gets a reference at most this far ahead, so the PD pulls with about its
+# task-space stiffness times this (about 100 N at K = 145 on the cotter pin) and x* cannot
+# run away. 0 re-plans from the measured point itself (docs/reproduction.md, "Trackers").
+DEFAULT_MAX_LEAD = 0.02
 # A state moving slower than STILL ** 0.5 times the fastest state counts as half still.
 STILL = 0.05
 
@@ -324,7 +329,7 @@ class HsmmLqrPolicy:
         """``x`` as a float array of shape (P,), or a ValueError naming ``name``."""
         return _check_position(x, self.n_position, name)
 
-    def step(self, t, x, xdot, predicted):
+    def step(self, t, x, xdot, predicted, observed=None):
         """One step: the weights at x_t, the plan's first control, the next state.
 
         Parameters
@@ -332,11 +337,14 @@ class HsmmLqrPolicy:
         t : int
             Step index (t dt s since the start).
         x : array, shape (P,)
-            Current position x_t (observed by the forward weighting, input of k*).
+            Current position of the plan x_t.
         xdot : array, shape (P,)
             Current velocity of the plan xdot_t.
         predicted : array, shape (N, d_max)
             Predicted forward variable for this step (not used by ``"temporal"``).
+        observed : array, shape (P,), optional
+            The measured position, observed by the forward weighting and input of k*;
+            default ``x``.
 
         Returns
         -------
@@ -347,6 +355,7 @@ class HsmmLqrPolicy:
         predicted_next : array, shape (N, d_max)
         """
         state = np.concatenate([x, xdot])
+        observed = x if observed is None else observed
         if self.weighting == "temporal":
             while t >= len(self._gain_table) and not self._table_done:
                 self._temporal_table(self._max_duration)  # a model that has not settled yet
@@ -355,11 +364,11 @@ class HsmmLqrPolicy:
             u = self._feedforward_table[row] - self._gain_table[row] @ state
             predicted_next = predicted
         else:
-            log_emission = self.gmr._log_input_likelihood(x[None, :])[0]
+            log_emission = self.gmr._log_input_likelihood(observed[None, :])[0]
             h, predicted_next = self.forward.step(predicted, log_emission)
             ahead = np.concatenate([h[None], self.predict_weights(predicted_next, self.horizon)])
             u = lqr.first_control(self.A, self.B, *self.costs(ahead), self.R, state)
-        output = h @ self.gmr._component_means(x[None, :])[0]
+        output = h @ self.gmr._component_means(observed[None, :])[0]
         k = np.clip(output[self.n_position :], *self.stiffness_range)
         state_next = self.A @ state + self.B @ u
         return h, k, state_next[: self.n_position], state_next[self.n_position :], predicted_next

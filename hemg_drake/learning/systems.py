@@ -5,6 +5,7 @@ from pydrake.systems.framework import LeafSystem
 
 from hemg_drake.learning.reproduce import (
     DEFAULT_CONTROL_COST,
+    DEFAULT_MAX_LEAD,
     DEFAULT_HORIZON,
     HsmmGmrPolicy,
     HsmmLqrPolicy,
@@ -158,11 +159,15 @@ class HsmmLqrReproducer(LeafSystem):
         weighting="forward",
         horizon=DEFAULT_HORIZON,
         control_cost=DEFAULT_CONTROL_COST,
+        max_lead=DEFAULT_MAX_LEAD,
     ):
         LeafSystem.__init__(self)
         self._policy = HsmmLqrPolicy(
             model, weighting=weighting, dt=dt, horizon=horizon, control_cost=control_cost
         )
+        if not (np.isfinite(max_lead) and max_lead >= 0):
+            raise ValueError(f"max_lead must be a finite number >= 0 (m), got {max_lead!r}")
+        self._max_lead = float(max_lead)
         start = self._policy.check_position(start, "start")
         xdot = np.zeros_like(start)
         predicted = self._policy.forward.initial()
@@ -186,11 +191,17 @@ class HsmmLqrReproducer(LeafSystem):
 
     def _calc_step(self, context, discrete_state):
         p_WE = self._policy.check_position(self._p_WE_input.Eval(context), "p_WE")
+        x_star = context.get_discrete_state(self._x_star_state).get_value()
         xdot = context.get_discrete_state(self._xdot_star_state).get_value()
         predicted = context.get_discrete_state(self._forward_state).get_value()
         step = int(context.get_discrete_state(self._step_state).get_value()[0])
+        # The plan's position: its own x*_k, kept within max_lead of the measured point.
+        lead = x_star - p_WE
+        distance = np.linalg.norm(lead)
+        if distance > self._max_lead:
+            x_star = p_WE + lead * (self._max_lead / distance)
         h, k, x_next, xdot_next, predicted_next = self._policy.step(
-            step, p_WE, xdot, predicted.reshape(self._forward_shape)
+            step, x_star, xdot, predicted.reshape(self._forward_shape), observed=p_WE
         )
         discrete_state.set_value(self._x_star_state, x_next)
         discrete_state.set_value(self._xdot_star_state, xdot_next)

@@ -166,7 +166,8 @@ def test_lqr_reproducer_in_a_simulator_equals_the_numpy_tracker(path_task, weigh
 
 
 @pytest.mark.parametrize("weighting", ["temporal", "forward"])
-def test_lqr_reference_stays_by_an_arm_held_back(path_task, weighting):
+@pytest.mark.parametrize("max_lead", [0.0, 0.02])
+def test_lqr_reference_stays_by_an_arm_held_back(path_task, weighting, max_lead):
     # The arm is stuck at the start (p_WE constant) while the task moves 13 cm on.
     start = path_task.mean[0, :3]
     n_steps = 300
@@ -178,20 +179,25 @@ def test_lqr_reference_stays_by_an_arm_held_back(path_task, weighting):
         builder.Connect(source.get_output_port(), reproducer.GetInputPort("p_WE"))
         return run(builder.Build(), {"r": reproducer}, n_steps)
 
-    lqr_log = held(HsmmLqrReproducer(model=path_task.model, start=start, weighting=weighting))
+    lqr_log = held(
+        HsmmLqrReproducer(
+            model=path_task.model, start=start, weighting=weighting, max_lead=max_lead
+        )
+    )
     gmr_log = held(HsmmGmrReproducer(model=path_task.model, start=start, weighting=weighting))
-    gmr_x = gmr_log["r", "x_star"]
 
     x_star, xdot_star = lqr_log["r", "x_star"], lqr_log["r", "xdot_star"]
     # Eq. 18 on the stuck position runs away with the task; the re-planned reference does not.
-    assert np.linalg.norm(gmr_x[-1] - start) > 0.05
-    assert np.max(np.linalg.norm(x_star - start, axis=1)) < 0.01
-    # Each plan starts at the measured p_WE: x*_{k+1} = p_WE + dt (xdot*_k + xdot*_{k+1}) / 2
-    # (the double integrator under a constant acceleration, written out here).
+    assert np.linalg.norm(gmr_log["r", "x_star"][-1] - start) > 0.05
+    lead = np.linalg.norm(x_star - start, axis=1)
+    assert np.max(lead) < max_lead + 0.01
+    # Each plan starts at most max_lead from p_WE, and moves by the double integrator under
+    # a constant acceleration: x*_{k+1} = x_plan + dt (xdot*_k + xdot*_{k+1}) / 2.
     previous = np.vstack([np.zeros(3), xdot_star[:-1]])
-    np.testing.assert_allclose(
-        x_star, start + 0.5 * DT * (previous + xdot_star), rtol=0, atol=1e-12
-    )
+    plan = x_star - 0.5 * DT * (previous + xdot_star)
+    assert np.all(np.linalg.norm(plan - start, axis=1) <= max_lead + 1e-12)
+    if max_lead > 0:
+        assert np.max(lead) > 0.5 * max_lead  # the plan leads the held arm, to pull it
 
 
 def test_lqr_reproducer_ports_and_initial_outputs(path_task):
@@ -221,6 +227,8 @@ def test_lqr_reproducer_rejects_bad_parameters_and_inputs(path_task):
         HsmmLqrReproducer(model=model, start=start, control_cost=np.nan)
     with pytest.raises(ValueError, match="dt must be a finite number > 0"):
         HsmmLqrReproducer(model=model, start=start, dt=0.0)
+    with pytest.raises(ValueError, match=r"max_lead must be a finite number >= 0 \(m\)"):
+        HsmmLqrReproducer(model=model, start=start, max_lead=-0.01)
     with pytest.raises(ValueError, match="start must have shape"):
         HsmmLqrReproducer(model=model, start=start[:2])
     reproducer = HsmmLqrReproducer(model=model, start=start, weighting="temporal")
