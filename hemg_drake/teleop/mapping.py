@@ -121,8 +121,20 @@ class WorkspaceMapping:
 class _MasterToSlave(LeafSystem):
     """The map of one stylus sample, inside :class:`WorkspaceMap` (memoryless).
 
+    .. pydrake_system::
+
+        name: _MasterToSlave
+        input_ports:
+        - p_MS (no delay)
+        - v_MS (no delay)
+        - sample (delayed)
+        output_ports:
+        - p_WE_desired
+        - v_WE_desired
+
     Inputs ``p_MS`` and ``v_MS`` (no delay), or ``sample``, the delayed 6-vector
-    [p_MS - p_MS_rest; v_MS] (the delay's zero state is then the rest pose).
+    [p_MS - p_MS_rest; v_MS] (the delay's zero state is then the rest pose). Outputs by
+    :class:`WorkspaceMapping`, direct feedthrough.
     """
 
     def __init__(self, mapping, p_MS_rest=None):
