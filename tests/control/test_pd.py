@@ -115,6 +115,9 @@ def test_torque_is_the_documented_law_by_hand(gravity_compensation, damping_rati
 
 
 def test_system_matches_numpy_twin_with_gain_port():
+    # The compiled kernel against the numpy forms (pd_gains, pd_torque; checked by hand in
+    # test_pd_gains_by_hand), and the gain port overriding the constructor's gain. The law
+    # itself: test_torque_is_the_documented_law_by_hand.
     diagram, plant, arm, pd = _build(gain=50.0)
     rng = np.random.default_rng(3)
     q = arm.home_positions + rng.uniform(-0.01, 0.01, 7)  # small errors: no saturation
