@@ -113,3 +113,59 @@ def write_diagram_picture(diagram, path_without_suffix, *, max_depth=1, timeout=
     else:
         how = f"run: {how}"
     return dot_path, f"{reason}: wrote {dot_path} instead of the SVG; to draw it, {how}"
+
+
+class DiagramPicture:
+    """A diagram for a notebook: shown as SVG when Graphviz draws it, else as its text.
+
+    Jupyter shows the SVG (``_repr_svg_``); without ``dot`` it shows the one-line hint and
+    the Graphviz text instead (``_repr_markdown_``), so a notebook runs on any machine.
+
+    Attributes
+    ----------
+    svg : str or None
+        The SVG document, or None when Graphviz could not draw it.
+    graphviz_text : str
+        ``diagram.GetGraphvizString(max_depth=...)``.
+    message : str or None
+        Why there is no SVG, and how to get one; None with an SVG.
+    """
+
+    def __init__(self, svg, graphviz_text, message):
+        self.svg, self.graphviz_text, self.message = svg, graphviz_text, message
+
+    def _repr_svg_(self):
+        return self.svg
+
+    def _repr_markdown_(self):
+        if self.svg is not None:
+            return None
+        return f"{self.message}\n\n```dot\n{self.graphviz_text}\n```\n"
+
+    def __repr__(self):
+        return "DiagramPicture(SVG)" if self.svg is not None else f"DiagramPicture({self.message})"
+
+
+def diagram_picture(diagram, *, max_depth=1, timeout=60):
+    """``diagram`` as a :class:`DiagramPicture`: SVG with Graphviz, its text without.
+
+    Parameters
+    ----------
+    diagram : pydrake.systems.framework.Diagram
+    max_depth : int
+        Levels of nested diagrams to expand.
+    timeout : float
+        Seconds to wait for ``dot``.
+    """
+    _check_depth(max_depth)
+    graphviz_text = diagram.GetGraphvizString(max_depth=max_depth)
+    dot = shutil.which("dot")
+    if dot is None:
+        return DiagramPicture(None, graphviz_text,
+                              f"Graphviz's 'dot' is not on PATH: {INSTALL_HINT} to see the "
+                              "diagram drawn; its Graphviz text follows")
+    try:
+        return DiagramPicture(_render_svg(dot, graphviz_text, timeout), graphviz_text, None)
+    except (RuntimeError, OSError) as error:
+        first = str(error).splitlines()[0] if str(error) else "dot failed"
+        return DiagramPicture(None, graphviz_text, f"{first}; the diagram's Graphviz text follows")

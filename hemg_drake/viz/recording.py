@@ -52,7 +52,7 @@ VIEW_FROM = (1.6, 1.0, 0.9)
 RIGHT_SHOULDER_W = (0.064027, -0.259027, 0.129626)
 
 
-def camera_framing(points_W, *, view_from=VIEW_FROM, fov_deg=FOV_DEG, margin=1.15):
+def camera_framing(points_W, *, view_from=VIEW_FROM, fov_deg=FOV_DEG, margin=1.5):
     """A camera position and target that frame ``points_W`` in Meshcat's view.
 
     The target is the centre of the points' bounding box; the camera looks at it from the

@@ -9,7 +9,7 @@ import pytest
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Adder, ConstantVectorSource, Gain
 
-from hemg_drake.viz.diagram_svg import diagram_svg, write_diagram_picture
+from hemg_drake.viz.diagram_svg import diagram_picture, diagram_svg, write_diagram_picture
 
 NAMES = ("stiffness_source", "summing_junction", "doubling_gain")
 
@@ -123,3 +123,25 @@ def test_failing_dot_still_writes_the_dot_text(diagram, tmp_path, monkeypatch):
 def test_other_suffixes_are_kept_in_the_name(diagram, no_dot, tmp_path):
     path, _ = write_diagram_picture(diagram, tmp_path / "run.v2")
     assert path.name == "run.v2.dot"
+
+
+def test_notebook_picture_is_the_svg_with_graphviz(diagram, graphviz):
+    picture = diagram_picture(diagram)
+    assert all(name in _text(picture._repr_svg_()) for name in NAMES)
+    assert picture._repr_markdown_() is None and picture.message is None
+
+
+def test_notebook_picture_without_graphviz_shows_the_text(diagram, no_dot):
+    picture = diagram_picture(diagram, max_depth=0)
+    assert picture.svg is None and picture._repr_svg_() is None
+    markdown = picture._repr_markdown_()
+    assert "install graphviz" in markdown
+    assert picture.graphviz_text == diagram.GetGraphvizString(max_depth=0)
+    assert f"```dot\n{picture.graphviz_text}\n```" in markdown
+    assert "install graphviz" in repr(picture)
+
+
+def test_notebook_picture_when_dot_fails(diagram, tmp_path, monkeypatch):
+    _fake_dot(monkeypatch, tmp_path, 'cat > /dev/null; echo "bad things" >&2; exit 3')
+    picture = diagram_picture(diagram)
+    assert picture.svg is None and "bad things" in picture.message
