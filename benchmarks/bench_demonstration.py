@@ -37,7 +37,8 @@ from pydrake.systems.primitives import ConstantVectorSource
 
 from hemg_drake.control.clik import velocity_columns
 from hemg_drake.diagrams.demonstration import build_demonstration_diagram
-from hemg_drake.diagrams.station import SCENE_BUILDERS, solve_tool_point_ik
+from hemg_drake.control.ik import solve_tool_point_ik
+from hemg_drake.diagrams.station import SCENE_BUILDERS
 from hemg_drake.robots.baxter import FLOOR_Z, add_baxter_arm
 from hemg_drake.scenario import load_scenario, shipped_scenario
 from hemg_drake.viz.recording import ReplayRecorder

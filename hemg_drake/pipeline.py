@@ -29,6 +29,14 @@ def _demonstrate_hint(folder):
     return f"hemg-drake demonstrate SCENARIO --out {folder.path}"
 
 
+def replay_recorder(scenario, title):
+    """A replay recorder titled ``title``, its camera framing the arm and the task's plan."""
+    from hemg_drake.robots.baxter import FLOOR_Z
+    from hemg_drake.viz.recording import ReplayRecorder, frame_task
+
+    return ReplayRecorder(floor_z=FLOOR_Z, title=title, view=frame_task(scenario.task_plan().points))
+
+
 def check_enough_data(observations, n_states):
     """Raise ValueError unless C >= 2 demonstrations hold enough samples for N states.
 
@@ -126,8 +134,10 @@ def _demonstrate(scenario, folder, replays, progress):
     demos, replay_files = [], []
     for c, seed in enumerate(scenario.seeds(), start=1):
         replay = folder / f"replay_{c}.html" if replays else None
+        title = f"{scenario.task.replace('_', ' ')}: demonstration {c} (seed {seed})"
+        recorder = replay_recorder(scenario, title) if replays else None
         start = time.perf_counter()
-        demos.append(record_demonstration(scenario, seed, replay_path=replay))
+        demos.append(record_demonstration(scenario, seed, recorder=recorder, replay_path=replay))
         if replay is not None:
             replay_files.append(replay)
         plan_end = operator_plan(scenario, seed).end_time
@@ -256,12 +266,11 @@ def reproduce(
 def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progress):
     from hemg_drake.diagrams.reproduction import build_reproduction_diagram, run_reproduction
     from hemg_drake.evaluation import format_metrics, task_metrics
-    from hemg_drake.robots.baxter import FLOOR_Z
-    from hemg_drake.viz.recording import ReplayRecorder
 
     duration = float(np.mean([demo.time[-1] for demo in demos]))
     began = time.perf_counter()
-    recorder = ReplayRecorder(floor_z=FLOOR_Z) if replay else None
+    title = f"{scenario.task.replace('_', ' ')}: reproduction from {out.path.name}"
+    recorder = replay_recorder(scenario, title) if replay else None
     built = build_reproduction_diagram(scenario, model, start=start, recorder=recorder)
     replay_path = out / "reproduction.html" if replay else None
     result = run_reproduction(built, duration=duration, replay_path=replay_path)

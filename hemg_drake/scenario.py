@@ -228,6 +228,12 @@ class ClikConfig:
     damping: float = _field(Clik.__init__, "damping")
     # Update period (s).
     period: float = _field(Clik.__init__, "period", positive=True)
+    # Optional orientation task in the null space of eq. 21's position task: the tool
+    # frame's axis axis_E (in E) is turned towards axis_W_desired (in W) at this rate
+    # (1/s); 0 leaves the paper's position-only law. The drawing holds its pen down.
+    orientation_gain: float = _field(Clik.__init__, "orientation_gain")
+    axis_E: list[float] = _field(Clik.__init__, "axis_E", signed=True, size=3)
+    axis_W_desired: list[float] = _field(Clik.__init__, "axis_W_desired", signed=True, size=3)
 
 
 @dc.dataclass

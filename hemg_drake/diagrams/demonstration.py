@@ -292,17 +292,9 @@ def run_demonstration(built, *, duration=None, replay_path=None):
     return demo
 
 
-def record_demonstration(scenario, seed, *, replay_path=None, scene=True, recorder_factory=None):
+def record_demonstration(scenario, seed, *, recorder=None, replay_path=None, scene=True):
     """Build and run one demonstration: :func:`build_demonstration_diagram` then
-    :func:`run_demonstration`, with a replay recorder when ``replay_path`` is given.
-
-    ``recorder_factory`` makes the recorder (default ``ReplayRecorder`` over the floor).
-    """
-    recorder = None
-    if replay_path is not None:
-        from hemg_drake.robots.baxter import FLOOR_Z
-        from hemg_drake.viz.recording import ReplayRecorder
-
-        recorder = (recorder_factory or (lambda: ReplayRecorder(floor_z=FLOOR_Z)))()
+    :func:`run_demonstration`; with ``recorder`` (a ReplayRecorder), its replay is written
+    to ``replay_path``."""
     built = build_demonstration_diagram(scenario, seed=seed, recorder=recorder, scene=scene)
     return run_demonstration(built, replay_path=replay_path)

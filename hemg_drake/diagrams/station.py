@@ -26,6 +26,7 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource
 
 from hemg_drake.control.clik import Clik, velocity_columns
+from hemg_drake.control.ik import solve_tool_point_ik
 from hemg_drake.control.pd import VariableGainPd
 from hemg_drake.robots.baxter import add_baxter_arm
 from hemg_drake.tasks.cotter_pin import add_cotter_pin_scene
@@ -176,7 +177,11 @@ def make_slave_station(
     if q0 is None:
         if start is None:
             start = scenario.task_plan().points[0]
-        q0 = solve_tool_point_ik(plant, arm, np.asarray(start, dtype=float))
+        axes = {}
+        if scenario.clik.orientation_gain > 0:
+            # Start with the tool's axis where the CLIK's orientation task holds it.
+            axes = dict(axis_E=scenario.clik.axis_E, axis_W=scenario.clik.axis_W_desired)
+        q0 = solve_tool_point_ik(plant, arm, start, **axes)
     q0 = np.array(q0, dtype=float)
     plant.SetDefaultPositions(arm.model_instance, q0)
 
@@ -228,35 +233,3 @@ def make_slave_station(
     diagram.set_name(name)
     return SlaveStation(diagram=diagram, plant=plant, arm=arm, scene=task_scene, q0=q0)
 
-
-def solve_tool_point_ik(plant, arm, p_WE, *, iterations=200, damping=0.01):
-    """Arm configuration that puts the tool point at ``p_WE``, from the home configuration.
-
-    Damped Newton steps on the tool point's translational Jacobian, kept inside the joint
-    limits.
-
-    Raises
-    ------
-    ValueError
-        The point is not reached within 1 mm.
-    """
-    p_WE = np.asarray(p_WE, dtype=float)
-    if p_WE.shape != (3,) or not np.all(np.isfinite(p_WE)):
-        raise ValueError(f"start must be 3 finite numbers (m), got {p_WE!r}")
-    context = plant.CreateDefaultContext()
-    world = plant.world_frame()
-    columns = velocity_columns(plant, arm.model_instance)
-    q = arm.home_positions.copy()
-    for _ in range(iterations):
-        plant.SetPositions(context, arm.model_instance, q)
-        error = p_WE - arm.tool_frame.CalcPoseInWorld(context).translation()
-        if np.linalg.norm(error) < 1e-6:
-            break
-        J = plant.CalcJacobianTranslationalVelocity(
-            context, JacobianWrtVariable.kV, arm.tool_frame, np.zeros(3), world, world
-        )[:, columns]
-        step = J.T @ np.linalg.solve(J @ J.T + damping**2 * np.eye(3), error)
-        q = np.clip(q + step, arm.position_lower, arm.position_upper)
-    if np.linalg.norm(error) > 1e-3:
-        raise ValueError(f"the point {p_WE.tolist()} is out of the arm's reach")
-    return q
