@@ -115,7 +115,7 @@ def mean_demonstration(demos, position_columns=slice(0, 3)):
     -------
     array, shape (T_0, D)
     """
-    demos = [_as_trajectory(f"demo {c}", demo) for c, demo in enumerate(demos)]
+    demos = [_as_trajectory(f"demonstration {c}", demo) for c, demo in enumerate(demos, 1)]
     if not demos:
         raise ValueError("mean_demonstration needs at least one demonstration")
     reference = demos[0]
@@ -123,7 +123,8 @@ def mean_demonstration(demos, position_columns=slice(0, 3)):
     for c, demo in enumerate(demos):
         if demo.shape[1] != reference.shape[1]:
             raise ValueError(
-                f"demo {c} has {demo.shape[1]} columns, demo 0 has {reference.shape[1]}"
+                f"demonstration {c + 1} has {demo.shape[1]} columns, demonstration 1 has "
+                f"{reference.shape[1]}"
             )
         index_ref, index_demo = dtw_path(reference[:, position_columns], demo[:, position_columns])
         # Average the samples matched to each reference sample (each is matched at least once).
@@ -197,7 +198,7 @@ def time_normalised_rmse(
     -------
     dict with ``position_rmse`` (m) and ``velocity_rmse`` (m/s).
     """
-    demos = [_as_trajectory(f"demo {c}", demo) for c, demo in enumerate(demos)]
+    demos = [_as_trajectory(f"demonstration {c}", demo) for c, demo in enumerate(demos, 1)]
     if not demos:
         raise ValueError("time_normalised_rmse needs at least one demonstration")
     n_samples = int(round(np.mean([len(demo) for demo in demos])))

@@ -117,3 +117,39 @@ def test_stroke_errors_split_into_shape_and_placement():
 def test_bad_input_is_a_value_error(call, message):
     with pytest.raises(ValueError, match=message):
         call()
+
+
+def test_timing_error_is_the_rms_time_shift_of_a_delayed_copy():
+    # A ramp and the same ramp held still for the first 20 samples: DTW matches the hold to
+    # the ramp's first sample, so the shift grows to 20 samples, then stays: its RMS is
+    # computed here from the path written out by hand.
+    dt = 0.01
+    ramp = np.column_stack([np.linspace(0.0, 1.0, 100), np.zeros(100)])
+    held = np.vstack([np.repeat(ramp[:1], 20, axis=0), ramp])
+    path = metrics.dtw_path(held, ramp)
+    assert metrics.timing_error(path, dt) == pytest.approx(
+        dt * np.sqrt(np.mean((path[0] - path[1]) ** 2))
+    )
+    # By hand: 20 samples matched to 0 with shifts 0..19, then 100 with shift 20.
+    shifts = np.concatenate([np.arange(20), np.full(100, 20)])
+    assert metrics.timing_error(path, dt) == pytest.approx(dt * np.sqrt(np.mean(shifts**2)))
+    assert metrics.timing_error(metrics.dtw_path(ramp, ramp), dt) == 0.0
+    with pytest.raises(ValueError, match="two index arrays"):
+        metrics.timing_error((np.arange(3), np.arange(4)), dt)
+
+
+def test_leave_one_out_measures_each_demonstration_against_the_others_mean():
+    t = np.linspace(0.0, 1.0, 50)
+    base = np.column_stack([t, 0 * t, 0 * t, np.ones_like(t), 0 * t, 0 * t, 0 * t])
+    offsets = (0.0, 0.002, 0.004)
+    demos = [base + [0.0, dy, 0, 0, 0, 0, 0] for dy in offsets]
+    floor = metrics.leave_one_out(demos, 0.02)
+    # Same timing: the others' mean lies at the mean of their offsets, straight across.
+    for c, record in enumerate(floor):
+        others = np.mean([dy for k, dy in enumerate(offsets) if k != c])
+        assert record["position_rmse"] == pytest.approx(abs(offsets[c] - others), abs=1e-12)
+        assert record["spatial_position_rmse"] == pytest.approx(abs(offsets[c] - others), abs=1e-12)
+        assert record["timing_error_s"] == 0.0
+        assert record["velocity_rmse"] == pytest.approx(0.0, abs=1e-12)
+    with pytest.raises(ValueError, match="at least 2"):
+        metrics.leave_one_out(demos[:1], 0.02)
