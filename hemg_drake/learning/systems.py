@@ -112,22 +112,26 @@ class HsmmLqrReproducer(LeafSystem):
     Units: m, m/s, the stiffness channel's units (N/m); h is dimensionless. The tracking
     alternative to eqs. 15-18 (docs/reproduction.md, "Trackers"): one step of
     :class:`hemg_drake.learning.reproduce.HsmmLqrPolicy` per period. At t_k = k dt the
-    system reads ``p_WE`` as x_k, takes the plan's state s_k = [x_k, xdot*_k] (the velocity
-    is the plan's own: only the position is measured), plans H steps ahead on the HSMM's
-    weights (eq. 12; the stiffness-and-precision cost of each active state) and applies
-    the first acceleration u_k of the double integrator: it stores h_k, k*_k (GMR's
-    conditional stiffness at x_k, eqs. 15-17, clipped to the training range) and
-    [x*_{k+1}, xdot*_{k+1}] = A s_k + B u_k. With ``p_WE`` fed from ``x_star`` this is
-    exactly :func:`hemg_drake.learning.reproduce.reproduce` with ``tracker="lqr"``.
+    system reads the measured ``p_WE``, takes the plan's state s_k = [x_k, xdot*_k], with
+    x_k its own x*_k brought within ``max_lead`` of ``p_WE`` (the velocity is the plan's
+    own: only the position is measured), plans H steps ahead on the HSMM's weights (eq. 12;
+    the weighting observes ``p_WE``) and applies the first acceleration u_k of the double
+    integrator: it stores h_k, k*_k (GMR's conditional stiffness at ``p_WE``, eqs. 15-17,
+    clipped to the training range) and [x*_{k+1}, xdot*_{k+1}] = A s_k + B u_k. With
+    ``p_WE`` fed from ``x_star`` this is exactly
+    :func:`hemg_drake.learning.reproduce.reproduce` with ``tracker="lqr"``.
 
-    Because every plan starts from the measured position, an arm held back (the cotter
-    pin's detent) keeps x* within one step of it, x*_{k+1} - p_WE = dt xdot*_k + dt^2 / 2
-    u_k: the reference cannot run away, unlike eq. 18 integrated on a stuck position.
+    An arm held back (the cotter pin's detent) gets a reference at most ``max_lead`` +
+    dt |xdot*| ahead of it: enough for the PD to pull (about its task-space stiffness times
+    ``max_lead``), never a reference that runs away, unlike eq. 18 integrated on a stuck
+    position. ``max_lead = 0`` re-plans from the measured point itself: x*_{k+1} - p_WE =
+    dt (xdot*_k + xdot*_{k+1}) / 2, a millimetre at the pin's speed, and the pin measured
+    stays in (the PD's force on that lead is a few newtons against a 50 N detent).
 
     With ``weighting="temporal"`` the gains of every horizon are computed in the
     constructor and a step is one affine feedback (about 10 us); with ``"forward"`` each
     step predicts H steps of weights and runs the H-step Riccati recursion (about 2 ms at
-    H = 100, N = 18; ``benchmarks/bench_tracker.py``).
+    H = 100; ``benchmarks/bench_tracker.py``).
 
     Every output is a state output (no direct feedthrough). Before the first update
     ``x_star`` is ``start``, ``xdot_star`` zero (the plan starts at rest), and ``k_star``
@@ -148,6 +152,8 @@ class HsmmLqrReproducer(LeafSystem):
         H, steps planned ahead (default 100: 1 s at 0.01 s).
     control_cost : float
         r of the control cost R = r I, s^4/m^2 (default 1).
+    max_lead : float
+        How far the plan may lead the measured ``p_WE``, m (>= 0; default 0.02).
     """
 
     def __init__(

@@ -198,6 +198,8 @@ def test_lqr_reference_stays_by_an_arm_held_back(path_task, weighting, max_lead)
     assert np.all(np.linalg.norm(plan - start, axis=1) <= max_lead + 1e-12)
     if max_lead > 0:
         assert np.max(lead) > 0.5 * max_lead  # the plan leads the held arm, to pull it
+    # The weights observe the measured p_WE, not the plan: as eqs. 12-13 do for HsmmGmr.
+    np.testing.assert_allclose(lqr_log["r", "h"], gmr_log["r", "h"], rtol=0, atol=1e-12)
 
 
 def test_lqr_reproducer_ports_and_initial_outputs(path_task):
