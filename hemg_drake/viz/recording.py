@@ -50,6 +50,9 @@ VIEW_FROM = (1.6, 1.0, 0.9)
 # world's origin: right_arm_mount (0.024645, -0.219645, 0.118588), yawed -45 deg, and s0
 # 0.055695 m along the mount's x and 0.011038 m up (docs/facts.md).
 RIGHT_SHOULDER_W = (0.064027, -0.259027, 0.129626)
+# How far above the shoulder the framed view reaches: the elbow rises about 0.4 m above it
+# in the tasks' poses (at the home pose its links reach z = 0.53 m, the shoulder is at 0.13).
+ELBOW_RISE = 0.45
 
 
 def camera_framing(points_W, *, view_from=VIEW_FROM, fov_deg=FOV_DEG, margin=1.5):
@@ -97,13 +100,16 @@ def camera_framing(points_W, *, view_from=VIEW_FROM, fov_deg=FOV_DEG, margin=1.5
 
 
 def frame_task(points_W, **options):
-    """:func:`camera_framing` of the right arm's shoulder and ``points_W`` (the task's
-    plan points, say), so the arm and its task fill the view. Options as camera_framing's.
+    """:func:`camera_framing` of the right arm and ``points_W`` (the task's plan points, say),
+    so the arm and its task fill the view. The arm is its shoulder and a point ``ELBOW_RISE``
+    above it, where the elbow reaches. Options as camera_framing's.
     """
     points = np.asarray(points_W, dtype=float)
     if points.ndim != 2 or points.shape[1] != 3:
         raise ValueError(f"points_W must have shape (n, 3), got {points.shape}")
-    return camera_framing(np.vstack([RIGHT_SHOULDER_W, points]), **options)
+    shoulder = np.asarray(RIGHT_SHOULDER_W)
+    arm = [shoulder, shoulder + [0.0, 0.0, ELBOW_RISE]]
+    return camera_framing(np.vstack([arm, points]), **options)
 
 
 class ReplayRecorder:

@@ -17,7 +17,13 @@ from pydrake.systems.framework import DiagramBuilder
 
 from hemg_drake.robots.baxter import FLOOR_Z, add_baxter_arm
 from hemg_drake.viz import screenshot
-from hemg_drake.viz.recording import RIGHT_SHOULDER_W, ReplayRecorder, camera_framing, frame_task
+from hemg_drake.viz.recording import (
+    ELBOW_RISE,
+    RIGHT_SHOULDER_W,
+    ReplayRecorder,
+    camera_framing,
+    frame_task,
+)
 from hemg_drake.viz.screenshot import render_html_to_png
 
 # Network references that would make a browser fetch something to render the page.
@@ -37,7 +43,8 @@ def _os_threads():
 
 # A task at the arm's front right (the cotter pin's ring and its pull), and the shoulder.
 PLAN_POINTS = np.array([[0.64, -0.84, 0.12], [0.64, -0.84, 0.22]])
-TASK_POINTS = np.vstack([RIGHT_SHOULDER_W, PLAN_POINTS])
+TASK_POINTS = np.vstack([RIGHT_SHOULDER_W, np.add(RIGHT_SHOULDER_W, [0, 0, ELBOW_RISE]),
+                         PLAN_POINTS])
 TITLE = "cotter pin: demonstration 2 <seed 101> & co"
 
 
@@ -103,6 +110,22 @@ def test_frame_task_includes_the_shoulder_where_the_plant_has_it():
     np.testing.assert_allclose(RIGHT_SHOULDER_W, shoulder, atol=1e-6)
     for got, expected in zip(frame_task(PLAN_POINTS), camera_framing(TASK_POINTS), strict=True):
         np.testing.assert_array_equal(got, expected)
+
+
+def test_frame_task_sees_every_link_of_the_arm_at_home():
+    plant = MultibodyPlant(0.0)
+    arm = add_baxter_arm(plant)
+    plant.Finalize()
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, arm.model_instance, arm.home_positions)
+    links = [plant.get_body(i).EvalPoseInWorld(context).translation()
+             for i in plant.GetBodyIndices(arm.model_instance)
+             if plant.get_body(i).name().startswith("right_")]
+    camera, target = frame_task(PLAN_POINTS)
+    axis = (target - camera) / np.linalg.norm(target - camera)
+    for p_W in links:
+        ray = p_W - camera
+        assert np.degrees(np.arccos(ray @ axis / np.linalg.norm(ray))) < 37.5 / 1.2
     with pytest.raises(ValueError, match="points_W"):
         frame_task([0.0, 0.0, 0.0])
 
