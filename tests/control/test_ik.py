@@ -135,3 +135,16 @@ def test_needs_a_finalized_plant():
     arm = add_baxter_arm(plant)
     with pytest.raises(ValueError, match="finalized plant"):
         solve_tool_point_ik(plant, arm, [0.6, -0.7, 0.1])
+
+
+def test_default_tolerance_reaches_the_default_sheets_start(pin_plant):
+    """Above the default sheet a vertical pen comes no closer than 0.94 deg: the default
+    tolerance (0.05 rad) still gives a start there, within it."""
+    plant, arm = pin_plant
+    p_WE = [0.64, -0.84, 0.12]
+    q = solve_tool_point_ik(plant, arm, p_WE, axis_E=PEN_AXIS_E, axis_W=DOWN)
+    X_WE = _tool_pose(plant, arm, q)
+    np.testing.assert_allclose(X_WE.translation(), p_WE, rtol=0, atol=1e-6)
+    assert np.arccos(X_WE.rotation().matrix()[:, 2] @ DOWN) <= 0.05 + 1e-6
+    with pytest.raises(ValueError, match="out of the arm's reach"):
+        solve_tool_point_ik(plant, arm, p_WE, axis_E=PEN_AXIS_E, axis_W=DOWN, angle_tolerance=0.01)
