@@ -18,6 +18,27 @@ def test_waypoints_are_within_limits():
     assert np.all((arm.position_lower < WAYPOINTS) & (WAYPOINTS < arm.position_upper))
 
 
+def test_the_tour_drives_the_station_by_joint_references():
+    diagram, plant, arm, trajectory = build_arm_demo(duration=1.0, gain=80.0)
+    station = diagram.GetSubsystemByName("station")
+    assert not station.HasSubsystemNamed("clik") and station.HasSubsystemNamed("pd")
+    q_desired = diagram.GetSubsystemByName("q_desired").get_output_port()
+    assert diagram.AreConnected(q_desired, station.GetInputPort("q_desired"))
+    v_desired = diagram.GetSubsystemByName("v_desired").get_output_port()
+    assert diagram.AreConnected(v_desired, station.GetInputPort("v_desired"))
+    # Free space, at rest at home (the first waypoint), time 0: building simulated nothing.
+    context = diagram.CreateDefaultContext()
+    assert context.get_time() == 0.0 and plant.num_velocities() == 7
+    np.testing.assert_array_equal(plant.GetPositions(plant.GetMyContextFromRoot(context)), WAYPOINTS[0])
+    pd = station.GetSubsystemByName("pd")
+    assert pd.gain_input.Eval(pd.GetMyContextFromRoot(context))[0] == 80.0
+    context.SetTime(0.5)
+    np.testing.assert_array_equal(
+        station.GetInputPort("v_desired").Eval(station.GetMyContextFromRoot(context)),
+        trajectory.MakeDerivative().value(0.5).ravel(),
+    )
+
+
 def test_trajectory_passes_waypoints_at_rest_ends():
     trajectory = waypoint_trajectory(WAYPOINTS, 4.0)
     times = np.linspace(0.0, 4.0, len(WAYPOINTS))

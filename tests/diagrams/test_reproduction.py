@@ -1,9 +1,12 @@
 """The reproduction diagram in free space: reference, tracking, stiffness, tracking force."""
 
+import time
+
 import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
+from hemg_drake.diagrams import reproduction
 from hemg_drake.diagrams.reproduction import (
     build_reproduction_diagram,
     run_reproduction,
@@ -13,10 +16,10 @@ from hemg_drake.learning.hsmm import HSMM
 from hemg_drake.learning.reproduce import reproduce
 from hemg_drake.learning.systems import tracking_force
 from hemg_drake.scenario import Scenario
-from hemg_drake.tasks.cotter_pin import HOME_TOOL_POINT
+from hemg_drake.tasks.cotter_pin import DEFAULT_POSITION
 
 DT = 0.01
-START = np.array(HOME_TOOL_POINT)
+START = np.array(DEFAULT_POSITION)  # the ring, where the default cotter-pin plan starts
 
 
 @pytest.fixture(scope="module")
@@ -36,18 +39,24 @@ def model():
 
 @pytest.fixture(scope="module")
 def scenario():
-    return Scenario(task="cotter_pin", duration=1.0)
+    return Scenario().replaced(
+        ["task=cotter_pin", "duration=1.0", "reproduction.weighting=temporal"]
+    )
 
 
 @pytest.fixture(scope="module")
 def free_run(scenario, model):
-    return run_reproduction(scenario, model, scene=False, weighting="temporal")
+    return run_reproduction(build_reproduction_diagram(scenario, model, scene=False))
 
 
-def test_reference_is_the_numpy_rollout_and_the_arm_tracks_it(free_run, model):
+def test_reference_is_the_numpy_rollout_and_the_arm_tracks_it(scenario, free_run, model):
     log = free_run.log
     assert free_run.pin_out is None  # no scene, no pin
-    expected = reproduce(model, START, len(log.time), dt=DT, weighting="temporal")
+    settings = scenario.reproduction
+    expected = reproduce(
+        model, START, len(log.time), dt=DT, weighting=settings.weighting,
+        restoring_gain=settings.restoring_gain,
+    )  # fmt: skip
     np.testing.assert_allclose(log.time, expected.t, atol=1e-9)
     np.testing.assert_allclose(log.x_star, expected.x, atol=1e-9)
     # The arm follows the reference through CLIK and the PD (a few mm of lag while moving).
@@ -66,7 +75,9 @@ def test_tracking_force_is_eq_23_and_exported(scenario, model, free_run):
     np.testing.assert_allclose(
         log.F_tr, tracking_force(log.x_star, log.xdot_star, goal, kp=50.0, kd=50.0), atol=1e-9
     )
-    built = build_reproduction_diagram(scenario, model, scene=False, tracking_gains=(10.0, 2.0))
+    built = build_reproduction_diagram(
+        scenario.replaced(["reproduction.tracking_gains=[10.0, 2.0]"]), model, scene=False
+    )
     context = built.diagram.CreateDefaultContext()
     reproducer = built.diagram.GetSubsystemByName("reproducer")
     sub = reproducer.GetMyContextFromRoot(context)
@@ -94,12 +105,15 @@ def test_bad_input(scenario, model):
         build_reproduction_diagram(scenario, HSMM(3), scene=False)
     with pytest.raises(ValueError, match="start"):
         build_reproduction_diagram(scenario, model, start=[0.6, np.nan, 0.1], scene=False)
-    with pytest.raises(ValueError, match="observe"):
-        build_reproduction_diagram(scenario, model, observe="camera", scene=False)
+    with pytest.raises(ValueError, match="reproduction.observe"):
+        scenario.replaced(["reproduction.observe=camera"])
     with pytest.raises(ValueError, match="out of the arm's reach"):
         build_reproduction_diagram(scenario, model, start=[3.0, 0.0, 0.0], scene=False)
+    built = build_reproduction_diagram(scenario, model, scene=False)
     with pytest.raises(ValueError, match="duration"):
-        run_reproduction(scenario, model, duration=-1.0, scene=False)
+        run_reproduction(built, duration=-1.0)
+    with pytest.raises(ValueError, match="replay_path needs a diagram built with a recorder"):
+        run_reproduction(built, replay_path="replay.html")
 
 
 def test_a_start_beside_the_grasped_ring_begins_at_rest(scenario, model):
@@ -107,7 +121,9 @@ def test_a_start_beside_the_grasped_ring_begins_at_rest(scenario, model):
     # holding x*_0 there, balances it (settled_arm_positions), not at rest 3 cm away, where
     # the released grasp would snap the tool back to the ring (1.5 m/s, measured).
     start = START + [0.03, 0.0, 0.0]
-    result = run_reproduction(scenario, model, start=start, duration=0.2, weighting="temporal")
+    result = run_reproduction(
+        build_reproduction_diagram(scenario, model, start=start), duration=0.2
+    )
     log = result.log
     np.testing.assert_allclose(log.x_star[0], start, atol=1e-12)
     # Stiff grasp, soft arm (K = k*_0): the tool rests within millimetres of the ring ...
@@ -120,6 +136,39 @@ def test_a_start_beside_the_grasped_ring_begins_at_rest(scenario, model):
     q = settled_arm_positions(scenario, START, 10.0)
     built = build_reproduction_diagram(scenario, model, scene=False)
     context = built.plant.CreateDefaultContext()
-    built.plant.SetPositions(context, built.arm.model_instance, q)
-    p_WE = built.arm.tool_frame.CalcPoseInWorld(context).translation()
+    arm = built.station.arm
+    built.plant.SetPositions(context, arm.model_instance, q)
+    p_WE = arm.tool_frame.CalcPoseInWorld(context).translation()
     np.testing.assert_allclose(p_WE, START, atol=1e-3)
+
+
+def test_building_does_not_simulate(scenario, model, monkeypatch):
+    """A build is quick and leaves the arm where the start's IK puts it, at time 0; only
+    run_reproduction settles it in the scene."""
+    simulators = []
+
+    class CountedSimulator(Simulator):
+        def __init__(self, *args, **kwargs):
+            simulators.append(self)
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(reproduction, "Simulator", CountedSimulator)
+    start = START + [0.03, 0.0, 0.0]  # beside the ring: settling would pull the tool to it
+    began = time.perf_counter()
+    built = build_reproduction_diagram(scenario, model, start=start)
+    assert time.perf_counter() - began < 2.0
+    assert simulators == []
+    context = built.diagram.CreateDefaultContext()
+    assert context.get_time() == 0.0
+    plant_context = built.station.plant_context(context)
+    arm = built.station.arm
+    q = built.plant.GetPositions(plant_context, arm.model_instance)
+    np.testing.assert_array_equal(q, built.station.q0)
+    np.testing.assert_array_equal(built.plant.GetVelocities(plant_context), 0.0)
+    p_WE = arm.tool_frame.CalcPoseInWorld(plant_context).translation()
+    np.testing.assert_allclose(p_WE, start, atol=1e-3)
+    assert built.scene.pin_displacement(plant_context) == 0.0
+    # Running settles first (one simulator for that, one for the run), then logs.
+    result = run_reproduction(built, duration=0.05)
+    assert len(simulators) == 2
+    assert np.linalg.norm(result.q0 - built.station.q0) > 1e-3
