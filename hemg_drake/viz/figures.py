@@ -274,11 +274,16 @@ def state_activations_title(task=None, along=None):
     Parameters
     ----------
     task : {"cotter_pin", "drawing"} or None
-    along : str, optional
-        What the weights were computed on, e.g. ``"demonstration 1"`` or ``"the reproduction"``.
+    along : str or int, optional
+        What the weights were computed on, e.g. ``"the reproduction"``; an integer c stands
+        for ``"demonstration c"`` (numbered from 1).
     """
     if task not in (None, "cotter_pin", "drawing"):
         raise ValueError(f"task must be 'cotter_pin', 'drawing' or None, got {task!r}")
+    if isinstance(along, bool) or (isinstance(along, int) and along < 1):
+        raise ValueError(f"along must be a text or a demonstration number >= 1, got {along!r}")
+    if isinstance(along, int):
+        along = f"demonstration {along}"
     title = "HSMM state activations h"
     if task is not None:
         title += ", " + task.replace("_", " ")

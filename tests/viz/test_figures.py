@@ -196,11 +196,16 @@ def test_state_activation_titles_name_fig_8c_only_for_the_pin():
     assert state_activations_title("cotter_pin", "demonstration 1") == (
         "HSMM state activations h, cotter pin, on demonstration 1 (Fig. 8 (c))")
     assert "Fig. 8" not in state_activations_title("drawing")
+    assert state_activations_title("drawing", 2) == (
+        "HSMM state activations h, drawing, on demonstration 2 (eq. 12)")
     h = np.full((3, 2), 0.5)
     figure = plot_state_activations(np.arange(3.0), h, task="cotter_pin", title="mine")
     assert figure.axes[0].get_title() == "mine"  # an explicit title wins
     with pytest.raises(ValueError, match="task"):
         state_activations_title("pin")
+    for along in (0, True):
+        with pytest.raises(ValueError, match="along"):
+            state_activations_title("drawing", along)
 
 
 def _gmr_reference(model, x):
