@@ -119,10 +119,11 @@ class Clik(LeafSystem):
     limit_margin : float
         Distance kept inside each position limit (rad).
     axis_E : array, shape (3,)
-        Unit vector fixed in ``frame_E``, the tool's axis (default its z, the pen's
-        axis from the hand toward the tip).
+        Direction fixed in ``frame_E``, the tool's axis (default its z, the pen's axis
+        from the hand toward the tip); normalised here.
     axis_W_desired : array, shape (3,)
-        Unit vector in W that ``axis_E`` is turned onto (default world -z, pen down).
+        Direction in W that ``axis_E`` is turned onto (default world -z, pen down);
+        normalised here.
     orientation_gain : float
         Rate of the tool-axis task (1/s); 0 (default) turns it off.
     """
@@ -151,8 +152,8 @@ class Clik(LeafSystem):
         self._damping = as_scalar("Clik damping", damping, strict=False)
         limit_margin = as_scalar("Clik limit_margin", limit_margin, strict=False)
         self._p_EoE_E = np.zeros(3) if p_EoE_E is None else as_vector("Clik p_EoE_E", p_EoE_E, 3)
-        self._axis_E = _unit_vector("Clik axis_E", axis_E)
-        self._axis_W_desired = _unit_vector("Clik axis_W_desired", axis_W_desired)
+        self._axis_E = unit_direction("Clik axis_E", axis_E)
+        self._axis_W_desired = unit_direction("Clik axis_W_desired", axis_W_desired)
         self._orientation_gain = as_scalar(
             "Clik orientation_gain", orientation_gain, strict=False
         )
@@ -235,7 +236,10 @@ class Clik(LeafSystem):
         )
 
     def qdot(self, q, p_WE_desired):
-        """The CLIK joint velocity of eq. 21 at ``q`` (rad/s), before limits."""
+        """The CLIK joint velocity of eq. 21 at ``q`` (rad/s), before limits.
+
+        The position law alone: the tool-axis task, when on, is added in the compiled step.
+        """
         # The Jacobian reuses the forward kinematics that p_WE cached in the plant context.
         e = np.asarray(p_WE_desired, float) - self.p_WE(q)
         J = self._jacobian()[:, self._v_columns]
@@ -287,11 +291,12 @@ class Clik(LeafSystem):
         self._set(discrete_state, q_next, v_next)
 
 
-def _unit_vector(name, value):
+def unit_direction(name, value):
+    """``value`` (3 finite numbers, not zero) scaled to unit length, or ValueError naming it."""
     vector = as_vector(name, value, 3)
     norm = float(np.linalg.norm(vector))
-    if abs(norm - 1.0) > 1e-9:
-        raise ValueError(f"{name} must be a unit vector, got {vector.tolist()} (norm {norm})")
+    if not norm > 1e-9:
+        raise ValueError(f"{name} must be a nonzero direction, got {vector.tolist()}")
     return vector / norm
 
 

@@ -20,6 +20,7 @@ from pydrake.multibody.inverse_kinematics import InverseKinematics
 from pydrake.solvers import SnoptSolver, Solve, SolverOptions
 
 from hemg_drake._validate import as_scalar, as_vector
+from hemg_drake.control.clik import unit_direction
 
 # A reached point is within this of the target (m); beyond it the point is out of reach.
 REACH_TOLERANCE = 1e-3
@@ -108,8 +109,8 @@ def solve_tool_point_ik(
         p_AQ_upper=p_WE,
     )
     if axis_E is not None:
-        axis_E = _direction("axis_E", axis_E)
-        axis_W = _direction("axis_W", axis_W)
+        axis_E = unit_direction("axis_E", axis_E)
+        axis_W = unit_direction("axis_W", axis_W)
         ik.AddAngleBetweenVectorsConstraint(
             frameA=world,
             na_A=axis_W,
@@ -139,11 +140,3 @@ def solve_tool_point_ik(
             f"{result.get_solution_result().name}, {residual:.3g} m from it)"
         )
     return np.clip(q_solution, lower, upper)
-
-
-def _direction(name, value):
-    vector = as_vector(name, value, 3)
-    norm = float(np.linalg.norm(vector))
-    if norm == 0.0:
-        raise ValueError(f"{name} must be a nonzero vector")
-    return vector / norm

@@ -117,7 +117,7 @@ def test_out_of_reach_names_the_point(pin_plant):
         (dict(p_WE=[0.6, -0.7]), "p_WE must have shape"),
         (dict(p_WE=[0.6, np.nan, 0.1]), "p_WE must be finite"),
         (dict(axis_E=[0, 0, 1]), "both axis_E and axis_W"),
-        (dict(axis_E=[0, 0, 0], axis_W=DOWN), "axis_E must be a nonzero"),
+        (dict(axis_E=[0, 0, 0], axis_W=DOWN), "axis_E must be a nonzero direction"),
         (dict(axis_E=PEN_AXIS_E, axis_W=DOWN, angle_tolerance=-0.1), "angle_tolerance"),
         (dict(angle_tolerance=4.0), "angle_tolerance must be <= pi"),
         (dict(q_guess=np.zeros(6)), "q_guess must have shape"),
