@@ -1,71 +1,91 @@
-"""Cotter pin through Drake: a high constant gain pulls the pin out, a low one does not."""
+"""Cotter pin through Drake: a high constant gain pulls the pin out, a low one does not.
+
+The runs use the plant configuration every scenario runs (the shipped scenario's: point
+contact, live output ports), through the plan follower on the slave station.
+"""
 
 import itertools
 
 import numpy as np
 import pytest
 from pydrake.common.yaml import yaml_load_typed
-from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import LogVectorOutput
 
+from hemg_drake.diagrams.plan_follower import build_plan_follower
 from hemg_drake.robots.baxter import add_baxter_arm
+from hemg_drake.scenario import load_scenario, shipped_scenario
 from hemg_drake.tasks.cotter_pin import (
+    DEFAULT_POSITION,
     PULL_AXIS_W,
     CotterPinParams,
+    PinResistance,
     add_cotter_pin_scene,
     default_cotter_pin_plan,
     detent_force,
     pin_resistance_force,
 )
-from hemg_drake.tasks.follow import add_plan_follower
+from hemg_drake.tasks.placement import scene_pose
 
 LOW_GAIN, HIGH_GAIN = 10.0, 100.0
+LOG_PERIOD = 0.01
+WEIGHT = 0.1 * 9.81  # the pin's
 
 
-def _scene(params=None):
+@pytest.fixture(scope="module")
+def product():
+    """The shipped cotter-pin scenario: the plant configuration the product runs."""
+    scenario = load_scenario(shipped_scenario("cotter_pin"))
+    assert scenario.plant.use_sampled_output_ports is False
+    assert scenario.plant.contact_model == "point" and scenario.plant.time_step == 1e-3
+    return scenario
+
+
+def _scene(plant_config, params=None, X_WT=None):
     builder = DiagramBuilder()
-    plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
+    plant, _ = AddMultibodyPlant(plant_config, builder)
     arm = add_baxter_arm(plant)
-    scene = add_cotter_pin_scene(plant, arm, params=params)
+    scene = add_cotter_pin_scene(plant, arm, params=params, X_WT=X_WT)
     plant.Finalize()
     plant.SetDefaultPositions(arm.model_instance, arm.home_positions)
     return builder, plant, arm, scene
 
 
-def _pull(gain):
-    """Follow the default plan at a constant gain; logs of the pin's [x; xdot] and f_WE."""
-    builder, plant, arm, scene = _scene()
-    plan = default_cotter_pin_plan()
-    add_plan_follower(builder, plant=plant, arm=arm, plan=plan, gain=gain)
-    pin_log = LogVectorOutput(plant.get_state_output_port(scene.model_instance), builder, 0.01)
-    force_log = LogVectorOutput(scene.force_output_port(builder), builder, 0.01)
-    simulator = Simulator(builder.Build())
-    simulator.AdvanceTo(plan.end_time)
-    context = simulator.get_context()
-    plant_context = plant.GetMyContextFromRoot(context)
-    pin = pin_log.FindLog(context)
+def pull(scenario, gain):
+    """Follow the default plan at a constant gain; the pin's withdrawal x and f_WE every
+    10 ms (read from the context as a logger would), and the plant's context at the end."""
+    follower = build_plan_follower(scenario, gain=gain)
+    simulator = Simulator(follower.diagram)
+    root = simulator.get_mutable_context()
+    plant_context = follower.station.plant_context(root)
+    f_WE_port = follower.diagram.GetOutputPort("f_WE")
+    times = np.arange(0.0, follower.plan.end_time + 1e-9, LOG_PERIOD)
+    x, f_WE = [], []
+    for t in times:
+        simulator.AdvanceTo(t)
+        x.append(follower.scene.pin_displacement(plant_context))
+        f_WE.append(f_WE_port.Eval(root).copy())
     return dict(
-        scene=scene,
-        plant=plant,
-        arm=arm,
-        plan=plan,
+        scene=follower.scene,
+        arm=follower.station.arm,
+        plan=follower.plan,
         plant_context=plant_context,
-        t=pin.sample_times(),
-        x=pin.data()[0],
-        f_WE=force_log.FindLog(context).data().T,
+        t=times,
+        x=np.array(x),
+        f_WE=np.array(f_WE),
     )
 
 
 @pytest.fixture(scope="module")
-def low():
-    return _pull(LOW_GAIN)
+def low(product):
+    return pull(product, LOW_GAIN)
 
 
 @pytest.fixture(scope="module")
-def high():
-    return _pull(HIGH_GAIN)
+def high(product):
+    return pull(product, HIGH_GAIN)
 
 
 def test_high_gain_pulls_the_pin_out(high):
@@ -76,6 +96,8 @@ def test_high_gain_pulls_the_pin_out(high):
     assert np.all(high["x"][high["t"] <= 0.5] < scene.params.detent_length)
     pulled = high["t"] <= high["plan"].times[2]
     assert high["x"][pulled].max() >= scene.pin_length
+    # Carried on to the stop: 98-100 mm (docs/tasks.md).
+    assert 0.095 < high["x"][-1] < 0.101
 
 
 def test_low_gain_leaves_the_pin_in(low):
@@ -83,25 +105,23 @@ def test_low_gain_leaves_the_pin_in(low):
     assert not scene.pin_out(low["plant_context"])
     # The detent gave only its spring's millimetre: x = (axial pull - weight) / stiffness.
     assert low["x"].max() < scene.params.detent_length
-    pull = -low["f_WE"] @ PULL_AXIS_W - 0.1 * 9.81
-    assert low["x"].max() == pytest.approx(
-        pull.max() / scene.params.detent_stiffness, rel=0.05
-    )
+    pull = -low["f_WE"] @ PULL_AXIS_W - WEIGHT
+    assert low["x"].max() == pytest.approx(pull.max() / scene.params.detent_stiffness, rel=0.05)
 
 
 def test_interaction_force_against_hold_force(low, high):
     hold = high["scene"].hold_force
-    weight = 0.1 * 9.81
     # High gain: the tool is pulled back down (-z) by about the hold force (plus the pin's
     # weight) until the detent lets go, then by little more than the weight.
     peak = high["f_WE"][np.argmax(np.linalg.norm(high["f_WE"], axis=1))]
     assert peak @ PULL_AXIS_W < -0.95 * np.linalg.norm(peak)
-    assert hold < np.linalg.norm(peak) < 1.2 * (hold + weight)
+    assert hold < np.linalg.norm(peak) < 1.2 * (hold + WEIGHT)
     settled = high["t"] >= high["plan"].times[-2]
-    np.testing.assert_allclose(high["f_WE"][settled][-1], [0, 0, -weight], atol=0.5)
-    # Low gain: the arm pulls hard, but stays under the hold force.
+    np.testing.assert_allclose(high["f_WE"][settled][-1], [0, 0, -WEIGHT], atol=0.5)
+    # Low gain: the arm pulls hard, but stays under the hold force (docs/tasks.md: 34 N).
     low_peak = np.linalg.norm(low["f_WE"], axis=1).max()
     assert 0.4 * hold < low_peak < hold
+    assert low_peak == pytest.approx(34.0, abs=2.0)
     assert low["f_WE"][-1] @ PULL_AXIS_W < 0
 
 
@@ -115,31 +135,54 @@ def test_force_sensor_agrees_with_the_grasp_spring(low):
     np.testing.assert_allclose(low["f_WE"][-1], expected, rtol=0.02, atol=0.05)
 
 
-def test_detent_system_matches_its_twin():
-    builder, plant, arm, scene = _scene()
-    detent, _ = scene.add_systems(builder)
-    assert scene.add_systems(builder)[0] is detent  # added once
-    context = detent.CreateDefaultContext()
-    index = scene.pin_joint.velocity_start()
+@pytest.mark.parametrize("gain, out", [(15.0, False), (20.0, True)])
+def test_the_gain_threshold_lies_between_15_and_20(product, gain, out):
+    """The tuning the scene's docstring quotes: K = 15 pulls 48 N and leaves the pin in,
+    K = 20 pulls it out."""
+    run = pull(product, gain)
+    assert run["scene"].pin_out(run["plant_context"]) is out
+    peak = np.linalg.norm(run["f_WE"], axis=1).max()
+    if not out:
+        assert peak == pytest.approx(48.0, abs=2.0)
+
+
+def test_detent_system_against_the_law_by_hand():
     law = dict(hold_force=50.0, detent_length=0.003, detent_stiffness=3e4)
+    detent = PinResistance(**law, sliding_damping=20.0)
+    context = detent.CreateDefaultContext()
     # Spring, saturated spring, released, pushed back in from a slight overshoot; at rest
     # and sliding out at 0.1 m/s against 20 N s/m of friction.
     cases = ((0.0005, -15.0), (0.002, -50.0), (0.004, 0.0), (-0.0001, 3.0))
     for (x, by_hand), xdot in itertools.product(cases, (0.0, 0.1)):
         detent.pin_state_input.FixValue(context, [x, xdot])
         tau = detent.generalized_force_output.Eval(context)
-        assert tau.shape == (plant.num_velocities(),)
-        assert tau[index] == pytest.approx(by_hand - 20.0 * xdot)
-        assert tau[index] == pytest.approx(detent_force(x, **law) - 20.0 * xdot)
-        assert tau[index] == pin_resistance_force(x, xdot, **law, sliding_damping=20.0)
-        assert np.count_nonzero(np.delete(tau, index)) == 0
+        assert tau.shape == (1,)  # the pin's one actuator
+        assert tau[0] == pytest.approx(by_hand - 20.0 * xdot)
+        assert detent_force(x, **law) == pytest.approx(by_hand)
+        assert tau[0] == pin_resistance_force(x, xdot, **law, sliding_damping=20.0)
 
 
-def test_ring_waits_at_the_home_tool_point():
-    _, plant, arm, scene = _scene()
+def test_scene_systems_drive_the_pin_actuator(product):
+    builder, plant, arm, scene = _scene(product.plant)
+    detent, sensor = scene.add_systems(builder)
+    assert scene.add_systems(builder) == (detent, sensor)  # added once
+    assert scene.force_output_port(builder) is sensor.f_WE_output
+    assert plant.num_actuated_dofs(scene.model_instance) == 1
+    assert plant.get_actuation_input_port(scene.model_instance).size() == 1
+    diagram = builder.Build()
+    actuation = plant.get_actuation_input_port(scene.model_instance)
+    assert diagram.AreConnected(detent.generalized_force_output, actuation)
+    applied = plant.get_applied_generalized_force_input_port()
+    assert (plant, applied.get_index()) not in diagram.connection_map()
+
+
+def test_ring_waits_at_the_scene_frame_on_the_home_tool_point(product):
+    _, plant, arm, scene = _scene(product.plant)
     context = plant.CreateDefaultContext()
     p_WE = arm.tool_frame.CalcPoseInWorld(context).translation()
     p_WR = scene.ring_frame.CalcPoseInWorld(context).translation()
+    np.testing.assert_allclose(p_WR, DEFAULT_POSITION, atol=1e-12)
+    np.testing.assert_allclose(p_WR, product.X_WT().translation(), atol=1e-12)
     assert np.linalg.norm(p_WE - p_WR) < 0.002
     assert scene.pin_displacement(context) == 0.0
     assert scene.pin_length == pytest.approx(0.05)
@@ -147,21 +190,23 @@ def test_ring_waits_at_the_home_tool_point():
 
 def test_plan_has_four_phases_along_the_pull_axis():
     plan = default_cotter_pin_plan()
-    params = CotterPinParams()
     assert plan.kinds == ("free", "forceful", "free", "free")
-    np.testing.assert_allclose(plan.points[0], params.ring_position)
+    np.testing.assert_allclose(plan.points[0], DEFAULT_POSITION)
     np.testing.assert_allclose(plan.points[1], plan.points[0])
     rise = (plan.points - plan.points[0]) @ PULL_AXIS_W
     np.testing.assert_allclose(rise, [0, 0, 0.065, 0.10, 0.10])
     np.testing.assert_allclose(np.cross(plan.points - plan.points[0], PULL_AXIS_W), 0, atol=1e-12)
+    np.testing.assert_array_equal(plan.times, [0.0, 0.5, 2.0, 3.0, 3.5])
+    # Placed: from the scene frame's origin, still straight up whatever the yaw.
+    moved = default_cotter_pin_plan(X_WT=scene_pose([0.6, -0.8, 0.1], 40.0))
+    np.testing.assert_allclose(moved.points - plan.points, [[-0.042, 0.037, -0.02]] * 5, atol=1e-12)
 
 
 @pytest.mark.parametrize(
     "change, message",
     [
         (dict(hold_force=-1.0), "CotterPinParams.hold_force"),
-        (dict(ring_position=[0.6, np.nan, 0.1]), "CotterPinParams.ring_position"),
-        (dict(ring_position=[0.6, 0.1]), "CotterPinParams.ring_position"),
+        (dict(hold_force=np.nan), "CotterPinParams.hold_force"),
         (dict(detent_length=0.06), "CotterPinParams.detent_length"),
         (dict(sliding_damping=-2.0), "CotterPinParams.sliding_damping"),
         (dict(grasp_stiffness=0.0), "CotterPinParams.grasp_stiffness"),
@@ -179,11 +224,18 @@ def test_bad_parameters_name_the_field(change, message):
         add_cotter_pin_scene(plant, add_baxter_arm(plant), params=params)
 
 
-def test_scene_refuses_bad_plants_and_stiff_springs():
+def test_scene_refuses_bad_plants_poses_and_stiff_springs():
     plant = MultibodyPlant(1e-3)
     arm = add_baxter_arm(plant)
     with pytest.raises(ValueError, match="detent_stiffness"):
         add_cotter_pin_scene(plant, arm, params=CotterPinParams(detent_stiffness=1e7))
+    tilted = RigidTransform(RollPitchYaw(0.1, 0.0, 0.0), [0.6, -0.8, 0.1])
+    with pytest.raises(ValueError, match="only turn the scene about world z"):
+        add_cotter_pin_scene(plant, arm, X_WT=tilted)
+    with pytest.raises(ValueError, match="only turn the scene about world z"):
+        default_cotter_pin_plan(X_WT=tilted)
+    with pytest.raises(ValueError, match="X_WT must be a RigidTransform"):
+        add_cotter_pin_scene(plant, arm, X_WT=[0.6, -0.8, 0.1])
     continuous = MultibodyPlant(0.0)
     with pytest.raises(ValueError, match="discrete plant"):
         add_cotter_pin_scene(continuous, add_baxter_arm(continuous))
@@ -195,12 +247,10 @@ def test_scene_refuses_bad_plants_and_stiff_springs():
 
 
 def test_params_load_from_yaml():
-    params = yaml_load_typed(
-        schema=CotterPinParams, data="ring_position: [0.6, -0.8, 0.1]\nhold_force: 60.0\n"
-    )
-    assert params.hold_force == 60.0
-    np.testing.assert_allclose(default_cotter_pin_plan(params).points[0], [0.6, -0.8, 0.1])
-    # yaml_load_typed sets fields after construction: the consumers check them.
+    params = yaml_load_typed(schema=CotterPinParams, data="hold_force: 60.0\n")
+    assert params.hold_force == 60.0 and params.detent_length == 0.003
+    # yaml_load_typed sets fields after construction: the scene checks them.
     bad = yaml_load_typed(schema=CotterPinParams, data="hold_force: .nan\n")
+    plant = MultibodyPlant(1e-3)
     with pytest.raises(ValueError, match="CotterPinParams.hold_force"):
-        default_cotter_pin_plan(bad)
+        add_cotter_pin_scene(plant, add_baxter_arm(plant), params=bad)
