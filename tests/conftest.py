@@ -1,4 +1,4 @@
-"""Shared test settings: headless plots, paths to the shared facts."""
+"""Shared test settings: headless plots, the path to the published facts (docs/facts)."""
 
 import os
 import shutil
@@ -9,14 +9,14 @@ import pytest
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 REPO = Path(__file__).resolve().parents[1]
-# The published test vectors live beside the repository (../shared/facts) on every machine.
-FACTS = REPO.parent / "shared" / "facts"
+# The published test vectors ship with the repository (docs/facts.md names their sources).
+FACTS = REPO / "docs" / "facts"
 
 
 @pytest.fixture
 def facts_dir():
     if not FACTS.is_dir():
-        pytest.fail(f"shared facts not found at {FACTS}")
+        pytest.fail(f"the published facts are not at {FACTS}")
     return FACTS
 
 

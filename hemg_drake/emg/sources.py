@@ -2,7 +2,7 @@
 
 Every source outputs the MYO's raw samples: 8 channels, integers in the signed
 8-bit range -128..127 (carried as float64 in Drake vector ports), one sample per
-1/200 s (facts: ``shared/facts/touch_x.md``, MYO section). Sample k is output
+1/200 s (facts: ``docs/facts.md``, MYO section). Sample k is output
 from the discrete update at t = k / 200 s until the next one, and the output is
 zero before the first; as with any Drake discrete update, a logger publishing
 at exactly t = k / 200 still sees sample k - 1.

@@ -1,7 +1,7 @@
 """The Baxter right arm (7 DOF) in a ``MultibodyPlant``: loading, frames, limits.
 
-The model is ``models/baxter_right_arm.urdf``, written from the shared facts (joint origins,
-axes, limits, inertials of Rethink's ``baxter_description``). It is found from this package's
+The model is ``models/baxter_right_arm.urdf``, written from the published facts in
+``docs/facts.md`` (joint origins, axes, limits, inertials of Rethink's ``baxter_description``). It is found from this package's
 location (or the installed copy, see :func:`find_models_dir`), never from the current
 directory, and parsed with the package map entry ``package://hemg_drake_models/``.
 """

@@ -12,7 +12,7 @@ from scipy.linalg import expm
 
 from hemg_drake._validate import all_finite, as_scalar, as_vector
 
-# Touch X figures (shared/facts/touch_x.md); all are constructor parameters.
+# Touch X figures (docs/facts.md); all are constructor parameters.
 TOUCH_X_MASS = 0.045  # kg, apparent mass at the tip (data sheet, unverified)
 TOUCH_X_PEAK_FORCE = 7.9  # N, CHAI3D's maxLinearForce for the PHANTOM Desktop / Touch X
 TOUCH_X_WORKSPACE = (0.16, 0.12, 0.12)  # m, width x height x depth (data sheet, unverified)
