@@ -1,6 +1,7 @@
-"""HSMM-GMR reproduction: state weights, GMR velocity and stiffness, integration (eqs. 12-18).
+"""HSMM reproduction: HSMM-GMR (eqs. 12-18) and an LQR tracker of the HSMM's states.
 
-One step, from the current position x_t and the predicted forward variable:
+``tracker="gmr"`` (the paper, :class:`HsmmGmrPolicy`): one step, from the current position
+x_t and the predicted forward variable:
 
 1. state weights h_t (eq. 12), by one of three weightings:
    ``"temporal"`` the forward variable without observation (timing alone);
@@ -11,6 +12,11 @@ One step, from the current position x_t and the predicted forward variable:
    kappa sum_i h_i (I - w_i u_i u_i^T) (mu_i^x - x_t) added to xdot*, and k* clipped to the
    stiffness range of the training data (``HSMM.data_range_``);
 3. x*_{t+1} = x*_t + dt xdot* (eq. 18).
+
+``tracker="lqr"`` (:class:`HsmmLqrPolicy`, :mod:`hemg_drake.learning.lqr`): a
+receding-horizon LQR on a task-space double integrator whose cost over the next H steps is
+each predicted state's precision over [x, xdot] weighted by h (minimal intervention,
+Calinon 2016); x* is the plan's next state, so errors are fed back, not integrated.
 
 The cross-track attractor. When every demonstration starts at one point, eqs. 15-17 hold
 no information on how to return to the path from elsewhere: a start offset is carried
@@ -200,8 +206,9 @@ class HsmmLqrPolicy:
     Calinon 2016). For a given x, the state's term is least at GMR's conditional velocity
     mu_i^xdot + S_i^xdot,x (S_i^xx)^-1 (x - mu_i^x) (eq. 16), so the LQR tracks eq. 16's
     velocity field with a position pull set by the conditional precision of x. The first
-    control is applied: s_{t+1} = A s_t + B u_t. k* is GMR's conditional stiffness at x_t
-    with the weights h_t (eqs. 15-17 for k alone), clipped to the training data's range.
+    control is applied: s_{t+1} = A s_t + B u_t. k* is GMR's conditional stiffness at the
+    observed position with the weights h_t (eqs. 15-17 for k alone), clipped to the
+    training data's range.
 
     With ``"temporal"`` the sequence does not depend on the motion, so the first-step gains
     of every horizon are computed ahead (batched Riccati recursions over chunks of
