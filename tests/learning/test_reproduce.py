@@ -281,3 +281,24 @@ def test_bad_tracker_settings_are_rejected(path_task):
         reproduce(model, start, 10, tracker="lqr", control_cost=-1.0)
     with pytest.raises(ValueError, match=r"start must have shape \(3,\)"):
         reproduce(model, start[:2], 10, tracker="lqr")
+
+
+def test_lqr_temporal_table_grows_for_a_model_that_never_settles(path_task):
+    # k-means states with loops in A: the timing alone never settles, so the table of gains
+    # is extended when a step needs it; a step there is the plan on that step's horizon.
+    from hemg_drake.learning import lqr
+    from hemg_drake.learning.reproduce import HsmmLqrPolicy
+
+    model = path_task.model
+    policy = HsmmLqrPolicy(model, weighting="temporal", horizon=20)
+    t = len(policy._gain_table) + 300
+    x, xdot = path_task.mean[0, :3], np.array([0.01, 0.0, 0.0])
+    _, _, x_next, _, _ = policy.step(t, x, xdot, None)
+    assert len(policy._gain_table) > t
+    h = model.forward_variable(t + 21, observe=False)[t:]
+    precisions = np.linalg.inv(model.covariances_[:, :6, :6])
+    Q = np.einsum("tn,nij->tij", h, precisions)
+    Qm = np.einsum("tn,nij,nj->ti", h, precisions, model.means_[:, :6])
+    A, B = lqr.double_integrator(3, 0.01)
+    u = lqr.first_control(A, B, Q, Qm, np.eye(3), np.concatenate([x, xdot]))
+    np.testing.assert_allclose(x_next, x + 0.01 * xdot + 0.5e-4 * u, rtol=0, atol=1e-12)
