@@ -168,6 +168,7 @@ def test_the_pen_stays_upright_while_it_touches(run):
     assert tilt[touching].max() < 5.0
 
 
+@pytest.mark.slow
 def test_a_compliant_slave_skips(product):
     """K = 20 cannot keep the pen on the paper: the strokes break up (docs/tasks.md)."""
     low = follow(product, 20.0)
