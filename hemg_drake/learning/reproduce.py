@@ -70,6 +70,10 @@ DEFAULT_HORIZON = 100
 # (1 / (sigma^2 r))^(1/4): 32 rad/s where the demonstrations agree to 1 mm, 10 rad/s at
 # 1 cm, 5.8 rad/s at 3 cm (docs/reproduction.md, "Trackers").
 DEFAULT_CONTROL_COST = 1.0
+# The LQR's cost at each step: the most probable state's quadratic form ("active", pbdlib's
+# state sequence), or all states' weighted by h ("mixture"; docs/reproduction.md).
+STATE_COSTS = ("active", "mixture")
+DEFAULT_STATE_COST = "active"
 # How far the online tracker's plan may lead the measured tool point, m (HsmmLqrReproducer):
 # an arm held back gets a reference at most this far ahead, so the PD pulls with about its
 # task-space stiffness times this (about 100 N at K = 145 on the cotter pin) and x* cannot
@@ -199,9 +203,11 @@ class HsmmLqrPolicy:
     observation, fixed by the timing; ``"forward"``: observing x_t, then predicted without
     observation), and the LQR minimises over that horizon
 
-        sum_j sum_i h_{t+j,i} (s_{t+j} - mu_i)^T Lambda_i (s_{t+j} - mu_i) + r |u_{t+j}|^2,
+        sum_j sum_i w_{t+j,i} (s_{t+j} - mu_i)^T Lambda_i (s_{t+j} - mu_i) + r |u_{t+j}|^2,
 
-    Lambda_i the inverse of state i's [x, xdot] covariance block, mu_i its [x, xdot] mean:
+    w = h (``state_cost="mixture"``) or the one-hot of the most probable state
+    (``"active"``, the state sequence of pbdlib's HSMM + LQR), Lambda_i the inverse of state
+    i's [x, xdot] covariance block, mu_i its [x, xdot] mean:
     stiff where the demonstrations agree, free where they vary (minimal intervention,
     Calinon 2016). For a given x, the state's term is least at GMR's conditional velocity
     mu_i^xdot + S_i^xdot,x (S_i^xx)^-1 (x - mu_i^x) (eq. 16), so the LQR tracks eq. 16's
@@ -229,6 +235,7 @@ class HsmmLqrPolicy:
         H, in steps (>= 1).
     control_cost : float
         r of R = r I in s^4/m^2 (model units: s^4 per position unit squared), > 0.
+    state_cost : {"active", "mixture"}
     """
 
     CHUNK = 256  # horizons per batched Riccati recursion of the temporal table
@@ -241,6 +248,7 @@ class HsmmLqrPolicy:
         dt=0.01,
         horizon=DEFAULT_HORIZON,
         control_cost=DEFAULT_CONTROL_COST,
+        state_cost=DEFAULT_STATE_COST,
     ):
         if weighting not in LQR_WEIGHTINGS:
             raise ValueError(
@@ -253,6 +261,9 @@ class HsmmLqrPolicy:
             raise ValueError(f"horizon must be an integer >= 1 (steps), got {horizon!r}")
         if not (np.isfinite(control_cost) and control_cost > 0):
             raise ValueError(f"control_cost must be a finite number > 0, got {control_cost!r}")
+        if state_cost not in STATE_COSTS:
+            raise ValueError(f"state_cost must be one of {STATE_COSTS}, got {state_cost!r}")
+        self.state_cost = state_cost
         self.forward = ResidualForward(model)
         self.weighting = weighting
         self.dt = float(dt)
@@ -290,7 +301,13 @@ class HsmmLqrPolicy:
                 self._temporal_table(self._max_duration)
 
     def costs(self, h):
-        """Q = sum_i h_i Lambda_i, shape (..., 2P, 2P), and Q m = sum_i h_i Lambda_i mu_i."""
+        """Q = sum_i w_i Lambda_i, shape (..., 2P, 2P), and Q m = sum_i w_i Lambda_i mu_i.
+
+        w = h (``"mixture"``) or the one-hot of argmax h (``"active"``); h of shape (..., N).
+        """
+        if self.state_cost == "active":
+            active = np.argmax(h, axis=-1)
+            return self.precisions[active], self.informations[active]
         return np.tensordot(h, self.precisions, 1), h @ self.informations
 
     def predict_weights(self, predicted, n_steps):
@@ -417,6 +434,7 @@ def reproduce(
     tracker="gmr",
     horizon=DEFAULT_HORIZON,
     control_cost=DEFAULT_CONTROL_COST,
+    state_cost=DEFAULT_STATE_COST,
 ):
     """Reproduce a task from a start position, step by step.
 
@@ -446,6 +464,9 @@ def reproduce(
         LQR horizon in steps (``"lqr"`` only).
     control_cost : float
         r of the LQR's control cost R = r I, s^4/m^2 (``"lqr"`` only).
+    state_cost : {"active", "mixture"}
+        The LQR's cost per step: the most probable state's, or all states' weighted by h
+        (``"lqr"`` only).
 
     Returns
     -------
@@ -465,7 +486,12 @@ def reproduce(
             )
         return _reproduce_lqr(
             HsmmLqrPolicy(
-                model, weighting=weighting, dt=dt, horizon=horizon, control_cost=control_cost
+                model,
+                weighting=weighting,
+                dt=dt,
+                horizon=horizon,
+                control_cost=control_cost,
+                state_cost=state_cost,
             ),
             start,
             n_steps,

@@ -6,6 +6,7 @@ from pydrake.systems.framework import LeafSystem
 from hemg_drake.learning.reproduce import (
     DEFAULT_CONTROL_COST,
     DEFAULT_MAX_LEAD,
+    DEFAULT_STATE_COST,
     DEFAULT_HORIZON,
     HsmmGmrPolicy,
     HsmmLqrPolicy,
@@ -154,6 +155,8 @@ class HsmmLqrReproducer(LeafSystem):
         r of the control cost R = r I, s^4/m^2 (default 1).
     max_lead : float
         How far the plan may lead the measured ``p_WE``, m (>= 0; default 0.02).
+    state_cost : {"active", "mixture"}
+        The cost per step: the most probable state's, or all states' weighted by h.
     """
 
     def __init__(
@@ -166,10 +169,16 @@ class HsmmLqrReproducer(LeafSystem):
         horizon=DEFAULT_HORIZON,
         control_cost=DEFAULT_CONTROL_COST,
         max_lead=DEFAULT_MAX_LEAD,
+        state_cost=DEFAULT_STATE_COST,
     ):
         LeafSystem.__init__(self)
         self._policy = HsmmLqrPolicy(
-            model, weighting=weighting, dt=dt, horizon=horizon, control_cost=control_cost
+            model,
+            weighting=weighting,
+            dt=dt,
+            horizon=horizon,
+            control_cost=control_cost,
+            state_cost=state_cost,
         )
         if not (np.isfinite(max_lead) and max_lead >= 0):
             raise ValueError(f"max_lead must be a finite number >= 0 (m), got {max_lead!r}")

@@ -142,21 +142,27 @@ def test_bad_parameters_and_inputs_are_rejected(path_task):
 
 
 # ------------------------------------------------------------------- HsmmLqrReproducer
-@pytest.mark.parametrize("weighting, horizon", [("temporal", 100), ("forward", 20)])
-def test_lqr_reproducer_in_a_simulator_equals_the_numpy_tracker(path_task, weighting, horizon):
+@pytest.mark.parametrize(
+    "weighting, horizon, state_cost",
+    [("temporal", 100, "active"), ("temporal", 100, "mixture"), ("forward", 20, "active")],
+)
+def test_lqr_reproducer_in_a_simulator_equals_the_numpy_tracker(
+    path_task, weighting, horizon, state_cost
+):
     start, n_steps = path_task.mean[0, :3] + [0.0, 0.01, 0.0], 60
     builder = DiagramBuilder()
     reproducer = builder.AddSystem(
         HsmmLqrReproducer(
-            model=path_task.model, start=start, dt=DT, weighting=weighting, horizon=horizon
-        )
+            model=path_task.model, start=start, dt=DT, weighting=weighting, horizon=horizon,
+            state_cost=state_cost,
+        )  # fmt: skip
     )
     builder.Connect(reproducer.GetOutputPort("x_star"), reproducer.GetInputPort("p_WE"))
     log = run(builder.Build(), {"r": reproducer}, n_steps)
 
     expected = reproduce(
         path_task.model, start, n_steps + 1, dt=DT, weighting=weighting, tracker="lqr",
-        horizon=horizon,
+        horizon=horizon, state_cost=state_cost,
     )  # fmt: skip
     # After the update at t_k the state holds h_k, k*_k and the plan's next state.
     np.testing.assert_allclose(log["r", "x_star"], expected.x[1:], rtol=0, atol=1e-9)
@@ -231,6 +237,8 @@ def test_lqr_reproducer_rejects_bad_parameters_and_inputs(path_task):
         HsmmLqrReproducer(model=model, start=start, dt=0.0)
     with pytest.raises(ValueError, match=r"max_lead must be a finite number >= 0 \(m\)"):
         HsmmLqrReproducer(model=model, start=start, max_lead=-0.01)
+    with pytest.raises(ValueError, match="state_cost must be one of"):
+        HsmmLqrReproducer(model=model, start=start, state_cost="all")
     with pytest.raises(ValueError, match="start must have shape"):
         HsmmLqrReproducer(model=model, start=start[:2])
     reproducer = HsmmLqrReproducer(model=model, start=start, weighting="temporal")

@@ -200,22 +200,31 @@ def window_control(A, B, Q, Qm, R, s0):
     return np.linalg.solve(hessian, G.T @ (linear - weights @ g))[:m]
 
 
-def test_lqr_tracker_is_the_receding_horizon_plan_on_the_timing(pull_task):
+def state_weights(h, state_cost):
+    """w of the LQR's cost: h, or the one-hot of the most probable state."""
+    return h if state_cost == "mixture" else np.eye(h.shape[1])[np.argmax(h, axis=1)]
+
+
+@pytest.mark.parametrize("state_cost", ["active", "mixture"])
+def test_lqr_tracker_is_the_receding_horizon_plan_on_the_timing(pull_task, state_cost):
     # Independent: weights from the model's forward variable, each state's precision over
     # [x, xdot], every step's plan by batch least squares, the double integrator by hand.
+    # From 30 steps on, the 8-step horizons see a state change (where the costs differ).
     from hemg_drake.learning.gmr import Gmr
 
     model, mean = pull_task
-    dt, horizon, r, n = 0.01, 8, 0.5, 40
+    dt, horizon, r, n = 0.01, 8, 0.5, 60
     start = mean[0, :3] + [0.0, 0.005, 0.0]
     result = reproduce(
         model, start, n, dt=dt, weighting="temporal", tracker="lqr", horizon=horizon,
-        control_cost=r,
+        control_cost=r, state_cost=state_cost,
     )  # fmt: skip
     h = model.forward_variable(n + horizon, observe=False)
+    assert np.argmax(h[30]) != np.argmax(h[n + horizon - 1])
+    w = state_weights(h, state_cost)
     precisions = np.linalg.inv(model.covariances_[:, :6, :6])
-    Q = np.einsum("tn,nij->tij", h, precisions)
-    Qm = np.einsum("tn,nij,nj->ti", h, precisions, model.means_[:, :6])
+    Q = np.einsum("tn,nij->tij", w, precisions)
+    Qm = np.einsum("tn,nij,nj->ti", w, precisions, model.means_[:, :6])
     A = np.block([[np.eye(3), dt * np.eye(3)], [np.zeros((3, 3)), np.eye(3)]])
     B = np.vstack([0.5 * dt**2 * np.eye(3), dt * np.eye(3)])
     gmr = Gmr(
@@ -234,10 +243,15 @@ def test_lqr_tracker_is_the_receding_horizon_plan_on_the_timing(pull_task):
         s = A @ s + B @ u
 
 
+@pytest.mark.parametrize("state_cost", ["active", "mixture"])
 @pytest.mark.parametrize("weighting", ["temporal", "forward"])
-def test_lqr_tracker_follows_the_mean_demonstration_without_overshoot(pull_task, weighting):
+def test_lqr_tracker_follows_the_mean_demonstration_without_overshoot(
+    pull_task, weighting, state_cost
+):
     model, mean = pull_task
-    result = reproduce(model, mean[0, :3], len(mean), weighting=weighting, tracker="lqr")
+    result = reproduce(
+        model, mean[0, :3], len(mean), weighting=weighting, tracker="lqr", state_cost=state_cost
+    )
     rmse = np.sqrt(np.mean(np.sum((result.x - mean[:, :3]) ** 2, axis=1)))
     assert rmse < 0.05 * 0.1  # 5 % of the 10 cm pull
     # The final height: demonstrated 0.217-0.223 m; no overshoot beyond the highest.
@@ -279,23 +293,26 @@ def test_bad_tracker_settings_are_rejected(path_task):
         reproduce(model, start, 10, tracker="lqr", horizon=0)
     with pytest.raises(ValueError, match="control_cost must be a finite number > 0"):
         reproduce(model, start, 10, tracker="lqr", control_cost=-1.0)
+    with pytest.raises(ValueError, match=r"state_cost must be one of \('active', 'mixture'\)"):
+        reproduce(model, start, 10, tracker="lqr", state_cost="argmax")
     with pytest.raises(ValueError, match=r"start must have shape \(3,\)"):
         reproduce(model, start[:2], 10, tracker="lqr")
 
 
-def test_lqr_temporal_table_grows_for_a_model_that_never_settles(path_task):
+@pytest.mark.parametrize("state_cost", ["active", "mixture"])
+def test_lqr_temporal_table_grows_for_a_model_that_never_settles(path_task, state_cost):
     # k-means states with loops in A: the timing alone never settles, so the table of gains
     # is extended when a step needs it; a step there is the plan on that step's horizon.
     from hemg_drake.learning import lqr
     from hemg_drake.learning.reproduce import HsmmLqrPolicy
 
     model = path_task.model
-    policy = HsmmLqrPolicy(model, weighting="temporal", horizon=20)
+    policy = HsmmLqrPolicy(model, weighting="temporal", horizon=20, state_cost=state_cost)
     t = len(policy._gain_table) + 300
     x, xdot = path_task.mean[0, :3], np.array([0.01, 0.0, 0.0])
     _, _, x_next, _, _ = policy.step(t, x, xdot, None)
     assert len(policy._gain_table) > t
-    h = model.forward_variable(t + 21, observe=False)[t:]
+    h = state_weights(model.forward_variable(t + 21, observe=False)[t:], state_cost)
     precisions = np.linalg.inv(model.covariances_[:, :6, :6])
     Q = np.einsum("tn,nij->tij", h, precisions)
     Qm = np.einsum("tn,nij,nj->ti", h, precisions, model.means_[:, :6])
