@@ -151,6 +151,8 @@ def _reproduce(args):
         overrides.append(f"reproduction.weighting={args.weighting}")
     if args.restoring_gain is not None:
         overrides.append(f"reproduction.restoring_gain={args.restoring_gain}")
+    if args.tracker is not None:
+        overrides.append(f"reproduction.tracker={args.tracker}")
     if args.out is not None:
         check_output_folder(args.out)
     reproduce(
@@ -203,6 +205,13 @@ def _version():
         return hemg_drake.__version__
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (``--help`` shows the usage)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
 class _Formatter(argparse.ArgumentDefaultsHelpFormatter):
     """Show defaults, but not for flags and options whose default is None."""
 
@@ -213,7 +222,7 @@ class _Formatter(argparse.ArgumentDefaultsHelpFormatter):
 
 
 def build_parser():
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="hemg-drake",
         description="Demonstrate, learn and reproduce teleoperated tasks in Drake.",
         formatter_class=_Formatter,
@@ -282,6 +291,11 @@ def build_parser():
         "--restoring-gain", type=_finite_float("--restoring-gain"), metavar="KAPPA",
         help="pull back to the demonstrated path at this rate (1/s; 0: none; default: the "
         "scenario's reproduction.restoring_gain)",
+    )  # fmt: skip
+    reproduce.add_argument(
+        "--tracker", choices=["gmr", "lqr"],
+        help="gmr: the paper's eqs. 15-18; lqr: an LQR tracking the HSMM's states from the "
+        "measured tool point (default: the scenario's reproduction.tracker)",
     )  # fmt: skip
     reproduce.add_argument("--out", help="output folder (default: the run folder)")
     reproduce.add_argument("--no-replay", action="store_true", help="write no HTML replay")

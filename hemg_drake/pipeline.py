@@ -276,12 +276,14 @@ def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progr
     result = run_reproduction(built, duration=duration, replay_path=replay_path)
     settings = scenario.reproduction
     progress(
-        f"reproduce: {scenario.task}, {settings.weighting} weighting, start offset "
+        f"reproduce: {scenario.task}, {settings.tracker} tracker, {settings.weighting} "
+        f"weighting, start offset "
         f"{np.round(offset, 4).tolist()} m: {duration:g} s simulated in "
         f"{time.perf_counter() - began:.1f} s"
     )
     metrics = task_metrics(scenario.task, demos, result)
     metrics.update(
+        tracker=settings.tracker,
         weighting=settings.weighting,
         restoring_gain=settings.restoring_gain,
         start=start.tolist(),

@@ -39,7 +39,8 @@ from hemg_drake.emg.envelope import RmsEnvelope
 from hemg_drake.emg.gain import VariableGain
 from hemg_drake.emg.sources import MYO_RATE
 from hemg_drake.learning.hsmm import HSMM, INITS as HSMM_INITS
-from hemg_drake.learning.reproduce import WEIGHTINGS, reproduce
+from hemg_drake.learning.reproduce import TRACKERS, WEIGHTINGS, reproduce
+from hemg_drake.learning.systems import HsmmLqrReproducer
 from hemg_drake.tasks import cotter_pin, drawing
 from hemg_drake.tasks.cotter_pin import CotterPinParams
 from hemg_drake.tasks.drawing import DrawingParams
@@ -283,6 +284,16 @@ class ReproductionConfig:
     # The position the reproducer observes: "reference" (its own x*) or "tool" (the
     # slave's measured tool point).
     observe: str = _value("reference", choices=("reference", "tool"))
+    # "gmr": the paper's eqs. 15-18 (GMR velocity integrated by eq. 18); "lqr": a
+    # receding-horizon LQR tracking the HSMM's states, re-planned from the measured tool
+    # point every step (docs/reproduction.md, Trackers). "lqr" takes the temporal or
+    # forward weighting.
+    tracker: str = _field(reproduce, "tracker", choices=TRACKERS)
+    # LQR tracker: steps planned ahead, the control cost r (s^4/m^2), and how far its
+    # plan may lead the measured tool point (m).
+    horizon: int = _field(reproduce, "horizon", positive=True)
+    control_cost: float = _field(reproduce, "control_cost", positive=True)
+    max_lead: float = _field(HsmmLqrReproducer.__init__, "max_lead")
     # K_ptr (N/m) and K_dtr (N s/m) of the tracking force (eq. 23; Table I: 50 and 50).
     tracking_gains: list[float] = _value([50.0, 50.0], size=2)
     # Simulated time to let the arm come to rest in the scene, holding x*_0, before the
@@ -595,6 +606,12 @@ def _check_values(scenario):
             raise ValueError(f"key '{key}' must not be negative, got {value!r}")
         if checks.get("fraction") and np.any(numbers > 1):
             raise ValueError(f"key '{key}' must lie in [0, 1], got {value!r}")
+    settings = scenario.reproduction
+    if settings.tracker == "lqr" and settings.weighting == "spatial":
+        raise ValueError(
+            "key 'reproduction.weighting' = 'spatial' does not go with tracker 'lqr' (it "
+            "tracks a state sequence: 'temporal' or 'forward')"
+        )
     offsets = scenario.reproduction.start_offsets
     if any(len(offset) != 3 for offset in offsets):
         raise ValueError(f"key 'reproduction.start_offsets' must hold [dx, dy, dz] lists, got {offsets}")

@@ -42,7 +42,7 @@ from pydrake.systems.primitives import ConstantVectorSource, Saturation
 from hemg_drake._validate import as_scalar, as_vector
 from hemg_drake.diagrams.log import add_logger, split_log
 from hemg_drake.diagrams.station import make_slave_station
-from hemg_drake.learning.systems import HsmmGmrReproducer, TrackingForce
+from hemg_drake.learning.systems import HsmmGmrReproducer, HsmmLqrReproducer, TrackingForce
 from hemg_drake.viz.ink import add_ink_to_recording, in_contact
 
 # Size of the model's position x (a point in space) and of its stiffness k.
@@ -146,6 +146,29 @@ def check_model(model):
         )
 
 
+def make_reproducer(scenario, model, start):
+    """The reproducer of the scenario's ``reproduction.tracker``: ``HsmmGmrReproducer``
+    (eqs. 12-18) or ``HsmmLqrReproducer`` (the LQR tracker), at the log period."""
+    settings = scenario.reproduction
+    if settings.tracker == "gmr":
+        return HsmmGmrReproducer(
+            model=model,
+            start=start,
+            dt=scenario.log_period,
+            weighting=settings.weighting,
+            restoring_gain=settings.restoring_gain,
+        )
+    return HsmmLqrReproducer(
+        model=model,
+        start=start,
+        dt=scenario.log_period,
+        weighting=settings.weighting,
+        horizon=settings.horizon,
+        control_cost=settings.control_cost,
+        max_lead=settings.max_lead,
+    )
+
+
 def _add_station(builder, scenario, start, *, scene, q0=None, recorder=None, meshcat=None):
     """The station, with the reproduced stiffness k* clipped to [k_min, k_max] before its
     gain input. Returns the station and the ``stiffness_limits`` Saturation."""
@@ -238,16 +261,7 @@ def build_reproduction_diagram(
     def add(name, system):
         return builder.AddNamedSystem(name, system)
 
-    reproducer = add(
-        "reproducer",
-        HsmmGmrReproducer(
-            model=model,
-            start=start,
-            dt=scenario.log_period,
-            weighting=settings.weighting,
-            restoring_gain=settings.restoring_gain,
-        ),
-    )
+    reproducer = add("reproducer", make_reproducer(scenario, model, start))
     kp, kd = settings.tracking_gains
     tracking = add("tracking_force", TrackingForce(kp=kp, kd=kd))
     goal_source = add("goal", ConstantVectorSource(goal))
