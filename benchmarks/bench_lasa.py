@@ -161,24 +161,25 @@ def benchmark(names):
 def print_table(results, names, markdown):
     columns = ("rmse", "dtw", "end", "fit")
     if markdown:
-        print("| method | time-normalised RMSE (mm) | DTW RMSE (mm) | end-point (mm) | fit (s) "
-              "| shapes won |")
+        print("| method | time-normalised RMSE (mm): mean / median / worst | DTW RMSE (mm) "
+              "| end-point (mm) | fit (s) | shapes won |")
         print("|---|---|---|---|---|---|")
     else:
         print(f"{'method':38s} {'RMSE mm':>9s} {'DTW mm':>8s} {'end mm':>8s} {'fit s':>7s} "
-              f"{'median RMSE':>11s}")
+              f"{'median':>7s} {'worst':>7s} {'won':>4s}")
     best = {name: min(r[name]["rmse"] for r in results.values()) for name in names}
     for method, per_shape in sorted(results.items(), key=lambda m: np.mean(
             [v["rmse"] for v in m[1].values()])):  # fmt: skip
         mean = {c: np.mean([per_shape[n][c] for n in names]) for c in columns}
         median = np.median([per_shape[n]["rmse"] for n in names])
+        worst = max(per_shape[n]["rmse"] for n in names)
         won = sum(per_shape[n]["rmse"] == best[n] for n in names)
         if markdown:
-            print(f"| {method} | {mean['rmse']:.2f} (median {median:.2f}) | {mean['dtw']:.2f} | "
-                  f"{mean['end']:.2f} | {mean['fit']:.3f} | {won} |")
+            print(f"| {method} | {mean['rmse']:.2f} / {median:.2f} / {worst:.2f} | "
+                  f"{mean['dtw']:.2f} | {mean['end']:.2f} | {mean['fit']:.3f} | {won} |")
         else:
             print(f"{method:38s} {mean['rmse']:9.2f} {mean['dtw']:8.2f} {mean['end']:8.2f} "
-                  f"{mean['fit']:7.3f} {median:11.2f}")
+                  f"{mean['fit']:7.3f} {median:7.2f} {worst:7.2f} {won:4d}")
 
 
 def print_per_shape(results, names, methods):

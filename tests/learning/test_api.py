@@ -200,3 +200,15 @@ def test_temporal_weighting_warns_where_the_timing_does_not_fix_the_states(model
         with warnings.catch_warnings():
             warnings.simplefilter("error")
             left_to_right.check_weighting("forward")
+
+
+def test_the_worked_example_in_the_docs_runs(capsys):
+    pytest.importorskip("sklearn")
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "learning.md").read_text()
+    section = text[text.index("## As a library") :]
+    code = section[section.index("```python\n") + 10 : section.index("```\n\nprints")]
+    printed = section[section.index("prints\n\n```\n") + 12 :]
+    exec(compile(code, "docs/learning.md", "exec"), {})
+    assert capsys.readouterr().out == printed[: printed.index("```")]
