@@ -30,30 +30,26 @@ def _print(line):
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
 
 
-def _positive_int(name):
+def _int_at_least(name, minimum):
     def parse(text):
         try:
             value = int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name} must be a whole number, got {text!r}")
-        if value < 1:
-            raise argparse.ArgumentTypeError(f"{name} must be at least 1, got {value}")
+        if value < minimum:
+            bound = "must not be negative" if minimum == 0 else f"must be at least {minimum}"
+            raise argparse.ArgumentTypeError(f"{name} {bound}, got {value}")
         return value
 
     return parse
+
+
+def _positive_int(name):
+    return _int_at_least(name, 1)
 
 
 def _non_negative_int(name):
-    def parse(text):
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be a whole number, got {text!r}")
-        if value < 0:
-            raise argparse.ArgumentTypeError(f"{name} must not be negative, got {value}")
-        return value
-
-    return parse
+    return _int_at_least(name, 0)
 
 
 def _finite_float(name, *, positive=False, maximum=math.inf):
