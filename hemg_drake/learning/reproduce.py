@@ -321,7 +321,9 @@ class HsmmLqrPolicy:
         """Weights and first-step gains of the timing alone, for the horizons t0 .. t0 + CHUNK.
 
         Extended chunk by chunk (always the same chunks, so the numbers do not depend on how
-        far a rollout went) until the weights have stayed within 1e-12 for d_max steps.
+        far a rollout went) until the weights have stayed within 1e-12 for d_max + H + 2
+        steps: no segment can outlast d_max, so they are settled, and the last horizon
+        lies in the settled part.
         """
         if self._table_done:
             return
