@@ -39,7 +39,7 @@ from hemg_drake.emg.envelope import RmsEnvelope
 from hemg_drake.emg.gain import VariableGain
 from hemg_drake.emg.sources import MYO_RATE
 from hemg_drake.learning.hsmm import HSMM, INITS as HSMM_INITS
-from hemg_drake.learning.reproduce import TRACKERS, WEIGHTINGS, reproduce
+from hemg_drake.learning.reproduce import STATE_COSTS, TRACKERS, WEIGHTINGS, reproduce
 from hemg_drake.learning.systems import HsmmLqrReproducer
 from hemg_drake.tasks import cotter_pin, drawing
 from hemg_drake.tasks.cotter_pin import CotterPinParams
@@ -281,19 +281,21 @@ class ReproductionConfig:
     # kappa of the cross-track attractor (1/s): a start offset decays as exp(-kappa t);
     # 0: eqs. 15-18 alone.
     restoring_gain: float = _field(reproduce, "restoring_gain")
-    # The position the reproducer observes: "reference" (its own x*) or "tool" (the
-    # slave's measured tool point).
+    # The position the "gmr" reproducer observes: "reference" (its own x*) or "tool" (the
+    # slave's measured tool point). The "lqr" tracker always re-plans from the tool point.
     observe: str = _value("reference", choices=("reference", "tool"))
-    # "gmr": the paper's eqs. 15-18 (GMR velocity integrated by eq. 18); "lqr": a
-    # receding-horizon LQR tracking the HSMM's states, re-planned from the measured tool
-    # point every step (docs/reproduction.md, Trackers). "lqr" takes the temporal or
-    # forward weighting.
+    # "gmr": the paper's eqs. 15-18 (GMR velocity integrated by eq. 18; restoring_gain
+    # applies to it); "lqr": a receding-horizon LQR tracking the HSMM's states, re-planned
+    # from the measured tool point every step (docs/reproduction.md, Trackers), with the
+    # temporal or forward weighting.
     tracker: str = _field(reproduce, "tracker", choices=TRACKERS)
-    # LQR tracker: steps planned ahead, the control cost r (s^4/m^2), and how far its
-    # plan may lead the measured tool point (m).
+    # LQR tracker: steps planned ahead, the control cost r (s^4/m^2), how far its plan may
+    # lead the measured tool point (m), and whose precision costs a step: "active" (the
+    # most probable state's) or "mixture" (weighted by h).
     horizon: int = _field(reproduce, "horizon", positive=True)
     control_cost: float = _field(reproduce, "control_cost", positive=True)
     max_lead: float = _field(HsmmLqrReproducer.__init__, "max_lead")
+    state_cost: str = _field(reproduce, "state_cost", choices=STATE_COSTS)
     # K_ptr (N/m) and K_dtr (N s/m) of the tracking force (eq. 23; Table I: 50 and 50).
     tracking_gains: list[float] = _value([50.0, 50.0], size=2)
     # Simulated time to let the arm come to rest in the scene, holding x*_0, before the

@@ -166,6 +166,7 @@ def make_reproducer(scenario, model, start):
         horizon=settings.horizon,
         control_cost=settings.control_cost,
         max_lead=settings.max_lead,
+        state_cost=settings.state_cost,
     )
 
 
@@ -267,9 +268,9 @@ def build_reproduction_diagram(
     goal_source = add("goal", ConstantVectorSource(goal))
 
     connect = builder.Connect
-    observed = slave.GetOutputPort("p_WE") if settings.observe == "tool" else (
-        reproducer.GetOutputPort("x_star")
-    )
+    # The LQR tracker re-plans from the measured tool point: that is its feedback.
+    measured = settings.observe == "tool" or settings.tracker == "lqr"
+    observed = slave.GetOutputPort("p_WE") if measured else reproducer.GetOutputPort("x_star")
     connect(observed, reproducer.GetInputPort("p_WE"))
     connect(reproducer.GetOutputPort("x_star"), slave.GetInputPort("p_WE_desired"))
     connect(reproducer.GetOutputPort("k_star"), limits.get_input_port())
