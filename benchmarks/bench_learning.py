@@ -10,22 +10,27 @@ and ten of 1,000). Reproduction: one step of each weighting, N = 18, D = 7.
 Run: ``.venv/bin/python benchmarks/bench_learning.py`` (``--quick``: 3 LASA shapes).
 """
 
-import argparse
 import os
-import subprocess
-import sys
-import tempfile
-import time
 
-import contextlib
-import io
+# One BLAS thread for both estimators: on 2 shared cores, threaded BLAS on small matrices
+# only adds contention (hmmlearn's iterations measured 25 ms quiet, 146 ms under load).
+for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_variable, "1")
 
-import numpy as np
+import argparse  # noqa: E402
+import contextlib  # noqa: E402
+import io  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
 
-from hemg_drake.learning import _kernels
-from hemg_drake.learning.gmr import gaussian_log_pdf
-from hemg_drake.learning.hsmm import HSMM
-from hemg_drake.learning.reproduce import WEIGHTINGS, reproduce
+import numpy as np  # noqa: E402
+
+from hemg_drake.learning import _kernels  # noqa: E402
+from hemg_drake.learning.gmr import gaussian_log_pdf  # noqa: E402
+from hemg_drake.learning.hsmm import HSMM  # noqa: E402
+from hemg_drake.learning.reproduce import WEIGHTINGS, reproduce  # noqa: E402
 
 NOISE = 2e-4
 N_STATES, N_DEMOS, N_STEPS, MAX_DURATION, N_ITER, DT = 18, 3, 1000, 150, 20, 0.01

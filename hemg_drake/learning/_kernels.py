@@ -306,3 +306,22 @@ def viterbi(log_emission, log_startprob, log_transmat, log_duration):
         t = begin - 1
         state = state_before
     return log_probability, states
+
+
+@numba.njit(cache=True)
+def occupancy(log_alpha, log_alpha_in, log_beta, log_beta_in, log_likelihood):
+    """p(state i active at t | all), shape (T, N), from the forward and backward variables.
+
+    Segments of i started at or before t minus those ended before t, clipped to [0, 1]
+    against round-off.
+    """
+    n_steps, n_states = log_alpha.shape
+    gamma = np.empty((n_steps, n_states))
+    for i in range(n_states):
+        active = 0.0
+        for t in range(n_steps):
+            active += np.exp(log_alpha_in[t, i] + log_beta_in[t, i] - log_likelihood)
+            if t > 0:
+                active -= np.exp(log_alpha[t - 1, i] + log_beta[t - 1, i] - log_likelihood)
+            gamma[t, i] = min(max(active, 0.0), 1.0)
+    return gamma
