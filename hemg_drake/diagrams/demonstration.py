@@ -111,7 +111,9 @@ def emg_calibration(scenario):
     )
 
 
-def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, scene=True):
+def build_demonstration_diagram(
+    scenario, *, seed, meshcat=None, recorder=None, scene=True, operator_factory=None
+):
     """Build the teleoperated demonstration diagram for one seeded demonstration.
 
     Parameters
@@ -125,6 +127,12 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
         Attached to the station's scene graph, to record an HTML replay.
     scene : bool
         False leaves out the task's scene: the arm in free space, no contact force.
+    operator_factory : callable, optional
+        Replaces the simulated operator (e.g. a person at the browser,
+        :mod:`hemg_drake.teleop.browser`): called as ``operator_factory(scenario=,
+        mapping=, p_MS_initial=, seed=)``, it returns a System with the
+        SimulatedOperator's ports (inputs ``p_MS``, ``v_MS``, ``feedback_force``; outputs
+        ``hand_force``, ``activation``), added as ``operator``.
 
     Returns
     -------
@@ -147,10 +155,15 @@ def build_demonstration_diagram(scenario, *, seed, meshcat=None, recorder=None, 
     def add(name, system):
         return builder.AddNamedSystem(name, system)
 
-    operator = add(
-        "operator",
-        SimulatedOperator(plan=plan, mapping=mapping, **scenario.operator.model_parameters()),
-    )
+    if operator_factory is None:
+        operator_system = SimulatedOperator(
+            plan=plan, mapping=mapping, **scenario.operator.model_parameters()
+        )
+    else:
+        operator_system = operator_factory(
+            scenario=scenario, mapping=mapping, p_MS_initial=p_MS_initial, seed=seed
+        )
+    operator = add("operator", operator_system)
     master = add("master", HapticMaster(p_MS_initial=p_MS_initial, **dc.asdict(scenario.master)))
     workspace_map = add(
         "workspace_map",
