@@ -23,6 +23,7 @@ import dataclasses as dc
 import importlib.resources
 import inspect
 import math
+import re
 import typing
 from pathlib import Path
 
@@ -530,19 +531,30 @@ def _fields(schema):
 _TYPE_NAMES = {float: "a number", int: "an integer", bool: "true or false", str: "a string"}
 
 
+# Numbers in scientific notation that YAML 1.1 (PyYAML, Drake's loader) reads as text:
+# 2e-3 (no dot) and 3.0e4 (no sign in the exponent). Read where a number is expected.
+_SCIENTIFIC = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+")
+
+
 def _check_types(value, schema, key):
-    """Check raw YAML data against ``schema``, naming the key path of the first mismatch."""
+    """Check raw YAML data against ``schema``, naming the key path of the first mismatch.
+
+    Returns the value, with numbers written as ``2e-3`` or ``3.0e4`` read as numbers (lists
+    and mappings are updated in place).
+    """
     where = f"key '{key}'" if key else "the top level"
     origin, args = typing.get_origin(schema), typing.get_args(schema)
     if origin is typing.Union:  # Optional[X]
         if value is not None:
-            _check_types(value, next(a for a in args if a is not type(None)), key)
+            return _check_types(value, next(a for a in args if a is not type(None)), key)
     elif origin is list:
         if not isinstance(value, list):
             raise ValueError(f"{where} must be a list, got {value!r}")
         for i, item in enumerate(value):
-            _check_types(item, args[0], f"{key}[{i}]")
+            value[i] = _check_types(item, args[0], f"{key}[{i}]")
     elif schema in (float, int, bool, str):
+        if schema is float and isinstance(value, str) and _SCIENTIFIC.fullmatch(value.strip()):
+            value = float(value)
         ok = {
             float: isinstance(value, (int, float)) and not isinstance(value, bool),
             int: isinstance(value, int) and not isinstance(value, bool),
@@ -565,7 +577,8 @@ def _check_types(value, schema, key):
                 f"{schema.__name__} has {sorted(fields)}"
             )
         for name, item in value.items():
-            _check_types(item, fields[name], f"{key}.{name}" if key else name)
+            value[name] = _check_types(item, fields[name], f"{key}.{name}" if key else name)
+    return value
 
 
 def _leaves(obj, key="", checks=None):

@@ -421,3 +421,39 @@ def test_yaml_round_trip_keeps_every_key(name):
     assert again.plant.use_sampled_output_ports
     assert (again.seed, again.task) == (7, name)
     np.testing.assert_array_equal(again.task_plan().points, scenario.task_plan().points)
+
+
+def test_every_scenario_key_is_documented():
+    """docs/scenarios.md lists every key of the scenario (so the doc cannot fall behind)."""
+    import dataclasses as dc
+    from pathlib import Path
+
+    from hemg_drake.scenario import Scenario
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "scenarios.md").read_text()
+
+    def keys(obj, prefix=""):
+        for field in dc.fields(obj):
+            value = getattr(obj, field.name)
+            yield prefix + field.name
+            if dc.is_dataclass(value) and not isinstance(value, type):
+                yield from keys(value, f"{prefix}{field.name}.")
+
+    missing = [key for key in keys(Scenario()) if f"`{key}`" not in text]
+    assert not missing, f"docs/scenarios.md does not list {missing}"
+
+
+def test_numbers_in_scientific_notation_are_numbers():
+    """YAML 1.1 reads 2e-3 and 3.0e4 as text; a scenario reads them as the numbers they are."""
+    from hemg_drake.scenario import load_scenario, parse_scenario, shipped_scenario
+
+    scenario = load_scenario(
+        shipped_scenario("cotter_pin"),
+        overrides=["master.period=2e-3", "scene.cotter_pin.detent_stiffness=3.0e4"],
+    )
+    assert scenario.master.period == 0.002
+    assert scenario.scene.cotter_pin.detent_stiffness == 30000.0
+    parsed = parse_scenario("task: drawing\nmapping:\n  scene_offset: [1e-2, 0, -2E-2]\n")
+    assert parsed.mapping.scene_offset == [0.01, 0.0, -0.02]
+    with pytest.raises(ValueError, match="key 'duration' must be a number, got 'e3'"):
+        parse_scenario("duration: e3\n")
