@@ -11,8 +11,8 @@ from hemg_drake.run_folder import MANIFEST, RunFolder
 DEMONSTRATE_FILES = ["dataset.npz", "replay_1.html", "replay_2.html", "demonstrations.png",
                      "fig6_emg.png", "demonstration_diagram.svg"]  # fmt: skip
 LEARN_FILES = ["model.npz", "state_activations.png"]
-REPRODUCE_FILES = ["reproduction.html", "reproduction.npz", "metrics.json",
-                   "fig8_reproduction.png", "fig11_strokes.png", "reproduction_diagram.dot"]  # fmt: skip
+REPRODUCE_FILES = ["reproduction.html", "reproduction.npz", "metrics.json", "fig8_reproduction.png",
+                   "fig11_strokes.png", "reproduction_diagram.dot"]  # fmt: skip
 # A user's own files in the folder: no stage owns them.
 OWN_FILES = ["notes.txt", "my_recording.csv"]
 HINT = "hemg-drake demonstrate SCENARIO --out runs/x"

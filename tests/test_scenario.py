@@ -14,6 +14,7 @@ from hemg_drake.emg.envelope import RmsEnvelope
 from hemg_drake.emg.gain import VariableGain
 from hemg_drake.learning.hsmm import HSMM
 from hemg_drake.learning.reproduce import reproduce
+from hemg_drake.learning.systems import HsmmLqrReproducer
 from hemg_drake.scenario import (
     Scenario,
     load_scenario,
@@ -108,9 +109,18 @@ def test_unknown_shipped_scenario():
         ("operator", TaskPlan.perturbed, ["timing_std", "effort_std"]),
         ("emg", RmsEnvelope.__init__, ["window", "per_channel"]),
         ("emg", VariableGain.__init__, ["A_emg", "k_min", "k_max"]),
-        ("feedback", ForceFeedback.__init__, ["mode", "gain", "stiffness", "damping", "peak_force"]),
+        (
+            "feedback",
+            ForceFeedback.__init__,
+            ["mode", "gain", "stiffness", "damping", "peak_force"],
+        ),
         ("learning", HSMM.__init__, ["init", "reg_covar", "n_iter"]),
-        ("reproduction", reproduce, ["weighting", "restoring_gain"]),
+        (
+            "reproduction",
+            reproduce,
+            ["weighting", "restoring_gain", "tracker", "horizon", "control_cost", "state_cost"],
+        ),
+        ("reproduction", HsmmLqrReproducer.__init__, ["max_lead"]),
         ("mapping", WorkspaceMap.__init__, ["delay_steps"]),
     ],
 )
