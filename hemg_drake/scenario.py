@@ -86,6 +86,18 @@ def _field(function, name, **checks):
 
 
 @dc.dataclass
+class PlacementsConfig:
+    """A scene placement per demonstration (``hemg_drake.placements``): each demonstration's
+    seed draws its scene pose uniformly from these ranges; empty: ``scene.position`` /
+    ``scene.yaw_deg`` for every demonstration."""
+
+    # Box of scene positions (m, in W): [[xmin, ymin, zmin], [xmax, ymax, zmax]].
+    position_range: list[list[float]] = _value([], signed=True)
+    # Range of scene yaws (deg): [smallest, largest].
+    yaw_range_deg: list[float] = _value([], signed=True, size=(0, 2))
+
+
+@dc.dataclass
 class SceneConfig:
     """Where the task's object stands, and its physics (the scene frame T)."""
 
@@ -100,6 +112,8 @@ class SceneConfig:
     cotter_pin: CotterPinParams = dc.field(default_factory=CotterPinParams)
     # The pen, its contact and the plan's heights (used when task is drawing).
     drawing: DrawingParams = dc.field(default_factory=DrawingParams)
+    # Demonstrations at many placements: ranges each demonstration's seed draws its pose from.
+    placements: PlacementsConfig = dc.field(default_factory=PlacementsConfig)
 
 
 @dc.dataclass
@@ -270,6 +284,9 @@ class LearningConfig:
     reg_covar: float = _field(HSMM.__init__, "reg_covar", positive=True)
     # EM iterations at most.
     n_iter: int = _field(HSMM.__init__, "n_iter", positive=True)
+    # Fit a task-parameterised HSMM (frames: robot base and scene; learning/tphsmm.py) even
+    # when the demonstrations share one placement (it is fitted whenever they do not).
+    task_parameterised: bool = _value(False)
 
 
 @dc.dataclass
@@ -627,6 +644,18 @@ def _check_values(scenario):
             "key 'reproduction.weighting' = 'spatial' does not go with tracker 'lqr' (it "
             "tracks a state sequence: 'temporal' or 'forward')"
         )
+    placements = scenario.scene.placements
+    box = np.array(placements.position_range, dtype=float).reshape(-1, 3) if all(
+        len(row) == 3 for row in placements.position_range
+    ) else None  # fmt: skip
+    if placements.position_range and (box is None or len(box) != 2 or np.any(box[0] > box[1])):
+        raise ValueError(
+            "key 'scene.placements.position_range' must be [[xmin, ymin, zmin], [xmax, ymax, "
+            f"zmax]] with each min <= max, got {placements.position_range}"
+        )
+    yaws = placements.yaw_range_deg
+    if yaws and yaws[0] > yaws[1]:
+        raise ValueError(f"key 'scene.placements.yaw_range_deg' must be [smallest, largest], got {yaws}")
     offsets = scenario.reproduction.start_offsets
     if any(len(offset) != 3 for offset in offsets):
         raise ValueError(f"key 'reproduction.start_offsets' must hold [dx, dy, dz] lists, got {offsets}")
