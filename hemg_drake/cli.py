@@ -190,6 +190,27 @@ def _emg_figure(args):
     _print(f"wrote {args.output}")
 
 
+def _sweep(args):
+    from hemg_drake.sweep import run_sweep, summary
+
+    if args.address and args.backend != "ray":
+        raise ValueError("--address joins a Ray cluster: it needs --backend ray")
+    check_output_folder(args.out)
+    records = run_sweep(
+        args.sweep, args.out, backend=args.backend, workers=args.workers,
+        address=args.address, resume=args.resume,
+    )  # fmt: skip
+    from hemg_drake.sweep import load_sweep
+
+    spec = load_sweep(args.sweep)[0]
+    for line in summary(records, spec):
+        _print(line)
+    failed = [r for r in records if r["status"] == "failed"]
+    for record in failed:
+        _print(f"failed: {record['id']}: {record['error']}")
+    _print(f"wrote {Path(args.out) / 'results.csv'} ({len(records)} trials, {len(failed)} failed)")
+
+
 def _version():
     from importlib.metadata import PackageNotFoundError, version
 
@@ -319,6 +340,21 @@ def build_parser():
     )  # fmt: skip
     emg.add_argument("-o", "--output", default="fig6.png", help="image file (.png, .svg, .pdf)")
     emg.set_defaults(func=_emg_figure)
+
+    sweep = command("sweep", "run a sweep file's trials on all cores (or Ray); table + figure")
+    sweep.add_argument("sweep", help="sweep YAML file, e.g. hemg_drake/sweeps/example_delay.yaml")
+    sweep.add_argument("--out", required=True, help="output folder, e.g. runs/sweep/")
+    sweep.add_argument(
+        "--backend", choices=["local", "ray"], default="local",
+        help="local: a process pool on this machine; ray: one Ray task per trial",
+    )  # fmt: skip
+    sweep.add_argument(
+        "--workers", type=_positive_int("--workers"),
+        help="parallel trials (default: all cores)",
+    )  # fmt: skip
+    sweep.add_argument("--address", help="Ray cluster to join (ray start --head prints it)")
+    sweep.add_argument("--resume", action="store_true", help="skip the trials already done")
+    sweep.set_defaults(func=_sweep)
     return parser
 
 
