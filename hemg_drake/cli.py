@@ -161,6 +161,22 @@ def _reproduce(args):
     )
 
 
+def _teleop(args):
+    from hemg_drake.scenario import load_scenario
+    from hemg_drake.teleop.browser import existing_takes, teleop
+
+    scenario = load_scenario(_scenario_path(args.scenario), overrides=args.set)
+    check_output_folder(args.out)
+    existing_takes(scenario, args.out)  # refuse a mismatched folder before opening a port
+    if args.replay_inputs is not None and not Path(args.replay_inputs).is_file():
+        raise ValueError(f"{args.replay_inputs}: no such inputs log")
+    written = teleop(
+        scenario, args.out, port=args.port, duration=args.duration,
+        replay_inputs=args.replay_inputs, replays=not args.no_replay, progress=_print,
+    )  # fmt: skip
+    _print("wrote " + ", ".join(str(path) for path in written))
+
+
 def _emg_figure(args):
     import numpy as np
 
@@ -340,6 +356,27 @@ def build_parser():
     )  # fmt: skip
     emg.add_argument("-o", "--output", default="fig6.png", help="image file (.png, .svg, .pdf)")
     emg.set_defaults(func=_emg_figure)
+
+    teleop = command(
+        "teleop", "drive the arm yourself in the browser (Meshcat); append the take to a dataset"
+    )
+    teleop.add_argument("scenario", help="scenario YAML file, or a shipped one: cotter_pin, drawing")
+    teleop.add_argument("--out", required=True, help="run folder; the take joins its dataset.npz")
+    teleop.add_argument(
+        "--port", type=_non_negative_int("--port"), default=7000,
+        help="Meshcat's port on localhost (0: a free one)",
+    )  # fmt: skip
+    teleop.add_argument(
+        "--duration", type=_finite_float("--duration", positive=True),
+        help="end the take after this many simulated seconds",
+    )  # fmt: skip
+    teleop.add_argument(
+        "--replay-inputs", metavar="LOG.npz",
+        help="re-drive a take headless from its inputs log (inputs_<c>.npz)",
+    )  # fmt: skip
+    teleop.add_argument("--no-replay", action="store_true", help="write no HTML replay")
+    add_set(teleop)
+    teleop.set_defaults(func=_teleop)
 
     sweep = command("sweep", "run a sweep file's trials on all cores (or Ray); table + figure")
     sweep.add_argument("sweep", help="sweep YAML file, e.g. hemg_drake/sweeps/example_delay.yaml")
