@@ -1,9 +1,10 @@
 """Live MYO armband through the optional ``pyomyo`` driver (extra ``hemg-drake[myo]``).
 
-All device access lives here; ``LiveEmgSource`` only calls ``read_emg()``, so
+All device access lives here; ``LiveEmgSource`` only calls ``read_samples()``, so
 it is tested with a fake device and this module with a fake ``pyomyo``.
 """
 
+import collections
 import threading
 
 import numpy as np
@@ -21,41 +22,68 @@ def _import_pyomyo():
     return pyomyo
 
 
+# Samples the reader thread keeps for LiveEmgSource at most (10 s at 200 Hz); older ones
+# are counted in ``lost``: a simulation that stalls that long has lost the stream anyway.
+MAX_PENDING = 2000
+
+
 class PyomyoDevice:
     """A connected MYO streaming raw sEMG, read by a background thread.
 
-    pyomyo delivers samples through a handler called from ``Myo.run()``; a
-    daemon thread keeps calling it and the handler keeps the newest sample,
-    which ``read_emg()`` hands out once.
+    pyomyo delivers samples through a handler called from ``Myo.run()``; a daemon thread
+    keeps calling it and the handler queues every sample, oldest first, which
+    ``read_samples()`` hands out (``LiveEmgSource`` emits each one, in order).
 
     Parameters
     ----------
     myo : pyomyo.Myo
         Already connected, in raw EMG mode.
+    max_pending : int
+        Samples kept waiting at most; beyond that the oldest are dropped and counted in
+        ``lost``.
     """
 
-    def __init__(self, myo):
+    def __init__(self, myo, *, max_pending=MAX_PENDING):
         self._myo = myo
         self._lock = threading.Lock()
-        self._newest = None
+        self._pending = collections.deque()
+        self._max_pending = int(max_pending)
+        self.lost = 0
         self._running = True
         myo.add_emg_handler(self._on_emg)
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
 
-    def _on_emg(self, emg, movement):
+    def _on_emg(self, emg, movement=None):
+        rows = np.asarray(emg, dtype=float)
+        rows = rows[np.newaxis, :8] if rows.ndim == 1 else rows[:, :8]
         with self._lock:
-            self._newest = np.asarray(emg[:8], dtype=float)
+            self._pending.extend(rows)
+            while len(self._pending) > self._max_pending:
+                self._pending.popleft()
+                self.lost += 1
 
     def _run(self):
         while self._running:
             self._myo.run()
 
-    def read_emg(self):
-        """The newest sample since the last call, shape (8,), or None."""
+    def read_samples(self):
+        """Every sample since the last call, shape (n, 8), oldest first; None if none."""
         with self._lock:
-            sample, self._newest = self._newest, None
-        return sample
+            if not self._pending:
+                return None
+            block = np.array(self._pending)
+            self._pending.clear()
+        return block
+
+    def read_emg(self):
+        """The newest sample since the last call, shape (8,), or None; older ones are dropped.
+
+        The polling interface of earlier versions; ``LiveEmgSource`` reads
+        ``read_samples()`` and so loses nothing.
+        """
+        block = self.read_samples()
+        return None if block is None else block[-1]
 
     def close(self):
         """Stop the reader thread and disconnect."""

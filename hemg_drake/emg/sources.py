@@ -6,8 +6,13 @@ Every source outputs the MYO's raw samples: 8 channels, integers in the signed
 from the discrete update at t = k / 200 s until the next one, and the output is
 zero before the first; as with any Drake discrete update, a logger publishing
 at exactly t = k / 200 still sees sample k - 1.
+
+``LiveEmgSource`` takes the channel count and units as parameters (8 int8 channels by
+default; e.g. 16 channels in volts from an armband that LibEMG streams) and emits every
+sample the device delivered, in order, through a queue (its docstring gives the policy).
 """
 
+import collections
 import math
 from pathlib import Path
 
@@ -126,13 +131,13 @@ def synthesize_emg(
 class _SampledSource(LeafSystem):
     """What every sEMG source shares: sample k is taken at t = k * period and held.
 
-    Subclasses implement ``_sample(context, k)``, returning the 8 values of
+    Subclasses implement ``_sample(context, k)``, returning the ``channels`` values of
     sample k, or None to keep the last one.
     """
 
-    def __init__(self, period):
+    def __init__(self, period, channels=MYO_CHANNELS):
         LeafSystem.__init__(self)
-        self._emg_state = self.DeclareDiscreteState(MYO_CHANNELS)
+        self._emg_state = self.DeclareDiscreteState(channels)
         self._count_state = self.DeclareDiscreteState(1)
         self.DeclarePeriodicDiscreteUpdateEvent(
             period_sec=as_scalar("period", period), offset_sec=0.0, update=self._update_sample
@@ -378,49 +383,184 @@ class FileEmgSource(_SampledSource):
         return self._recording[k % n if self._loop else min(k, n - 1)]
 
 
+# Units of a live device's samples: how they are checked and clipped.
+# "int8": the MYO's raw ADC counts, clipped to -128..127 (a driver may hand out wider ints);
+# "V": volts, as LibEMG's streamers of Delsys, SiFi or OYMotion armbands give them, unclipped.
+LIVE_UNITS = ("int8", "V")
+# Samples kept waiting at most (1 s at 200 Hz) before the oldest are dropped: a backlog that
+# long means the simulation runs persistently slower than real time.
+DEFAULT_MAX_BACKLOG = 200
+# The counters a LiveEmgSource keeps, in the order of its ``counters`` output port.
+LIVE_COUNTERS = ("received", "emitted", "underruns", "dropped", "backlog", "device_lost")
+
+
+class EmgDeviceStalled(RuntimeError):
+    """A live sEMG device delivered nothing for longer than the source's ``timeout``."""
+
+
 class LiveEmgSource(_SampledSource):
-    """Outputs the newest raw sEMG sample of a live armband, polled at 200 Hz.
+    """Emits every raw sEMG sample a live armband delivered, in order, one per period.
 
     .. pydrake_system::
 
         name: LiveEmgSource
         output_ports:
         - emg
+        - counters
 
-    ``emg`` (8, MYO units). The device is any object with a ``read_emg()``
-    method returning the newest sample (8 integers) or ``None`` when nothing
-    new arrived; ``open_myo_device()`` gives one for a real MYO (optional extra
-    ``hemg-drake[myo]``), tests pass a fake. With ``None`` the output holds;
-    values are clipped to -128..127, and a sample that is not 8 finite values
-    raises ValueError.
+    ``emg`` (``channels``; MYO units by default, or volts): the next sample of the queue at
+    each poll, held between polls, zero before the first. ``counters`` (6): the totals of
+    ``LIVE_COUNTERS`` after the last poll (``counters_dict`` names them).
 
-    Timing: periodic discrete update every ``period`` (offset 0). Run the
-    simulator at real-time rate (``Simulator.set_target_realtime_rate(1)``) so
+    The device is any object with ``read_samples()`` (preferred) or ``read_emg()``,
+    returning None when nothing arrived, one sample (shape (channels,)) or every sample
+    since the last call (shape (n, channels), oldest first). ``open_myo_device()`` gives
+    one for a MYO, ``hemg_drake.emg.libemg.LibEmgSharedMemory`` one for any armband that a
+    LibEMG streamer publishes; an optional attribute ``lost`` (samples the device itself
+    lost, e.g. overwritten in LibEMG's ring buffer before they were read) is reported too.
+
+    Queue policy (the device's clock and the simulator's drift apart; no sample is
+    skipped and none is repeated as new):
+
+    - every poll (periodic discrete update, offset 0) appends all that arrived to a FIFO
+      and emits its oldest sample, so the chain sees the device's samples in order;
+    - **behind** (several samples waiting: the device ran ahead of the simulated clock, or
+      the simulation fell behind real time): the backlog is emitted in order, one per
+      poll; Drake's real-time pacing runs a lagging simulation faster until it is back on
+      the wall clock, which drains the queue. Beyond ``max_backlog`` waiting samples the
+      oldest are dropped and counted (``dropped``), bounding the latency;
+    - **ahead** (the queue is empty: the device is slower, or stopped): the output holds
+      the last sample (never NaN, never a made-up value) and ``underruns`` counts the poll.
+      With ``timeout`` set, that many seconds without a sample raise ``EmgDeviceStalled``.
+
+    The queue lives in this object, beside the device it reads: one simulation at a time.
+    A sample that is not ``channels`` finite values raises ValueError (nothing non-finite
+    reaches the envelope); ``units="int8"`` clips to -128..127, ``units="V"`` keeps values.
+
+    Run the simulator at real-time rate (``Simulator.set_target_realtime_rate(1)``) so
     the polls follow the device's clock.
 
     Parameters
     ----------
-    device : object with ``read_emg()``
+    device : object with ``read_samples()`` or ``read_emg()``
     period : float
-        Poll period in s (MYO: 1/200).
+        Poll period in s: the device's sample period (MYO: 1/200).
+    channels : int
+        Values per sample (MYO: 8; e.g. 16 for a 16-electrode armband).
+    units : {"int8", "V"}
+    max_backlog : int or None
+        Samples kept waiting at most; None keeps every one (latency then grows without
+        bound if the simulation cannot keep real time).
+    timeout : float or None
+        Seconds without a new sample after which a poll raises ``EmgDeviceStalled``;
+        None (default) holds and counts.
     """
 
-    def __init__(self, *, device, period=MYO_PERIOD):
-        if not callable(getattr(device, "read_emg", None)):
-            raise ValueError("device must have a read_emg() method")
+    def __init__(
+        self,
+        *,
+        device,
+        period=MYO_PERIOD,
+        channels=MYO_CHANNELS,
+        units="int8",
+        max_backlog=DEFAULT_MAX_BACKLOG,
+        timeout=None,
+    ):
+        self._read = getattr(device, "read_samples", None)
+        if not callable(self._read):
+            self._read = getattr(device, "read_emg", None)
+        if not callable(self._read):
+            raise ValueError("device must have a read_samples() or read_emg() method")
+        if isinstance(channels, bool) or not isinstance(channels, int) or channels < 1:
+            raise ValueError(f"channels must be a positive integer, got {channels!r}")
+        if units not in LIVE_UNITS:
+            raise ValueError(f"units must be one of {LIVE_UNITS}, got {units!r}")
+        if max_backlog is not None and (
+            isinstance(max_backlog, bool) or not isinstance(max_backlog, int) or max_backlog < 1
+        ):
+            raise ValueError(f"max_backlog must be a positive integer or None, got {max_backlog!r}")
+        if timeout is not None:
+            timeout = as_scalar("timeout", timeout)
+            if not timeout > 0:
+                raise ValueError(f"timeout must be positive or None, got {timeout!r}")
         self._device = device
-        _SampledSource.__init__(self, period)
+        self._channels = channels
+        self._units = units
+        self._max_backlog = max_backlog
+        self._timeout = timeout
+        self._queue = collections.deque()
+        self._silent_polls = 0
+        _SampledSource.__init__(self, period, channels)
+        self._period = float(period)
+        self._counter_state = self.DeclareDiscreteState(len(LIVE_COUNTERS))
+        self._counters_output = self.DeclareStateOutputPort("counters", self._counter_state)
 
-    def _sample(self, context, k):
-        sample = self._device.read_emg()
-        if sample is None:
-            return None
-        sample = np.asarray(sample, dtype=float)
-        if sample.shape != (MYO_CHANNELS,) or not np.all(np.isfinite(sample)):
+    def get_counters_output_port(self):
+        return self._counters_output
+
+    def counters_dict(self, context):
+        """The counters after the last poll, by name (``LIVE_COUNTERS``), as ints."""
+        mine = self.GetMyContextFromRoot(context)
+        values = mine.get_discrete_state(self._counter_state).get_value()
+        return dict(zip(LIVE_COUNTERS, (int(v) for v in values)))
+
+    def status(self, context):
+        """One line on the stream's health, for a console or a log."""
+        c = self.counters_dict(context)
+        return (
+            f"sEMG: {c['received']} samples received, {c['emitted']} emitted, "
+            f"{c['underruns']} polls with none waiting (device slower or stopped), "
+            f"{c['dropped']} dropped (backlog over {self._max_backlog}), "
+            f"{c['device_lost']} lost by the device, {c['backlog']} waiting"
+        )
+
+    def _block(self, raw):
+        """The device's reply as an (n, channels) float array, checked and clipped."""
+        block = np.asarray(raw, dtype=float)
+        if block.ndim == 1:
+            block = block[np.newaxis, :]
+        if block.ndim != 2 or block.shape[1] != self._channels or not np.all(np.isfinite(block)):
             raise ValueError(
-                f"device.read_emg() must return {MYO_CHANNELS} finite values, got {sample!r}"
+                f"device.{self._read.__name__}() must return {self._channels} finite values "
+                f"per sample, got {raw!r}"
             )
-        return np.clip(sample, INT8_MIN, INT8_MAX)
+        if self._units == "int8":
+            block = np.clip(block, INT8_MIN, INT8_MAX)
+        return block
+
+    def _update_sample(self, context, discrete_state):
+        k = int(context.get_discrete_state(self._count_state).GetAtIndex(0))
+        counters = context.get_discrete_state(self._counter_state).get_value().copy()
+        received, emitted, underruns, dropped = (int(v) for v in counters[:4])
+        raw = self._read()
+        if raw is not None:
+            block = self._block(raw)
+            self._queue.extend(block)
+            received += len(block)
+        if self._max_backlog is not None:
+            # The poll below takes one; keep at most max_backlog waiting after it.
+            while len(self._queue) > self._max_backlog + 1:
+                self._queue.popleft()
+                dropped += 1
+        if self._queue:
+            discrete_state.set_value(self._emg_state, self._queue.popleft())
+            emitted += 1
+            self._silent_polls = 0
+        else:
+            underruns += 1
+            self._silent_polls += 1
+            if self._timeout is not None and self._silent_polls * self._period >= self._timeout:
+                raise EmgDeviceStalled(
+                    f"no sEMG sample for {self._silent_polls * self._period:.3g} s "
+                    f"({self._silent_polls} polls; timeout {self._timeout:g} s): the device "
+                    f"stopped or is disconnected ({received} samples received in all)"
+                )
+        lost = int(getattr(self._device, "lost", 0) or 0)
+        discrete_state.set_value(
+            self._counter_state,
+            [received, emitted, underruns, dropped, len(self._queue), lost],
+        )
+        discrete_state.set_value(self._count_state, [k + 1])
 
 
 def open_myo_device(**kwargs):

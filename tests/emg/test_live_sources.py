@@ -1,0 +1,307 @@
+"""Live sEMG: LiveEmgSource's queue policy, and LibEMG's shared memory read by a writer
+process that behaves as a LibEMG streamer (same layout, same two critical sections)."""
+
+import multiprocessing
+import time
+import uuid
+from multiprocessing import resource_tracker
+from multiprocessing.shared_memory import SharedMemory
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+
+from hemg_drake.emg.libemg import LibEmgSharedMemory
+from hemg_drake.emg.sources import LIVE_COUNTERS, EmgDeviceStalled, LiveEmgSource
+
+# ---------------------------------------------------------------- queue policy (fake devices
+
+
+class ScriptedDevice:
+    """Replies, poll after poll, with the scripted blocks (None: nothing arrived)."""
+
+    def __init__(self, replies, lost=0):
+        self.replies = list(replies)
+        self.lost = lost
+
+    def read_samples(self):
+        return self.replies.pop(0) if self.replies else None
+
+
+def _sample(j, channels=8):
+    """Sample number j: channel c holds j + c (distinct, ordered, int8-sized for j < 100)."""
+    return [float(j + c) for c in range(channels)]
+
+
+def _block(first, n, channels=8):
+    return np.array([_sample(j, channels) for j in range(first, first + n)])
+
+
+def _run(builder, simulate, source, n_polls):
+    system = builder.AddSystem(source)
+    return simulate(
+        builder,
+        {"emg": system.get_emg_output_port(), "counters": system.get_counters_output_port()},
+        n_polls,
+    )
+
+
+def test_every_sample_is_emitted_in_order_when_the_device_runs_ahead(builder, simulate):
+    # Device ahead: 3 samples at the first poll, 2 at the fourth, then nothing. The queue
+    # emits one per poll in order, then holds the last one and counts underruns.
+    device = ScriptedDevice([_block(0, 3), None, None, _block(3, 2)])
+    out = _run(builder, simulate, LiveEmgSource(device=device), 8)
+    expected = [_sample(j) for j in (0, 1, 2, 3, 4, 4, 4, 4)]
+    np.testing.assert_array_equal(out["emg"], expected)
+    counters = dict(zip(LIVE_COUNTERS, out["counters"][-1]))
+    assert counters == {
+        "received": 5, "emitted": 5, "underruns": 3, "dropped": 0, "backlog": 0,
+        "device_lost": 0,
+    }  # fmt: skip
+    # The backlog after each poll, by hand: 2, 1, 0, 1, 0, 0, 0, 0.
+    np.testing.assert_array_equal(out["counters"][:, 4], [2, 1, 0, 1, 0, 0, 0, 0])
+
+
+def test_a_slow_device_holds_its_last_sample_and_counts_underruns(builder, simulate):
+    device = ScriptedDevice([None, _sample(0), None, None, _sample(1)], lost=7)
+    out = _run(builder, simulate, LiveEmgSource(device=device), 6)
+    np.testing.assert_array_equal(
+        out["emg"], [[0] * 8, _sample(0), _sample(0), _sample(0), _sample(1), _sample(1)]
+    )
+    assert not np.any(np.isnan(out["emg"]))
+    assert list(out["counters"][-1]) == [2, 2, 4, 0, 0, 7]
+
+
+def test_backlog_beyond_its_bound_drops_the_oldest(builder, simulate):
+    device = ScriptedDevice([_block(0, 10)])
+    out = _run(builder, simulate, LiveEmgSource(device=device, max_backlog=3), 5)
+    # 10 arrive, one is emitted, 3 may wait: samples 0..5 are dropped, 6..9 come out.
+    np.testing.assert_array_equal(out["emg"][:4], [_sample(j) for j in (6, 7, 8, 9)])
+    assert list(out["counters"][-1][:5]) == [10, 4, 1, 6, 0]
+
+
+def test_sixteen_channels_in_volts_are_not_clipped(builder, simulate):
+    volts = np.array([[1e-4 * (c + 1) * (-1) ** c for c in range(16)], [300.0] * 16])
+    source = LiveEmgSource(device=ScriptedDevice([volts]), channels=16, units="V")
+    out = _run(builder, simulate, source, 2)
+    np.testing.assert_array_equal(out["emg"], volts)
+    with pytest.raises(ValueError, match="16 finite values per sample"):
+        simulator = Simulator(
+            LiveEmgSource(device=ScriptedDevice([volts[:, :8]]), channels=16, units="V")
+        )
+        simulator.AdvanceTo(0.01)
+
+
+def test_myo_default_clips_and_a_nan_never_reaches_the_chain():
+    source = LiveEmgSource(device=ScriptedDevice([[[300.0] * 8], [[np.nan] * 8]]))
+    simulator = Simulator(source)
+    simulator.AdvanceTo(0.001)
+    context = simulator.get_context()
+    np.testing.assert_array_equal(source.get_emg_output_port().Eval(context), [127.0] * 8)
+    with pytest.raises(ValueError, match="8 finite values"):
+        simulator.AdvanceTo(0.006)
+    assert np.all(np.isfinite(source.get_emg_output_port().Eval(context)))
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"channels": 0}, "channels must be a positive integer"),
+        ({"units": "mV"}, "units must be one of"),
+        ({"max_backlog": 0}, "max_backlog must be a positive integer or None"),
+        ({"timeout": -1.0}, "timeout must be finite and > 0"),
+    ],
+)
+def test_bad_parameters_are_named(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        LiveEmgSource(device=ScriptedDevice([]), **kwargs)
+
+
+def test_timeout_names_the_silence():
+    source = LiveEmgSource(device=ScriptedDevice([_sample(0)]), timeout=0.05)
+    simulator = Simulator(source)
+    with pytest.raises(EmgDeviceStalled, match=r"no sEMG sample for 0\.05 s \(10 polls"):
+        simulator.AdvanceTo(1.0)
+    # 1 sample, then 10 silent polls (t = 0.005 .. 0.05) before the raise.
+    assert 0.045 <= simulator.get_context().get_time() <= 0.05
+
+
+# ------------------------------------------------------- a LibEMG streamer in another process
+
+CHANNELS = 8
+
+
+def _value(j):
+    """Sample j of the mimic streamer, row of 8: distinct per sample and per channel."""
+    return j + 0.01 * np.arange(CHANNELS)
+
+
+def _streamer(tag, rows, locks, batches, period, go, written, release):
+    """What a LibEMG streamer does (libemg/_streamers, shared_memory_manager.py): create
+    ``tag`` (float64, rows x 8, zeros) and ``tag_count`` (int32, 1 x 1); per packet, shift
+    the newest-first buffer under the buffer's lock, then add to the count under the
+    counter's lock. ``batches`` lists (first sample, number of samples) per packet."""
+    # A real streamer runs under its own resource tracker; this forked child shares the
+    # test's, so it leaves the tracker alone and unlinks its memory itself below.
+    resource_tracker.register = resource_tracker.unregister = lambda name, rtype: None
+    emg_lock, count_lock = locks
+    emg_block = SharedMemory(tag, create=True, size=8 * rows * CHANNELS)
+    count_block = SharedMemory(f"{tag}_count", create=True, size=4)
+    emg = np.ndarray((rows, CHANNELS), np.float64, buffer=emg_block.buf)
+    count = np.ndarray((1, 1), np.int32, buffer=count_block.buf)
+    emg.fill(0)
+    count.fill(0)
+    try:
+        for phase in batches:
+            go.wait(10)
+            go.clear()
+            for first, n in phase:
+                packet = np.array([_value(j) for j in range(first + n - 1, first - 1, -1)])
+                with emg_lock:
+                    emg[:] = np.vstack((packet, emg))[:rows, :]
+                with count_lock:
+                    count[:] = count + n
+                if period:
+                    time.sleep(period)
+            written.set()
+        release.wait(10)
+    finally:
+        del emg, count
+        emg_block.close()
+        count_block.close()
+        emg_block.unlink()
+        count_block.unlink()
+
+
+class Streamer:
+    """Runs ``_streamer`` in a child process; ``phase()`` lets it write the next phase."""
+
+    def __init__(self, phases, *, rows=1000, period=0.0, shared_lock=True):
+        context = multiprocessing.get_context("fork")
+        self.tag = f"hemg_test_{uuid.uuid4().hex[:12]}"
+        emg_lock = context.Lock()
+        self.locks = (emg_lock, emg_lock if shared_lock else context.Lock())
+        self.go, self.written, self.release = context.Event(), context.Event(), context.Event()
+        self.process = context.Process(
+            target=_streamer,
+            args=(self.tag, rows, self.locks, phases, period, self.go, self.written,
+                  self.release),
+            daemon=True,
+        )  # fmt: skip
+        self.process.start()
+
+    def phase(self, *, wait=True):
+        self.written.clear()
+        self.go.set()
+        if wait:
+            assert self.written.wait(10), "the mimic streamer did not finish its phase"
+
+    def stop(self):
+        self.release.set()
+        self.process.join(10)
+
+
+@pytest.fixture
+def streamers():
+    started = []
+
+    def start(*args, **kwargs):
+        streamer = Streamer(*args, **kwargs)
+        started.append(streamer)
+        return streamer
+
+    yield start
+    for streamer in started:
+        streamer.stop()
+
+
+def _packets(first, total, size):
+    return [(j, min(size, first + total - j)) for j in range(first, first + total, size)]
+
+
+def _read_until(reader, n_expected, timeout=10.0):
+    blocks, deadline = [], time.monotonic() + timeout
+    got = 0
+    while got < n_expected and time.monotonic() < deadline:
+        block = reader.read_samples()
+        if block is not None:
+            blocks.append(block)
+            got += len(block)
+        else:
+            time.sleep(0.0005)
+    return np.concatenate(blocks) if blocks else np.zeros((0, CHANNELS))
+
+
+@pytest.mark.parametrize("with_locks, shared_lock", [(True, True), (True, False), (False, True)])
+def test_reader_gets_every_sample_in_order_while_the_streamer_writes(
+    streamers, with_locks, shared_lock
+):
+    # MYO-like packets of 2 samples, written while the reader polls at its own pace.
+    streamer = streamers([[], _packets(0, 600, 2)], rows=100, period=0.0002,
+                         shared_lock=shared_lock)  # fmt: skip
+    streamer.phase()  # the memory exists, nothing written yet
+    locks = dict(zip(("lock", "count_lock"), streamer.locks)) if with_locks else {}
+    with LibEmgSharedMemory(channels=CHANNELS, tag=streamer.tag, **locks) as reader:
+        streamer.phase(wait=False)
+        samples = _read_until(reader, 600)
+        assert streamer.written.wait(10)
+        assert reader.read_samples() is None
+        np.testing.assert_array_equal(samples, [_value(j) for j in range(600)])
+        assert reader.lost == 0 and reader.resets == 0
+
+
+def test_a_late_reader_starts_from_now_or_from_the_buffer(streamers):
+    streamer = streamers([_packets(0, 300, 2), _packets(300, 50, 5)], rows=120)
+    streamer.phase()  # 300 samples before anyone reads
+    now = LibEmgSharedMemory(channels=CHANNELS, tag=streamer.tag)
+    held = LibEmgSharedMemory(channels=CHANNELS, tag=streamer.tag, start="buffer")
+    assert now.read_samples() is None
+    # The ring holds the newest 120 of the first 300: samples 180..299.
+    np.testing.assert_array_equal(held.read_samples(), [_value(j) for j in range(180, 300)])
+    streamer.phase()
+    np.testing.assert_array_equal(now.read_samples(), [_value(j) for j in range(300, 350)])
+    np.testing.assert_array_equal(held.read_samples(), [_value(j) for j in range(300, 350)])
+    assert now.lost == 0 and held.lost == 0
+    now.close()
+    held.close()
+
+
+def test_a_streamer_faster_than_the_reader_overwrites_and_is_counted(streamers):
+    streamer = streamers([_packets(0, 10, 2), _packets(10, 500, 4), _packets(510, 6, 3)],
+                         rows=64)  # fmt: skip
+    streamer.phase()
+    with LibEmgSharedMemory(channels=CHANNELS, tag=streamer.tag) as reader:
+        streamer.phase()  # 500 samples while the reader sleeps: the ring keeps 64
+        np.testing.assert_array_equal(reader.read_samples(), [_value(j) for j in range(446, 510)])
+        assert reader.lost == 500 - 64
+        streamer.phase()
+        np.testing.assert_array_equal(reader.read_samples(), [_value(j) for j in range(510, 516)])
+
+
+def test_a_stopped_streamer_leaves_the_source_holding_with_counters(streamers):
+    streamer = streamers([[], _packets(0, 12, 2)], rows=100)
+    streamer.phase()
+    reader = LibEmgSharedMemory(channels=CHANNELS, tag=streamer.tag)
+    source = LiveEmgSource(device=reader)
+    simulator = Simulator(source)
+    simulator.AdvanceTo(0.0201)  # 5 polls with nothing yet
+    streamer.phase()  # 12 samples, then the streamer stops writing
+    simulator.AdvanceTo(0.2)  # 40 polls in all
+    context = simulator.get_context()
+    counters = source.counters_dict(context)
+    assert counters == {
+        "received": 12, "emitted": 12, "underruns": 28, "dropped": 0, "backlog": 0,
+        "device_lost": 0,
+    }  # fmt: skip
+    np.testing.assert_array_equal(source.get_emg_output_port().Eval(context), _value(11))
+    assert "12 samples received, 12 emitted, 28 polls with none waiting" in source.status(context)
+    reader.close()
+
+
+def test_a_missing_streamer_and_a_wrong_channel_count_are_named(streamers):
+    with pytest.raises(FileNotFoundError, match="no LibEMG shared memory 'hemg_absent'.*streamer"):
+        LibEmgSharedMemory(channels=8, tag="hemg_absent", wait=0.05)
+    streamer = streamers([[]], rows=10)
+    streamer.phase()
+    with pytest.raises(ValueError, match="640 bytes, not a whole number of 7-channel"):
+        LibEmgSharedMemory(channels=7, tag=streamer.tag)
