@@ -227,6 +227,19 @@ def _sweep(args):
     _print(f"wrote {Path(args.out) / 'results.csv'} ({len(records)} trials, {len(failed)} failed)")
 
 
+def _export(args):
+    from hemg_drake.learning.demos import load_dataset
+    from hemg_drake.learning.export import export_robomimic
+    from hemg_drake.run_folder import RunFolder
+
+    run = Path(args.run)
+    dataset = run if run.is_file() else RunFolder(run).dataset
+    check_output_file(args.output)
+    demos, metadata = load_dataset(dataset)
+    total = export_robomimic(args.output, demos, metadata)
+    _print(f"wrote {args.output} ({len(demos)} demonstrations, {total} samples, {args.format})")
+
+
 def _version():
     from importlib.metadata import PackageNotFoundError, version
 
@@ -356,6 +369,14 @@ def build_parser():
     )  # fmt: skip
     emg.add_argument("-o", "--output", default="fig6.png", help="image file (.png, .svg, .pdf)")
     emg.set_defaults(func=_emg_figure)
+    export = command("export", "write a run's demonstrations in another format (robomimic HDF5)")
+    export.add_argument("run", help="run folder holding dataset.npz (or a dataset file)")
+    export.add_argument(
+        "--format", choices=["robomimic"], default="robomimic",
+        help="robomimic: its HDF5 layout (data/demo_i/obs, actions; needs h5py)",
+    )  # fmt: skip
+    export.add_argument("output", help="file to write, e.g. runs/pin/demos.hdf5")
+    export.set_defaults(func=_export)
 
     teleop = command(
         "teleop", "drive the arm yourself in the browser (Meshcat); append the take to a dataset"

@@ -1,0 +1,198 @@
+"""Demonstrations in robomimic's HDF5 layout, so other learning code reads them.
+
+robomimic (ARISE-Initiative/robomimic, "Datasets > Overview > Dataset Structure") reads::
+
+    data                      group; attrs total (samples in all demos), env_args (JSON:
+                              env_name, type, env_kwargs)
+    data/demo_<i>             group per demonstration, i = 0 .. C-1; attr num_samples
+    data/demo_<i>/obs/<key>   (N, D) per observation key
+    data/demo_<i>/next_obs/<key>   the observation one step later
+    data/demo_<i>/actions     (N, A)
+    data/demo_<i>/rewards     (N,)
+    data/demo_<i>/dones       (N,)
+
+A hemg_drake demonstration maps onto it at its log period (N = T samples):
+
+- ``obs``: ``p_WE``, ``v_WE``, ``p_MS``, ``f_WE`` (N, 3) and ``gain``, ``envelope``,
+  ``activation`` (N, 1), SI units (m, m/s, N; K as logged); ``next_obs`` repeats the last
+  sample at the end, as robomimic's converters do;
+- ``actions`` (N, 4): what the operator commanded the slave, ``[p_WE_desired (m, W), K]``
+  (the CLIK's reference and the stiffness of eq. 22), in SI units, not normalised;
+- ``rewards``: 0 (no task reward is defined here); ``dones``: 1 on the last sample;
+- ``env_args``: ``{"env_name": "hemg_drake/<task>", "type": 2, "env_kwargs": {...}}``
+  (2 is robomimic's generic gym type; there is no robomimic environment to roll out in,
+  so train with rollouts disabled).
+
+Beside robomimic's keys, which its loaders ignore, each demo keeps what a round trip
+needs: attr ``seed``, ``time`` (N,), and ``emg/{time, emg, muscle_activation}`` at the
+MYO's 200 Hz; ``data`` keeps the dataset's metadata as JSON in attr ``hemg_drake_metadata``.
+:func:`load_robomimic` reads the file back into :class:`Demonstration` objects.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from hemg_drake.fileio import atomic_open
+from hemg_drake.learning.demos import Demonstration
+
+_INSTALL_HINT = "install the optional extra: pip install 'hemg-drake[export]'"
+# Observation keys, with the Demonstration field each comes from.
+OBS_KEYS = ("p_WE", "v_WE", "p_MS", "f_WE", "gain", "envelope", "activation")
+ACTION_KEYS = ("p_WE_desired", "gain")
+EMG_KEYS = {"time": "emg_time", "emg": "emg", "muscle_activation": "muscle_activation"}
+# robomimic's EnvType.GYM_TYPE: the generic type, for an environment it cannot create.
+GYM_TYPE = 2
+METADATA_ATTR = "hemg_drake_metadata"
+
+
+def _h5py():
+    try:
+        import h5py
+    except ImportError as error:
+        raise ModuleNotFoundError(f"robomimic export needs h5py ({_INSTALL_HINT})") from error
+    return h5py
+
+
+def _column(array):
+    array = np.asarray(array, dtype=float)
+    return array[:, np.newaxis] if array.ndim == 1 else array
+
+
+def _env_args(metadata):
+    task = metadata.get("task", "unknown")
+    kwargs = {key: metadata[key] for key in ("task", "log_period") if key in metadata}
+    kwargs["action_keys"] = list(ACTION_KEYS)
+    kwargs["obs_keys"] = list(OBS_KEYS)
+    return {"env_name": f"hemg_drake/{task}", "type": GYM_TYPE, "env_kwargs": kwargs}
+
+
+def export_robomimic(path, demos, metadata=None):
+    """Write demonstrations to ``path`` in robomimic's HDF5 layout, atomically.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.hdf5`` file; replaced atomically if it exists.
+    demos : sequence of Demonstration, at least one.
+    metadata : dict, optional
+        The dataset's metadata (``load_dataset``), JSON-serialisable; kept in the file.
+
+    Returns
+    -------
+    int, the number of samples written (``data.attrs["total"]``).
+    """
+    h5py = _h5py()
+    demos = list(demos)
+    if not demos or not all(isinstance(d, Demonstration) for d in demos):
+        raise ValueError("export_robomimic needs a non-empty list of Demonstration")
+    metadata = dict(metadata or {})
+    try:
+        metadata_text = json.dumps(metadata, sort_keys=True)
+    except TypeError as error:
+        raise ValueError(f"metadata must be JSON-serialisable: {error}") from None
+    total = 0
+    with atomic_open(path, "w+b") as raw, h5py.File(raw, "w") as f:
+        data = f.create_group("data")
+        for i, demo in enumerate(demos):
+            group = data.create_group(f"demo_{i}")
+            n = len(demo)
+            obs = {key: _column(getattr(demo, key)) for key in OBS_KEYS}
+            for key, array in obs.items():
+                group.create_dataset(f"obs/{key}", data=array)
+                group.create_dataset(
+                    f"next_obs/{key}", data=np.concatenate([array[1:], array[-1:]])
+                )
+            actions = np.column_stack([getattr(demo, key) for key in ACTION_KEYS])
+            group.create_dataset("actions", data=actions)
+            group.create_dataset("rewards", data=np.zeros(n))
+            dones = np.zeros(n)
+            dones[-1] = 1.0
+            group.create_dataset("dones", data=dones)
+            group.create_dataset("time", data=demo.time)
+            for key, field in EMG_KEYS.items():
+                group.create_dataset(f"emg/{key}", data=getattr(demo, field))
+            group.attrs["num_samples"] = n
+            group.attrs["seed"] = demo.seed
+            total += n
+        data.attrs["total"] = total
+        data.attrs["env_args"] = json.dumps(_env_args(metadata))
+        data.attrs[METADATA_ATTR] = metadata_text
+    return total
+
+
+def _demo_names(path, data):
+    names = [name for name in data if name.startswith("demo_")]
+    try:
+        return sorted(names, key=lambda name: int(name[len("demo_"):]))
+    except ValueError:
+        raise ValueError(f"{path}: group names must be demo_<integer>, got {names}") from None
+
+
+def _read(path, group, key):
+    if key not in group:
+        raise ValueError(f"{path}: {group.name}/{key} is missing")
+    return np.asarray(group[key][()])
+
+
+def load_robomimic(path):
+    """Read a file written by :func:`export_robomimic` back into demonstrations.
+
+    Returns
+    -------
+    demos : list of Demonstration
+    metadata : dict
+        The metadata the file was exported with.
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    ValueError
+        Not an HDF5 file, or not one this module wrote (a missing group, dataset or
+        attribute, a length that disagrees with ``num_samples``): the message names it.
+    """
+    h5py = _h5py()
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"robomimic file not found: {path}")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as error:
+        raise ValueError(f"{path}: not a readable HDF5 file ({error})") from None
+    with f:
+        if "data" not in f:
+            raise ValueError(f"{path}: no 'data' group; not a robomimic dataset")
+        data = f["data"]
+        if METADATA_ATTR not in data.attrs:
+            raise ValueError(
+                f"{path}: data has no {METADATA_ATTR!r} attribute; not exported by hemg_drake"
+            )
+        metadata = json.loads(data.attrs[METADATA_ATTR])
+        demos = []
+        for name in _demo_names(path, data):
+            group = data[name]
+            n = int(group.attrs.get("num_samples", -1))
+            fields = {"time": _read(path, group, "time")}
+            for key in OBS_KEYS:
+                array = _read(path, group, f"obs/{key}")
+                fields[key] = array[:, 0] if array.ndim == 2 and array.shape[1] == 1 else array
+            actions = _read(path, group, "actions")
+            if actions.ndim != 2 or actions.shape[1] != 4:
+                raise ValueError(f"{path}: {group.name}/actions must have shape (N, 4)")
+            fields["p_WE_desired"] = actions[:, :3]
+            for key, field in EMG_KEYS.items():
+                fields[field] = _read(path, group, f"emg/{key}")
+            if len(fields["time"]) != n:
+                raise ValueError(
+                    f"{path}: {group.name} has {len(fields['time'])} samples, "
+                    f"num_samples says {n}"
+                )
+            try:
+                demos.append(Demonstration(seed=int(group.attrs.get("seed", 0)), **fields))
+            except (TypeError, ValueError) as error:
+                raise ValueError(f"{path}: {group.name}: {error}") from None
+    if not demos:
+        raise ValueError(f"{path}: no demo_<i> groups in data")
+    return demos, metadata

@@ -1,0 +1,122 @@
+"""robomimic export: a round trip, the layout as robomimic reads it, and the CLI."""
+
+import json
+
+import numpy as np
+import pytest
+
+from hemg_drake.cli import main
+from hemg_drake.learning.demos import Demonstration, save_dataset
+from hemg_drake.learning.export import export_robomimic, load_robomimic
+
+h5py = pytest.importorskip("h5py")
+
+
+def _demo(seed, n, n_emg):
+    """A demonstration of random (seeded) but well-shaped data."""
+    rng = np.random.default_rng(seed)
+    return Demonstration(
+        seed=seed,
+        time=np.arange(n) * 0.01,
+        p_WE=rng.normal(size=(n, 3)),
+        v_WE=rng.normal(size=(n, 3)),
+        p_MS=rng.normal(size=(n, 3)),
+        p_WE_desired=rng.normal(size=(n, 3)),
+        envelope=rng.uniform(0, 50, n),
+        activation=rng.uniform(0, 1, n),
+        gain=rng.uniform(10, 200, n),
+        f_WE=rng.normal(size=(n, 3)),
+        emg_time=np.arange(n_emg) / 200.0,
+        emg=rng.integers(-128, 128, (n_emg, 8)).astype(float),
+        muscle_activation=rng.uniform(0, 1, n_emg),
+    )
+
+
+@pytest.fixture
+def demos():
+    return [_demo(3, 40, 80), _demo(4, 55, 110), _demo(5, 12, 24)]
+
+
+METADATA = {"task": "cotter_pin", "log_period": 0.01, "scenario": "task: cotter_pin\n"}
+
+
+def test_round_trip_gives_the_same_arrays(tmp_path, demos):
+    path = tmp_path / "demos.hdf5"
+    assert export_robomimic(path, demos, METADATA) == 40 + 55 + 12
+    loaded, metadata = load_robomimic(path)
+    assert metadata == METADATA
+    assert len(loaded) == len(demos)
+    for original, back in zip(demos, loaded):
+        assert back.seed == original.seed
+        for field in ("time", "p_WE", "v_WE", "p_MS", "p_WE_desired", "envelope", "activation",
+                      "gain", "f_WE", "emg_time", "emg", "muscle_activation"):  # fmt: skip
+            np.testing.assert_array_equal(getattr(back, field), getattr(original, field))
+
+
+def test_file_has_robomimics_layout_read_with_plain_h5py(tmp_path, demos):
+    path = tmp_path / "demos.hdf5"
+    export_robomimic(path, demos, METADATA)
+    # Read as robomimic's SequenceDataset and file utilities do: demos sorted by the
+    # integer after "demo_", num_samples per demo, obs/<key> (N, D), actions (N, A).
+    with h5py.File(path, "r") as f:
+        data = f["data"]
+        names = sorted(data.keys(), key=lambda name: int(name[5:]))
+        assert names == ["demo_0", "demo_1", "demo_2"]
+        assert int(data.attrs["total"]) == sum(len(d) for d in demos)
+        env_meta = json.loads(data.attrs["env_args"])
+        assert env_meta["env_name"] == "hemg_drake/cotter_pin"
+        assert env_meta["type"] == 2 and isinstance(env_meta["env_kwargs"], dict)
+        for name, demo in zip(names, demos):
+            group = data[name]
+            n = int(group.attrs["num_samples"])
+            assert n == len(demo)
+            widths = {"p_WE": 3, "v_WE": 3, "p_MS": 3, "f_WE": 3, "gain": 1, "envelope": 1,
+                      "activation": 1}  # fmt: skip
+            assert set(group["obs"].keys()) == set(widths)
+            assert set(group["next_obs"].keys()) == set(widths)
+            for key, width in widths.items():
+                assert group[f"obs/{key}"].shape == (n, width)
+                assert group[f"next_obs/{key}"].shape == (n, width)
+            np.testing.assert_array_equal(group["obs/p_WE"][()], demo.p_WE)
+            np.testing.assert_array_equal(group["obs/gain"][()][:, 0], demo.gain)
+            np.testing.assert_array_equal(group["next_obs/v_WE"][()][:-1], demo.v_WE[1:])
+            np.testing.assert_array_equal(group["next_obs/v_WE"][()][-1], demo.v_WE[-1])
+            actions = group["actions"][()]
+            assert actions.shape == (n, 4)
+            np.testing.assert_array_equal(actions[:, :3], demo.p_WE_desired)
+            np.testing.assert_array_equal(actions[:, 3], demo.gain)
+            assert group["rewards"].shape == (n,) and not np.any(group["rewards"][()])
+            dones = group["dones"][()]
+            assert dones.shape == (n,) and dones[-1] == 1 and not np.any(dones[:-1])
+
+
+def test_export_is_atomic_and_bad_input_is_named(tmp_path, demos):
+    path = tmp_path / "demos.hdf5"
+    path.write_bytes(b"old")
+    with pytest.raises(ValueError, match="JSON-serialisable"):
+        export_robomimic(path, demos, {"bad": object()})
+    with pytest.raises(ValueError, match="non-empty list of Demonstration"):
+        export_robomimic(path, [], METADATA)
+    assert path.read_bytes() == b"old" and list(tmp_path.iterdir()) == [path]
+    with pytest.raises(ValueError, match="not a readable HDF5 file"):
+        load_robomimic(path)
+    with pytest.raises(FileNotFoundError, match="robomimic file not found"):
+        load_robomimic(tmp_path / "missing.hdf5")
+    with h5py.File(tmp_path / "other.hdf5", "w") as f:
+        f.create_group("data")
+    with pytest.raises(ValueError, match="not exported by hemg_drake"):
+        load_robomimic(tmp_path / "other.hdf5")
+
+
+def test_cli_exports_a_run_folder(tmp_path, demos, capsys):
+    run = tmp_path / "run"
+    run.mkdir()
+    save_dataset(run / "dataset.npz", demos, METADATA)
+    out = tmp_path / "out" / "pin.hdf5"
+    assert main(["export", str(run), "--format", "robomimic", str(out)]) == 0
+    assert "3 demonstrations, 107 samples" in capsys.readouterr().out
+    loaded, metadata = load_robomimic(out)
+    np.testing.assert_array_equal(loaded[1].p_WE, demos[1].p_WE)
+    assert metadata["num_demonstrations"] == 3 and metadata["task"] == "cotter_pin"
+    assert main(["export", str(tmp_path / "nowhere"), "--format", "robomimic", str(out)]) == 2
+    assert "nowhere" in capsys.readouterr().err
