@@ -35,6 +35,7 @@ import contextlib
 import csv
 import dataclasses as dc
 import hashlib
+import importlib.resources
 import io
 import itertools
 import json
@@ -61,6 +62,8 @@ THREAD_ENV = {
     "MKL_NUM_THREADS": "1",
 }
 TRIAL_FILE = "trial.json"
+# The sweeps shipped with the package (hemg_drake/sweeps/<name>.yaml): the studies.
+SWEEPS = importlib.resources.files("hemg_drake") / "sweeps"
 # Ray's object store: trials return a few numbers, so the smallest store Ray accepts.
 RAY_OBJECT_STORE_BYTES = 80 * 1024 * 1024
 DEFAULT_METRICS = (
@@ -264,6 +267,15 @@ def _check_spec(spec):
             raise ValueError(f"key 'set': an override must read key=value, got {override!r}")
 
 
+def sweep_path(path):
+    """A sweep file's path: ``path``, or the shipped sweep of that name (``example_delay``)."""
+    path = Path(path)
+    shipped = SWEEPS / f"{path}.yaml"
+    if not path.exists() and path.suffix == "" and shipped.is_file():
+        return Path(str(shipped))
+    return path
+
+
 def load_sweep(path):
     """Read and check a sweep file: (SweepSpec, base scenario YAML text, its source name).
 
@@ -272,7 +284,7 @@ def load_sweep(path):
     """
     from hemg_drake.scenario import TASKS, load_scenario, shipped_scenario
 
-    path = Path(path)
+    path = sweep_path(path)
     if path.is_dir():
         raise ValueError(f"{path}: is a folder, not a sweep file (a .yaml file)")
     if not path.is_file():
@@ -753,6 +765,7 @@ def run_sweep(path, out, *, backend="local", workers=None, address=None, resume=
     if workers < 1:
         raise ValueError(f"workers must be at least 1, got {workers}")
     spec, text, source = load_sweep(path)
+    spec_text = sweep_path(path).read_text(encoding="utf-8")
     out = Path(out)
     trials_dir = out / "trials"
     if not resume and trials_dir.is_dir() and any(trials_dir.iterdir()):
@@ -763,7 +776,7 @@ def run_sweep(path, out, *, backend="local", workers=None, address=None, resume=
     trials_dir.mkdir(parents=True, exist_ok=True)
     for stale in itertools.chain(trials_dir.glob(".tmp-*"), (out / "cache").glob(".tmp-*")):
         shutil.rmtree(stale, ignore_errors=True)
-    write_text_atomic(out / "sweep.yaml", Path(path).read_text(encoding="utf-8"))
+    write_text_atomic(out / "sweep.yaml", spec_text)
     all_trials = trials(spec)
     records = {}
     for trial in all_trials:
