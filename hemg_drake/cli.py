@@ -9,7 +9,6 @@ import argparse
 import math
 import os
 import sys
-import tempfile
 from pathlib import Path
 
 SET_HELP = (
@@ -68,19 +67,21 @@ def _finite_float(name, *, positive=False, maximum=math.inf):
 
 
 def check_output_folder(path):
-    """Raise ValueError unless ``path`` is (or can be made) a writable folder; make it.
+    """Raise ValueError unless ``path`` is a writable folder or can be made one (it is not
+    made here: nothing is written before the inputs are checked too).
 
     Checked before any simulation, so a bad ``--out`` costs nothing.
     """
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise ValueError(f"{path}: exists and is not a folder")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=path):
-            pass
-    except OSError as error:
-        raise ValueError(f"{path}: cannot write there ({error.strerror or error})") from None
+    existing = path
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ValueError(f"{path}: cannot write there ({existing} is a file, not a folder)")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ValueError(f"{path}: cannot write there ({existing} is not writable)")
     return path
 
 

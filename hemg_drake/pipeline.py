@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from hemg_drake.fileio import save_npz_atomic, write_text_atomic
-from hemg_drake.run_folder import RunFolder
+from hemg_drake.run_folder import DATASET, MODEL, RunFolder
 
 TASKS = ("cotter_pin", "drawing")
 
@@ -78,19 +78,36 @@ def learning_data(demos, scenario):
     return data
 
 
-def fit_model(data, scenario, *, n_iter=None):
-    """The HSMM of the scenario's ``learning`` settings fitted to ``data``."""
+def fit_model(data, scenario, *, n_iter=None, frames=None):
+    """The HSMM of the scenario's ``learning`` settings fitted to ``data``.
+
+    With ``frames`` (the demonstrations' task frames, list of (A, b)) that differ between
+    demonstrations, or ``learning.task_parameterised``: a
+    :class:`~hemg_drake.learning.tphsmm.TaskParameterisedHSMM` in those frames.
+    """
     from hemg_drake.learning.hsmm import HSMM
+    from hemg_drake.learning.tphsmm import TaskParameterisedHSMM
+    from hemg_drake.placements import frames_vary
 
     settings = scenario.learning
     check_enough_data(data, settings.num_states)
-    return HSMM(
-        settings.num_states,
+    parameters = dict(
         init=settings.init,
         reg_covar=settings.reg_covar,
         n_iter=settings.n_iter if n_iter is None else n_iter,
         seed=scenario.seed,
-    ).fit(data)
+    )
+    if frames is not None and (settings.task_parameterised or frames_vary(frames)):
+        return TaskParameterisedHSMM(settings.num_states, **parameters).fit(data, frames)
+    return HSMM(settings.num_states, **parameters).fit(data)
+
+
+def demonstration_frames(demos, scenario):
+    """Each demonstration's task frames (A, b): recorded, or (format 2 datasets, one
+    placement) the dataset scenario's."""
+    from hemg_drake.placements import task_frames
+
+    return [demo.frames or task_frames(scenario) for demo in demos]
 
 
 def load_demonstrations(path):
@@ -119,25 +136,37 @@ def demonstrate(scenario, run_dir, *, replays=True, progress=print):
     -------
     list of Path, the files written (dataset first).
     """
+    from hemg_drake.placements import demonstration_scenario
+
+    # Every placement drawn and checked within reach before anything is written.
+    placed = [demonstration_scenario(scenario, seed) for seed in scenario.seeds()]
     folder = RunFolder(run_dir, create=True)
     with folder.stage("demonstrate") as removed:
         if removed:
             progress(f"removed {len(removed)} file(s) of an older run from {folder.path}/")
-        return _demonstrate(scenario, folder, replays, progress)
+        return _demonstrate(scenario, folder, replays, progress, placed)
 
 
-def _demonstrate(scenario, folder, replays, progress):
+def _demonstrate(scenario, folder, replays, progress, placed):
+    import dataclasses as dc
+
+    from hemg_drake.placements import has_placements, task_frames
     from hemg_drake.diagrams.demonstration import operator_plan, record_demonstration
     from hemg_drake.learning.demos import save_dataset
     from hemg_drake.viz.figures import plot_demonstrations, plot_emg_envelopes, save_figure
 
     demos, replay_files = [], []
-    for c, seed in enumerate(scenario.seeds(), start=1):
+    for c, (seed, here) in enumerate(zip(scenario.seeds(), placed, strict=True), start=1):
         replay = folder / f"replay_{c}.html" if replays else None
         title = f"{scenario.task.replace('_', ' ')}: demonstration {c} (seed {seed})"
-        recorder = replay_recorder(scenario, title) if replays else None
+        recorder = replay_recorder(here, title) if replays else None
         start = time.perf_counter()
-        demos.append(record_demonstration(scenario, seed, recorder=recorder, replay_path=replay))
+        demos.append(record_demonstration(here, seed, recorder=recorder, replay_path=replay))
+        if has_placements(scenario):
+            progress(
+                f"demonstration {c}: scene at {np.round(task_frames(here)[1][1], 3).tolist()} "
+                f"m, yaw {here.scene.yaw_deg:.1f} deg"
+            )
         if replay is not None:
             replay_files.append(replay)
         plan_end = operator_plan(scenario, seed).end_time
@@ -151,6 +180,8 @@ def _demonstrate(scenario, folder, replays, progress):
                 else ""
             )
         )
+    frames = [task_frames(here) for here in placed]
+    demos = [dc.replace(d, frame_A=A, frame_b=b) for d, (A, b) in zip(demos, frames, strict=True)]
     metadata = dict(scenario=scenario.to_yaml(), task=scenario.task, log_period=scenario.log_period)
     save_dataset(folder.dataset, demos, metadata)
     figures = [folder / "demonstrations.png", folder / "fig6_emg.png"]
@@ -187,17 +218,20 @@ def learn(run_dir, *, overrides=(), n_iter=None, progress=print):
     demos, scenario = load_demonstrations(folder.dataset)
     scenario = scenario.replaced(overrides)
     data = learning_data(demos, scenario)
+    frames = demonstration_frames(demos, scenario)
     start = time.perf_counter()
-    model = fit_model(data, scenario, n_iter=n_iter)
+    model = fit_model(data, scenario, n_iter=n_iter, frames=frames)
     iterations = f"{model.n_iter_} EM iteration{'s' if model.n_iter_ != 1 else ''}"
+    kind = "HSMM" if not hasattr(model, "at") else f"TP-HSMM ({model.n_frames_} frames)"
     progress(
-        f"learn: HSMM N = {model.n_states} on {len(data)} demonstrations, {iterations} in "
+        f"learn: {kind} N = {model.n_states} on {len(data)} demonstrations, {iterations} in "
         f"{time.perf_counter() - start:.1f} s"
         + ("" if model.converged_ else " (stopped before converging: raise --iterations)")
     )
     with folder.stage("learn"):
+        first = model.at(*frames[0]) if hasattr(model, "at") else model
         figure = plot_state_activations(
-            demos[0].time, model.forward_variable(data[0]), task=scenario.task, along=1
+            demos[0].time, first.forward_variable(data[0]), task=scenario.task, along=1
         )
         model.save(folder.model)
         save_figure(figure, folder / "state_activations.png")
@@ -208,16 +242,25 @@ def learn(run_dir, *, overrides=(), n_iter=None, progress=print):
     return model
 
 
-def _checked_model(folder):
-    """The run folder's model, refused unless it was fitted on the folder's dataset."""
+def placed_model(model, scenario):
+    """The HSMM to reproduce with at the scenario's placement: a TP-HSMM's product in the
+    scenario's task frames (``hemg_drake.placements.task_frames``), a plain HSMM itself."""
+    from hemg_drake.placements import task_frames
+
+    return model.at(*task_frames(scenario)) if hasattr(model, "at") else model
+
+
+def _checked_model(folder, scenario):
+    """The run folder's model at the scenario's placement, refused unless it was fitted on
+    the folder's dataset."""
     from hemg_drake.diagrams.reproduction import check_model
-    from hemg_drake.learning.hsmm import HSMM
+    from hemg_drake.learning.tphsmm import load_model
 
     hint = f"hemg-drake learn {folder.path}"
     folder.check("demonstrate", folder.dataset, run_hint=_demonstrate_hint(folder))
     folder.check("learn", folder.model, run_hint=hint)
     folder.check_made_from("learn", folder.dataset, run_hint=hint)
-    model = HSMM.load(folder.model)
+    model = placed_model(load_model(folder.model), scenario)
     try:
         check_model(model)
     except ValueError as error:
@@ -249,16 +292,30 @@ def reproduce(
     -------
     dict, the metrics written to ``metrics.json``.
     """
+    from hemg_drake.placements import moved_demonstration, scene_frame, task_frames
+
     folder = RunFolder(run_dir)
-    model = _checked_model(folder)
-    demos, scenario = load_demonstrations(folder.dataset)
-    scenario = scenario.replaced(overrides)
+    demos, recorded = load_demonstrations(folder.dataset)
+    scenario = recorded.replaced(overrides)
+    model = _checked_model(folder, scenario)
     offset = np.asarray(start_offset, dtype=float)
     if offset.shape != (3,) or not np.all(np.isfinite(offset)):
         raise ValueError(f"start offset must be 3 finite numbers (m), got {start_offset!r}")
+    # The demonstrations carried to the scene's placement (themselves where they were shown):
+    # the start and what the metrics compare with.
+    here = scene_frame(*task_frames(scenario))
+    demos = [
+        moved_demonstration(demo, scene_frame(*frames), here)
+        for demo, frames in zip(demos, demonstration_frames(demos, recorded), strict=True)
+    ]
     offset_W = scenario.X_WT().rotation().matrix() @ offset
     start = np.mean([demo.p_WE[0] for demo in demos], axis=0) + offset_W
     out = folder if out_dir is None else RunFolder(out_dir, create=True)
+    if out.path.resolve() != folder.path.resolve() and (out.dataset.exists() or out.model.exists()):
+        raise ValueError(
+            f"--out {out.path} holds a run of its own ({DATASET} or {MODEL}); write the "
+            f"reproduction into a new folder or the run folder itself"
+        )
     with out.stage("reproduce"):
         return _reproduce(scenario, model, demos, folder, out, start, offset, replay, progress)
 
@@ -288,6 +345,8 @@ def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progr
         restoring_gain=settings.restoring_gain,
         start=start.tolist(),
         start_offset=offset.tolist(),
+        scene_position=scenario.X_WT().translation().tolist(),
+        scene_yaw_deg=scenario.scene.yaw_deg,
     )
     written = [out / "reproduction.npz", out / "metrics.json"]
     save_npz_atomic(written[0], **result.log.arrays())
@@ -327,7 +386,9 @@ def write_diagrams(scenario, model, run_dir, *, progress=print):
     folder = Path(run_dir)
     diagrams = {
         "demonstration_diagram": build_demonstration_diagram(scenario, seed=scenario.seed).diagram,
-        "reproduction_diagram": build_reproduction_diagram(scenario, model).diagram,
+        "reproduction_diagram": build_reproduction_diagram(
+            scenario, placed_model(model, scenario)
+        ).diagram,
     }
     written = []
     for name, diagram in diagrams.items():

@@ -33,11 +33,10 @@ OUTPUTS = {
         DATASET, "replay_*.html", "demonstrations.png", "fig6_emg.png",
         "demonstration_diagram.svg", "demonstration_diagram.dot",
     ),
-    "learn": (MODEL, "state_activations.png"),
+    "learn": (MODEL, "state_activations.png", "reproduction_diagram.svg", "reproduction_diagram.dot"),
     "reproduce": (
         "reproduction.html", "reproduction.npz", "metrics.json", "fig8_reproduction.png",
-        "fig10_reproduction.png", "fig11_strokes.png", "reproduction_diagram.svg",
-        "reproduction_diagram.dot",
+        "fig10_reproduction.png", "fig11_strokes.png",
     ),
 }  # fmt: skip
 # Sub-folders of extra reproductions (``start_offset``, ``start_offset_<i>``).
@@ -117,7 +116,9 @@ class RunFolder:
                 for path in self.path.glob(pattern):
                     path.unlink()
                     removed.append(path.name)
-        if "reproduce" in later:
+        # The extra reproductions (start offsets) were made from the model: they go when the
+        # model or its data do, not when the main reproduction is run again.
+        if "learn" in later:
             for sub in self.path.glob(REPRODUCTION_FOLDERS):
                 if sub.is_dir():
                     removed += [f"{sub.name}/{n}" for n in RunFolder(sub).begin("reproduce")]

@@ -48,6 +48,7 @@ from hemg_drake.tasks.drawing import DrawingParams
 from hemg_drake.tasks.placement import scene_pose, to_world
 from hemg_drake.tasks.plan import TaskPlan
 from hemg_drake.teleop.feedback import MODES as FEEDBACK_MODES
+from hemg_drake.teleop.feedback import PASSIVITY as FEEDBACK_PASSIVITY
 from hemg_drake.teleop.feedback import ForceFeedback
 from hemg_drake.teleop.mapping import WorkspaceMap, WorkspaceMapping
 from hemg_drake.teleop.master import MasterDynamics
@@ -265,6 +266,14 @@ class FeedbackConfig:
     damping: float = _field(ForceFeedback.__init__, "damping")
     # Saturation of the motor force (N).
     peak_force: float = _field(ForceFeedback.__init__, "peak_force")
+    # Slave-to-master transport delay of the fed-back force (or of the slave's position in
+    # mode "position_error"), in master samples (1 ms each); mapping.delay_steps is the
+    # master-to-slave half.
+    delay_steps: int = _field(ForceFeedback.__init__, "delay_steps")
+    # "none", or "tdpa": a time-domain passivity observer and controller at the master's
+    # port (Hannaford & Ryu 2002) keeps the channel from giving the master more energy
+    # than it took. Mode "force" needs the master's v_MS connected to it.
+    passivity: str = _field(ForceFeedback.__init__, "passivity", choices=FEEDBACK_PASSIVITY)
 
 
 @dc.dataclass
@@ -412,7 +421,7 @@ class Scenario:
         Raises ValueError (naming ``source``, the override and the key) as
         :func:`load_scenario` does.
         """
-        return parse_scenario(self.to_yaml(), source="scenario", overrides=overrides,
+        return parse_scenario(self.to_yaml(), source="the scenario", overrides=overrides,
                               overrides_source=source)  # fmt: skip
 
 
@@ -454,7 +463,8 @@ def load_scenario(path, *, overrides=()):
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError as error:
         raise ValueError(f"{path}: not UTF-8 text (byte {error.start}): not a YAML file") from None
-    if not text.strip() or (_parses(text) and yaml_load(data=text) is None):
+    if not text.strip() or (_parses(text) and yaml_load(data=text) in (None, {})):
+        # An empty file would silently run the default scenario.
         raise ValueError(f"{path}: the scenario file is empty; give at least its 'task'")
     return parse_scenario(text, source=str(path), overrides=overrides)
 
@@ -498,9 +508,20 @@ def parse_scenario(text, *, source="<scenario>", overrides=(), overrides_source=
         scenario = yaml_load_typed(schema=Scenario, data=data, defaults=Scenario())
         _check_values(scenario)
     except (RuntimeError, ValueError, AssertionError) as error:
-        origin = source if not overrides else f"{source} with {overrides_source} {' '.join(overrides)}"
+        origin = _blame(_first_line(error), source, overrides, overrides_source)
         raise ValueError(f"{origin}: {_first_line(error)}") from None
     return scenario
+
+
+def _blame(message, source, overrides, overrides_source):
+    """Who a failed check is about: the override that set its key, else the source."""
+    named = re.findall(r"key '([\w.]+)", message)
+    for override in reversed(overrides):
+        key = str(override).partition("=")[0].strip()
+        if any(name == key or f"{name}.".startswith(f"{key}.") or key.startswith(f"{name}.")
+               for name in named):  # fmt: skip
+            return f"{overrides_source} {override}"
+    return source
 
 
 def _parse_yaml(text, source):
@@ -519,6 +540,8 @@ def _apply_override(raw, override, where):
     key = key.strip()
     if not equals or not key or any(not part for part in key.split(".")):
         raise ValueError("an override must read key=value, e.g. emg.k_max=150")
+    if not value_text.strip():
+        raise ValueError(f"an override needs a value after '=', e.g. {key}=...")
     value = _parse_yaml(value_text, "the value")
     node = raw
     *parents, leaf = key.split(".")

@@ -101,7 +101,8 @@ def test_writable_output_folder_reaches_the_pipeline(tmp_path, capsys, monkeypat
     code, _, err = run(["demo", "--out", str(out), "--tasks", "drawing", "--no-replay",
                         "--set", "num_demonstrations=2"], capsys)  # fmt: skip
     assert (code, err) == (0, "")
-    assert out.is_dir()  # made before the job starts
+    # Checked, not made: the job makes it once its inputs are checked too.
+    assert not out.exists()
     ((folder, kwargs),) = calls
     assert str(folder) == str(out) and kwargs["tasks"] == ["drawing"]
     assert kwargs["overrides"] == ["num_demonstrations=2"] and kwargs["replays"] is False

@@ -467,3 +467,22 @@ def test_numbers_in_scientific_notation_are_numbers():
     assert parsed.mapping.scene_offset == [0.01, 0.0, -0.02]
     with pytest.raises(ValueError, match="key 'duration' must be a number, got 'e3'"):
         parse_scenario("duration: e3\n")
+
+
+def test_a_failed_check_names_the_override_at_fault():
+    from hemg_drake.scenario import load_scenario, shipped_scenario
+
+    with pytest.raises(ValueError) as error:
+        load_scenario(shipped_scenario("cotter_pin"), overrides=["seed=3", "emg.k_max=-5"])
+    assert str(error.value).startswith("--set emg.k_max=-5: key 'emg.k_max'")
+    with pytest.raises(ValueError, match="needs a value after '='"):
+        load_scenario(shipped_scenario("cotter_pin"), overrides=["emg.k_max="])
+    with pytest.raises(ValueError, match="the scenario file is empty"):
+        path = shipped_scenario("cotter_pin").parent / "nonexistent.yaml"  # noqa: F841
+        import tempfile
+        from pathlib import Path
+
+        with tempfile.TemporaryDirectory() as folder:
+            empty = Path(folder) / "empty.yaml"
+            empty.write_text("{}\n")
+            load_scenario(empty)
