@@ -36,6 +36,10 @@ FORCE_FACTOR = 1.5
 PIN_OVERSHOOT_M = 0.01
 PIN_DIP_M = 0.01
 STROKE_SHAPE_M = 0.005
+# Pin: the pull starts when the demonstrations' tool has risen PULL_START_M along the pull
+# axis, and has pulled the pin when it has risen PULL_END_M (the pin's length, 5 cm).
+PULL_START_M = 0.002
+PULL_END_M = 0.05
 # Table II of the paper (cotter pin), and what it does not state about its measure.
 PAPER_TABLE_II = {
     "position_rmse_m": 0.0022,
@@ -78,6 +82,42 @@ def _table_ii(demos, log, dt):
             "timing_error_s": [f["timing_error_s"] for f in floor],
         },
         "paper": PAPER_TABLE_II,
+    }
+
+
+def _first_time(time, rise, height):
+    """First time ``rise`` reaches ``height``, or None."""
+    above = np.flatnonzero(rise >= height)
+    return float(time[above[0]]) if above.size else None
+
+
+def _pull_metrics(demos, log):
+    """How the reference x* grasps and pulls, against the demonstrations (where they are).
+
+    The pull axis u (world +z, through the demonstrations' mean grasp point g, their start):
+    ``grasp_position_error_m`` is x*'s distance from that axis when the demonstrations start
+    pulling (on average they have risen PULL_START_M); ``pull_direction_error_deg`` the angle
+    between u and x*'s displacement from then until the demonstrations (on average) have
+    pulled the pin out (risen PULL_END_M, or the end of the log).
+    """
+    from hemg_drake.tasks.cotter_pin import PULL_AXIS_W as u
+
+    grasp = np.mean([d.p_WE[0] for d in demos], axis=0)
+    starts = [_first_time(d.time, (d.p_WE - d.p_WE[0]) @ u, PULL_START_M) for d in demos]
+    ends = [_first_time(d.time, (d.p_WE - d.p_WE[0]) @ u, PULL_END_M) for d in demos]
+    if any(t is None for t in starts):
+        return {"grasp_position_error_m": None, "pull_direction_error_deg": None}
+    end_time = log.time[-1] if any(t is None for t in ends) else np.mean(ends)
+    begin = int(np.argmin(np.abs(log.time - np.mean(starts))))
+    end = int(np.argmin(np.abs(log.time - end_time)))
+    offset = log.x_star[begin] - grasp
+    across = offset - (offset @ u) * u
+    pull = log.x_star[end] - log.x_star[begin]
+    norm = np.linalg.norm(pull)
+    angle = np.degrees(np.arccos(np.clip(pull @ u / norm, -1.0, 1.0))) if norm > 0 else None
+    return {
+        "grasp_position_error_m": float(np.linalg.norm(across)),
+        "pull_direction_error_deg": None if angle is None else float(angle),
     }
 
 
@@ -133,6 +173,7 @@ def task_metrics(task, demos, result):
             final_height_m=float(log.p_WE[-1, 2]),
             overshoot_m=float(log.p_WE[-1, 2]) - end_z,
             dip_m=start_z - float(log.p_WE[:, 2].min()),
+            **_pull_metrics(demos, log),
         )
         checks.update({
             "pin out": bool(result.pin_out),

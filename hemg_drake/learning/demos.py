@@ -13,8 +13,12 @@ scenario's YAML text). Only plain arrays are stored (no pickles).
 
 Format 2 (this version) adds what later stages read instead of rebuilding it: the reference
 the CLIK received (``p_WE_desired``), and at the MYO's 200 Hz the raw sEMG the gain chain
-read (``emg``) with the operator's muscle activation that drove it. Format 1 datasets are
-refused with a message to record them again.
+read (``emg``) with the operator's muscle activation that drove it. Format 3 (this
+version) adds each demonstration's task frames, ``demo<c>.frame_A`` (F, 3, 3) and
+``demo<c>.frame_b`` (F, 3): the robot's base and the scene frame T where it was shown
+(``hemg_drake.placements.task_frames``), for demonstrations at many placements. Format 2
+datasets load without frames (``frame_A`` None: one placement, the scenario's); format 1
+datasets are refused with a message to record them again.
 """
 
 import dataclasses as dc
@@ -27,7 +31,9 @@ import numpy as np
 import hemg_drake
 from hemg_drake.fileio import load_npz, save_npz_atomic
 
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
+# Formats this version reads (2: no task frames).
+READABLE_FORMATS = (2, 3)
 # Number of columns of each field logged every log period (1: a scalar signal, shape (T,)).
 FIELD_WIDTHS = {
     "time": 1,
@@ -76,6 +82,9 @@ class Demonstration:
         The raw sEMG samples the gain chain read (MYO units, int8 values).
     muscle_activation : array, shape (T_e,)
         The operator's muscle activation in [0, 1] that drove each sEMG sample.
+    frame_A, frame_b : arrays, shape (F, 3, 3) and (F, 3), or None
+        The task frames where it was shown (rotations and origins in W: the robot's base,
+        the scene frame T); None for a record without them (one placement).
     """
 
     seed: int
@@ -91,9 +100,12 @@ class Demonstration:
     emg_time: np.ndarray
     emg: np.ndarray
     muscle_activation: np.ndarray
+    frame_A: np.ndarray = None
+    frame_b: np.ndarray = None
 
     def __post_init__(self):
         object.__setattr__(self, "seed", int(self.seed))
+        self._check_frames()
         for widths in (FIELD_WIDTHS, EMG_FIELD_WIDTHS):
             length = None
             for name, width in widths.items():
@@ -110,6 +122,28 @@ class Demonstration:
 
     def __len__(self):
         return len(self.time)
+
+    def _check_frames(self):
+        if self.frame_A is None and self.frame_b is None:
+            return
+        if self.frame_A is None or self.frame_b is None:
+            raise ValueError("Demonstration fields 'frame_A' and 'frame_b' go together")
+        A = np.asarray(self.frame_A, dtype=float)
+        b = np.asarray(self.frame_b, dtype=float)
+        if A.ndim != 3 or A.shape[1:] != (3, 3) or b.shape != (len(A), 3) or len(A) < 1:
+            raise ValueError(
+                f"Demonstration fields 'frame_A', 'frame_b' must have shapes (F, 3, 3), (F, 3), "
+                f"got {A.shape}, {b.shape}"
+            )
+        if not (np.all(np.isfinite(A)) and np.all(np.isfinite(b))):
+            raise ValueError("Demonstration fields 'frame_A', 'frame_b' contain NaN or inf")
+        object.__setattr__(self, "frame_A", A)
+        object.__setattr__(self, "frame_b", b)
+
+    @property
+    def frames(self):
+        """(frame_A, frame_b), or None."""
+        return None if self.frame_A is None else (self.frame_A, self.frame_b)
 
 
 def versions():
@@ -147,10 +181,15 @@ def save_dataset(path, demos, metadata=None):
         text = json.dumps(record, sort_keys=True)
     except TypeError as error:
         raise ValueError(f"dataset metadata must be JSON-serialisable: {error}") from None
+    if len({demo.frame_A is None for demo in demos}) > 1:
+        raise ValueError("save_dataset: give task frames for every demonstration or for none")
     arrays = {"metadata": np.array(text)}
     for c, demo in enumerate(demos):
         for name in ALL_FIELDS:
             arrays[f"demo{c}.{name}"] = getattr(demo, name)
+        if demo.frame_A is not None:
+            arrays[f"demo{c}.frame_A"] = demo.frame_A
+            arrays[f"demo{c}.frame_b"] = demo.frame_b
     save_npz_atomic(path, **arrays)
 
 
@@ -181,7 +220,7 @@ def load_dataset(path):
     if not isinstance(metadata, dict) or "format_version" not in metadata:
         raise ValueError(f"{path}: the metadata has no format_version; not a hemg_drake dataset")
     found = metadata["format_version"]
-    if found != FORMAT_VERSION:
+    if found not in READABLE_FORMATS:
         advice = (
             "it lacks the raw sEMG and the CLIK's reference that learning and Fig. 6 read; "
             "record it again with hemg-drake demonstrate"
@@ -190,7 +229,7 @@ def load_dataset(path):
         )
         raise ValueError(
             f"{path}: dataset format {found!r}, this hemg_drake reads format "
-            f"{FORMAT_VERSION}: {advice}"
+            f"{' or '.join(map(str, READABLE_FORMATS))}: {advice}"
         )
     count, seeds = metadata.get("num_demonstrations"), metadata.get("seeds")
     valid = isinstance(count, int) and count >= 1 and isinstance(seeds, list)
@@ -204,6 +243,9 @@ def load_dataset(path):
             if key not in arrays:
                 raise ValueError(f"{path}: missing array '{key}'")
             fields[name] = arrays[key]
+        for name in ("frame_A", "frame_b"):
+            if f"demo{c}.{name}" in arrays:
+                fields[name] = arrays[f"demo{c}.{name}"]
         try:
             demos.append(Demonstration(seed=seeds[c], **fields))
         except (TypeError, ValueError) as error:
