@@ -401,7 +401,8 @@ class LoggedInputs:
             )
         if self.times[k] != t:
             raise ValueError(
-                f"inputs log sample {k} is at t = {self.times[k]!r} s, the diagram's at {t!r} s: "
+                f"inputs log sample {k} is at t = {float(self.times[k])!r} s, the diagram's at "
+                f"{t!r} s: "
                 "recorded with another input period or scenario"
             )
         self._next = k + 1
@@ -563,7 +564,8 @@ class Take:
 
 
 def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, realtime=True,
-             recorder=None, replay_path=None, progress=print, on_step=None):  # fmt: skip
+             recorder=None, replay_path=None, progress=print, on_step=None,
+             scene=True):  # fmt: skip
     """Run one take of the demonstration diagram with a :class:`BrowserMaster`.
 
     Parameters
@@ -585,6 +587,8 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
     progress : callable taking one line (the master's messages).
     on_step : callable, optional
         Called as ``on_step(t)`` after each page period (tests script the page with it).
+    scene : bool
+        False leaves out the task's scene (the arm in free space).
 
     Returns
     -------
@@ -624,10 +628,17 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
 
     built = build_demonstration_diagram(
         scenario, seed=seed, meshcat=meshcat if live else None, recorder=recorder,
-        operator_factory=factory,
+        operator_factory=factory, scene=scene,
     )  # fmt: skip
     master = holder["master"]
-    page = TeleopPage(meshcat, k_min=scenario.emg.k_min, k_max=scenario.emg.k_max) if live else None
+    page = None
+    if live:
+        from hemg_drake.robots.baxter import FLOOR_Z
+        from hemg_drake.viz.recording import frame_task
+
+        meshcat.SetCameraPose(*frame_task(scenario.task_plan().points))
+        meshcat.SetTransform("/Grid", RigidTransform([0.0, 0.0, FLOOR_Z]))
+        page = TeleopPage(meshcat, k_min=scenario.emg.k_min, k_max=scenario.emg.k_max)
     diagram = built.diagram
     simulator = Simulator(diagram)
     ApplySimulatorConfig(scenario.simulator, simulator)
@@ -804,3 +815,121 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     written = [folder.dataset, *sorted(set(old_files) - set(new_files)), *new_files, *figures]
     folder.finish("demonstrate", written)
     return written
+
+
+class HeadlessPage:
+    """The live Meshcat page in headless Chromium, driven through the DevTools protocol.
+
+    For tests, screenshots and latency checks without a person: ``press(code)`` sends a
+    real key press to the page (as a keyboard would), ``screenshot()`` returns a PNG.
+    Needs Debian's ``chromium`` and ``websocket-client`` (the dev extra). Use as a
+    context manager; the browser process is ended on exit.
+
+    Parameters
+    ----------
+    url : str, the page (``meshcat.web_url()``).
+    size : (int, int), window size in pixels.
+    timeout : float, seconds to wait for Chromium to start.
+    """
+
+    def __init__(self, url, *, size=(1280, 800), timeout=60.0):
+        import select
+        import subprocess
+        import tempfile
+
+        import websocket
+
+        from hemg_drake.viz.screenshot import find_chromium
+
+        chromium = find_chromium()
+        if chromium is None:
+            raise FileNotFoundError("chromium not found on PATH: install it (apt-get install chromium)")
+        self._profile = tempfile.TemporaryDirectory(prefix="hemg-teleop-chromium-")
+        command = [
+            chromium, "--headless=new", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+            "--no-sandbox", "--no-first-run", "--disable-background-networking",
+            "--disable-component-update", "--disable-sync", "--hide-scrollbars",
+            f"--user-data-dir={self._profile.name}", f"--window-size={size[0]},{size[1]}",
+            "--remote-debugging-port=0", "--remote-allow-origins=*", url,
+        ]  # fmt: skip
+        self.process = subprocess.Popen(
+            command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+            text=True,
+        )  # fmt: skip
+        deadline = time.monotonic() + timeout
+        browser_url = None
+        try:
+            while browser_url is None:
+                left = deadline - time.monotonic()
+                if left <= 0 or self.process.poll() is not None:
+                    raise RuntimeError("headless Chromium did not start its DevTools endpoint")
+                ready, _, _ = select.select([self.process.stderr], [], [], left)
+                if ready:
+                    line = self.process.stderr.readline()
+                    if line.startswith("DevTools listening on "):
+                        browser_url = line.split(" on ", 1)[1].strip()
+            # The first page target is the one showing ``url``.
+            self._ws = websocket.create_connection(browser_url, timeout=timeout)
+            self._id = 0
+            targets = self._call("Target.getTargets")["targetInfos"]
+            page = next(t for t in targets if t["type"] == "page")
+            session = self._call("Target.attachToTarget", targetId=page["targetId"], flatten=True)
+            self._session = session["sessionId"]
+        except BaseException:
+            self.close()
+            raise
+
+    def _call(self, method, session=None, **params):
+        import json
+
+        self._id += 1
+        message = {"id": self._id, "method": method, "params": params}
+        if session is not None:
+            message["sessionId"] = session
+        self._ws.send(json.dumps(message))
+        while True:
+            reply = json.loads(self._ws.recv())
+            if reply.get("id") == self._id:
+                if "error" in reply:
+                    raise RuntimeError(f"DevTools {method}: {reply['error']}")
+                return reply.get("result", {})
+
+    def page(self, method, **params):
+        """Call a DevTools method on the page (e.g. ``Runtime.evaluate``)."""
+        return self._call(method, session=self._session, **params)
+
+    def press(self, code):
+        """Press and release the key ``code`` (a KeyboardEvent.code, e.g. "ArrowRight")."""
+        for kind in ("keyDown", "keyUp"):
+            self.page("Input.dispatchKeyEvent", type=kind, code=code, key=code)
+
+    def evaluate(self, expression):
+        """The value of a javascript expression in the page."""
+        result = self.page("Runtime.evaluate", expression=expression, returnByValue=True)
+        return result.get("result", {}).get("value")
+
+    def screenshot(self):
+        """A PNG of the page (bytes)."""
+        import base64
+
+        return base64.b64decode(self.page("Page.captureScreenshot", format="png")["data"])
+
+    def close(self):
+        with contextlib.suppress(Exception):
+            self._ws.close()
+        if self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(timeout=10)
+            except Exception:
+                self.process.kill()
+                self.process.wait()
+        with contextlib.suppress(Exception):
+            self.process.stderr.close()
+        self._profile.cleanup()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

@@ -1,0 +1,340 @@
+"""The browser master: its laws against hand computation, and every input path on loopback.
+
+Inputs reach Meshcat three ways here, as a person's would: Meshcat's Python API
+(``SetSliderValue``, the keyboard's sliders), msgpack messages on Meshcat's websocket as
+the page sends them (gamepad, button clicks; the layout of Drake's
+``geometry/meshcat_types_internal.h`` ``UserInterfaceEvent``), and real key presses in the
+page in headless Chromium.
+"""
+
+import dataclasses as dc
+import hashlib
+import math
+import socket
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+
+from hemg_drake.cli import main
+from hemg_drake.learning.demos import load_dataset
+from hemg_drake.run_folder import RunFolder
+from hemg_drake.scenario import load_scenario, shipped_scenario
+from hemg_drake.teleop import browser
+from hemg_drake.teleop.browser import (
+    COLUMNS, END_BUTTON, SLIDER_ACTIVATION, SLIDER_X, BrowserMaster, LoggedInputs, dead_zone,
+    load_inputs, run_take, start_meshcat, teleop,
+)  # fmt: skip
+
+websocket = pytest.importorskip("websocket", reason="websocket-client is in the dev extra")
+msgpack = pytest.importorskip("msgpack")
+
+P0 = [0.01, -0.02, 0.03]
+HALF = [0.08, 0.06, 0.06]  # the Touch X's box, half sizes (m)
+K_H, D_H, F_MAX = 300.0, 5.0, 15.0
+
+
+@pytest.fixture(scope="module")
+def scenario():
+    return load_scenario(shipped_scenario("cotter_pin"))
+
+
+@pytest.fixture
+def meshcat():
+    return start_meshcat(0)
+
+
+def row(slider_mm=(0.0, 0.0, 0.0), activation=0.05, axes=None, buttons=None, clicks=0, pages=0):
+    """One raw input row; ``axes``/``buttons`` None: no gamepad."""
+    values = dict(zip(COLUMNS, [math.nan] * len(COLUMNS)))
+    values.update(slider_x_mm=slider_mm[0], slider_y_mm=slider_mm[1], slider_z_mm=slider_mm[2])
+    values.update(slider_activation=activation, end_clicks=clicks, connections=pages)
+    values["gamepad_index"] = -1.0 if axes is None else 0.0
+    for i, value in enumerate(axes or []):
+        values[f"axis_{i}"] = value
+    for i, value in enumerate(buttons or []):
+        values[f"button_{i}"] = value
+    return [values[name] for name in COLUMNS]
+
+
+def master_after(rows, p_MS, v_MS, **parameters):
+    """The BrowserMaster fed ``rows`` at 0, 10, 20 ms ..., its outputs just after the last."""
+    times = 0.01 * np.arange(len(rows))
+    master = BrowserMaster(source=LoggedInputs(times, rows), p_MS_initial=P0, **parameters)
+    simulator = Simulator(master)
+    context = simulator.get_mutable_context()
+    master.GetInputPort("p_MS").FixValue(context, p_MS)
+    master.GetInputPort("v_MS").FixValue(context, v_MS)
+    master.GetInputPort("feedback_force").FixValue(context, [0.0, 0.0, 0.0])
+    simulator.AdvanceTo(times[-1] + 0.005)
+    force = master.GetOutputPort("hand_force").Eval(context)
+    activation = master.GetOutputPort("activation").Eval(context)[0]
+    return master, force, activation
+
+
+def test_dead_zone_by_hand():
+    assert dead_zone(0.1, 0.15) == 0.0
+    assert dead_zone(-0.15, 0.15) == 0.0
+    assert dead_zone(0.575, 0.15) == pytest.approx(0.5)
+    assert dead_zone(-1.0, 0.15) == pytest.approx(-1.0)
+    assert dead_zone(1.7, 0.15) == pytest.approx(1.0)
+    assert dead_zone(math.nan, 0.15) == 0.0
+
+
+def test_keyboard_and_gamepad_target_and_hand_force_by_hand():
+    # Samples 0..3: the keyboard moves x by +4 mm (relative to sample 0) and z by -6 mm;
+    # the gamepad holds left stick x at 0.575 (0.5 beyond the dead zone: 0.05 m/s) and the
+    # right stick y at -1 (up: +0.1 m/s in y) from sample 1 on.
+    pad = dict(axes=[0.575, 0.0, 0.0, -1.0], buttons=[0.0] * 7 + [0.3])
+    rows = [
+        row((10.0, 0.0, 0.0)),
+        row((12.0, 0.0, -2.0), **pad),
+        row((14.0, 0.0, -6.0), **pad),
+        row((14.0, 0.0, -6.0), **pad),
+    ]
+    p_MS, v_MS = [0.0, 0.0, 0.0], [0.01, 0.0, -0.02]
+    _, force, activation = master_after(rows, p_MS, v_MS)
+    # Target: start + keyboard offset + three gamepad samples of T * v.
+    p_T = [0.01 + 0.004 + 3 * 0.01 * 0.05, -0.02 + 3 * 0.01 * 0.1, 0.03 - 0.006]
+    v_T = [0.05, 0.1, 0.0]
+    expected = [K_H * (p_T[i] - p_MS[i]) + D_H * (v_T[i] - v_MS[i]) for i in range(3)]
+    np.testing.assert_allclose(force, expected, rtol=1e-12, atol=1e-12)
+    assert activation == pytest.approx(0.3)  # the trigger beats the slider's 0.05
+
+
+def test_target_stays_in_the_workspace_and_hand_force_saturates():
+    # Full stick to the right for 120 samples (0.12 m of travel at 0.1 m/s) from x = 0.01:
+    # the target stops at the wall x = 0.08, with no velocity once it is there.
+    pad = dict(axes=[1.0, 0.0, 0.0, 0.0], buttons=[0.0] * 8)
+    rows = [row()] + [row(**pad)] * 120
+    p_T = [HALF[0], P0[1], P0[2]]
+    expected = [K_H * (p_T[i] - P0[i]) for i in range(3)]  # 21 N along x
+    _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0], max_hand_force=1000.0)
+    np.testing.assert_allclose(force, expected, rtol=1e-12, atol=1e-12)
+    # With the default 15 N limit, the same push saturates in norm.
+    _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0])
+    norm = math.sqrt(sum(f * f for f in expected))
+    np.testing.assert_allclose(force, [f * F_MAX / norm for f in expected], rtol=1e-12)
+
+
+def test_missing_or_nan_gamepad_moves_nothing_and_is_reported():
+    rows = [
+        row(),
+        row(axes=[math.nan, 0.0, 0.0, math.nan], buttons=[0.0] * 7 + [math.nan]),
+        row(axes=[0.0] * 4, buttons=[0.0] * 8),
+        row(activation=0.4),  # the page stopped sending the gamepad
+    ]
+    master, force, activation = master_after(rows, P0, [0.0, 0.0, 0.0])
+    np.testing.assert_allclose(force, [0.0, 0.0, 0.0], atol=1e-15)
+    assert activation == pytest.approx(0.4)
+    messages = " | ".join(master.pop_messages())
+    assert "gamepad 0 connected" in messages and "NaN" in messages
+    assert "disconnected" in messages
+
+
+def test_bad_arguments_and_logs_are_refused(tmp_path):
+    with pytest.raises(ValueError, match="p_MS_initial"):
+        BrowserMaster(source=LoggedInputs([0.0], [row()]), p_MS_initial=[0.2, 0.0, 0.0])
+    with pytest.raises(ValueError, match="source"):
+        BrowserMaster(source=None, p_MS_initial=P0)
+    with pytest.raises(ValueError, match="shape"):
+        LoggedInputs([0.0], [[0.0, 1.0]])
+    inputs = LoggedInputs([0.0, 0.02], [row(), row()])
+    inputs.read(0.0)
+    with pytest.raises(ValueError, match="t = 0.02"):
+        inputs.read(0.01)
+    bad = tmp_path / "inputs.npz"
+    bad.write_bytes(b"PK\x03\x04 not really")
+    with pytest.raises(ValueError, match="teleop inputs log"):
+        load_inputs(bad)
+
+
+def test_keyboard_sliders_move_the_stylus_and_the_log_replays_bit_for_bit(scenario, meshcat):
+    # Meshcat's Python API stands in for the key presses: +10 mm in x from t = 0.25 s.
+    def script(t):
+        if t >= 0.25:
+            meshcat.SetSliderValue(SLIDER_X, 10.0)
+            meshcat.SetSliderValue(SLIDER_ACTIVATION, 0.9)
+
+    # In free space (no pin holding the tool), so the stylus settles on the target.
+    take = run_take(scenario, seed=3, meshcat=meshcat, duration=0.75, realtime=False,
+                    on_step=script, progress=lambda line: None, scene=False)  # fmt: skip
+    demo, log = take.demonstration, take.inputs
+    p0 = take.master.p_MS_initial
+    assert demo.p_MS[-1, 0] - p0[0] == pytest.approx(0.010, abs=2e-4)
+    np.testing.assert_allclose(demo.p_MS[-1, 1:], p0[1:], atol=1e-6)
+    # The slave is asked to move scale x R_WM [10 mm, 0, 0].
+    mapping = take.built.mapping
+    expected = mapping.master_to_slave(np.array(p0) + [0.010, 0.0, 0.0])
+    np.testing.assert_allclose(demo.p_WE_desired[-1], expected, atol=5e-4)
+    assert demo.muscle_activation[-1] == pytest.approx(0.9)
+    assert demo.gain[-1] > demo.gain[0]
+    # Inputs at 100 Hz; the same diagram re-driven from them is the same, bit for bit.
+    assert len(log.time) == 75 and np.all(np.diff(log.time) > 0)
+    again = run_take(scenario, seed=3, source=log, realtime=False, scene=False)
+    for field in dc.fields(demo):
+        assert np.array_equal(getattr(demo, field.name), getattr(again.demonstration, field.name))
+
+
+def send(ws, **message):
+    ws.send_binary(msgpack.packb(message))
+
+
+def test_gamepad_and_button_over_the_websocket(scenario, meshcat):
+    """Gamepad axes, the trigger, a NaN axis, a disconnect and the End button, as the page
+    sends them."""
+    ws = websocket.create_connection(meshcat.ws_url(), timeout=5)
+    sent = {}
+
+    def script(t):
+        stage = int(t / 0.125)
+        if stage in sent:
+            return
+        sent[stage] = True
+        buttons = [0.0] * 7 + [0.8] + [0.0] * 9
+        if stage == 1:
+            send(ws, type="gamepad", name="", gamepad=dict(index=0, button_values=buttons,
+                                                         axes=[0.575, 0.0, 0.0, 0.0]))  # fmt: skip
+        elif stage == 3:
+            send(ws, type="gamepad", name="", gamepad=dict(index=0, button_values=buttons,
+                                                         axes=[math.nan, 0.0, 0.0, 0.0]))  # fmt: skip
+        elif stage == 4:
+            send(ws, type="gamepad", name="", gamepad={})  # disconnected
+        elif stage == 6:
+            send(ws, type="button", name=END_BUTTON)
+
+    lines = []
+    try:
+        take = run_take(scenario, seed=1, meshcat=meshcat, duration=5.0, realtime=False,
+                        on_step=script, progress=lines.append, scene=False)  # fmt: skip
+    finally:
+        ws.close()
+    log, demo = take.inputs, take.demonstration
+    assert log.end_reason == "button" and log.end_time < 1.5
+    text = " | ".join(lines)
+    assert "connected" in text and "NaN" in text and "disconnected" in text
+    # The target moved 0.05 m/s in x for each sample that saw the deflected stick.
+    axis = log.rows[:, COLUMNS.index("axis_0")]
+    deflected = int(np.sum(axis == 0.575))
+    assert deflected > 0
+    assert demo.p_MS[-1, 0] - take.master.p_MS_initial[0] == pytest.approx(
+        deflected * 0.01 * 0.05, abs=3e-4
+    )
+    assert np.max(demo.muscle_activation) == pytest.approx(0.8)
+    assert np.all(np.isfinite(demo.p_WE))
+
+
+def test_closed_page_ends_the_take_and_keeps_it(scenario, meshcat):
+    ws = websocket.create_connection(meshcat.ws_url(), timeout=5)
+
+    def script(t):
+        if t >= 0.25 and ws.connected:
+            ws.close()
+
+    take = run_take(scenario, seed=1, meshcat=meshcat, duration=10.0, realtime=False,
+                    on_step=script, progress=lambda line: None)  # fmt: skip
+    assert take.inputs.end_reason == "page closed"
+    assert 2.0 <= take.inputs.end_time < 2.6
+
+
+def _first_line(capsys):
+    return capsys.readouterr().out.splitlines()
+
+
+def test_cli_appends_takes_that_learn_accepts_and_replays_them(tmp_path, capsys):
+    out = tmp_path / "run"
+    args = ["teleop", "cotter_pin", "--out", str(out), "--port", "0", "--no-replay"]
+    assert main([*args, "--duration", "0.3"]) == 0
+    lines = _first_line(capsys)
+    assert lines[0].startswith("Meshcat: http://localhost:")
+    assert int(lines[0].rsplit(":", 1)[1]) > 0
+    assert main([*args, "--duration", "0.2"]) == 0
+    capsys.readouterr()
+    log = load_inputs(out / "inputs_1.npz")
+    assert len(log.time) == 30  # 100 Hz
+    # Re-driven headless from take 1's log: a third take equal to the first, bit for bit.
+    assert main(["teleop", "cotter_pin", "--out", str(out), "--no-replay",
+                 "--replay-inputs", str(out / "inputs_1.npz")]) == 0  # fmt: skip
+    demos, metadata = load_dataset(out / "dataset.npz")
+    assert len(demos) == 3 and metadata["operators"][:2] == ["browser", "browser"]
+    assert [len(d) for d in demos] == [31, 21, 31]  # the log period, both ends
+    for field in dc.fields(demos[0]):
+        assert np.array_equal(getattr(demos[0], field.name), getattr(demos[2], field.name))
+    folder = RunFolder(out)
+    folder.check("demonstrate", folder.dataset, run_hint="x")
+    for name in ("inputs_1.npz", "inputs_2.npz", "inputs_3.npz"):
+        folder.check("demonstrate", out / name, run_hint="x")
+
+
+def _hash(path):
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_interrupted_take_writes_nothing_and_keeps_the_old_takes(scenario, meshcat, tmp_path):
+    teleop(scenario, tmp_path, meshcat=meshcat, duration=0.2, replays=False, realtime=False,
+           progress=lambda line: None)  # fmt: skip
+    before = _hash(tmp_path / "dataset.npz")
+
+    def interrupt(t):
+        if t > 0.1:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        teleop(scenario, tmp_path, meshcat=meshcat, duration=5.0, replays=True, realtime=False,
+               on_step=interrupt, progress=lambda line: None)  # fmt: skip
+    assert _hash(tmp_path / "dataset.npz") == before
+    assert not (tmp_path / "inputs_2.npz").exists() and not (tmp_path / "replay_2.html").exists()
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_port_in_use_and_other_scenario_are_one_line_errors(tmp_path, capsys):
+    with socket.socket() as taken:
+        taken.bind(("localhost", 0))
+        taken.listen(1)
+        port = taken.getsockname()[1]
+        code = main(["teleop", "cotter_pin", "--out", str(tmp_path), "--port", str(port)])
+    err = capsys.readouterr().err
+    assert code == 2 and "in use" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "dataset.npz").exists()
+    assert main(["teleop", "cotter_pin", "--out", str(tmp_path), "--port", "0", "--no-replay",
+                 "--duration", "0.05"]) == 0  # fmt: skip
+    capsys.readouterr()
+    code = main(["teleop", "drawing", "--out", str(tmp_path), "--port", "0"])
+    err = capsys.readouterr().err
+    assert code == 2 and "another scenario" in err
+
+
+@pytest.mark.browser
+def test_keys_in_the_real_page_move_the_stylus_and_escape_ends_the_take(
+    scenario, meshcat, chromium
+):
+    """Headless Chromium opens the live page; DevTools key presses drive the sliders."""
+    import time
+
+    browser_page = browser.HeadlessPage(meshcat.web_url())
+    pressed = {}
+
+    def script(t):
+        if "right" not in pressed:
+            # Wait (in wall time; the simulation waits too) for the page and its controls.
+            deadline = time.monotonic() + 60
+            while not browser_page.evaluate(f"document.body.innerText.includes('{SLIDER_X}')"):
+                if time.monotonic() > deadline:
+                    raise RuntimeError("the page never showed its controls")
+                time.sleep(0.05)
+            for _ in range(5):
+                browser_page.press("ArrowRight")  # +2 mm each
+            pressed["right"] = t
+        elif t - pressed["right"] > 0.5 and "escape" not in pressed:
+            browser_page.press("Escape")
+            pressed["escape"] = t
+
+    with browser_page:
+        take = run_take(scenario, seed=1, meshcat=meshcat, duration=20.0, realtime=True,
+                        on_step=script, progress=lambda line: None, scene=False)  # fmt: skip
+    assert take.inputs.end_reason == "button" and take.inputs.end_time < 5.0
+    slider = take.inputs.rows[:, COLUMNS.index("slider_x_mm")]
+    assert slider[-1] - slider[0] == pytest.approx(10.0)
+    assert take.demonstration.p_MS[-1, 0] - take.master.p_MS_initial[0] == pytest.approx(
+        0.010, abs=5e-4
+    )
