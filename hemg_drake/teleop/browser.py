@@ -798,7 +798,14 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     folder.begin("learn")
     try:
         save_inputs(inputs_path, take.inputs)
-        demos = [*demos, take.demonstration]
+        demo = take.demonstration
+        if demos and getattr(demos[0], "frame_A", None) is not None:
+            # The dataset carries each demonstration's task frames: give the take its own.
+            from hemg_drake.placements import task_frames
+
+            frame_A, frame_b = task_frames(scenario)
+            demo = dc.replace(demo, frame_A=frame_A, frame_b=frame_b)
+        demos = [*demos, demo]
         operators = metadata.get("operators", ["simulated"] * (len(demos) - 1))
         record = dict(
             scenario=scenario.to_yaml(), task=scenario.task, log_period=scenario.log_period,
