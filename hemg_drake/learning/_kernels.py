@@ -19,6 +19,22 @@ _NEGLIGIBLE = 50.0
 
 
 @numba.njit(cache=True)
+def _logsumexp(values, n):
+    """log(sum(exp(values[:n]))), -inf if every value is -inf."""
+    top = _NEG_INF
+    for k in range(n):
+        if values[k] > top:
+            top = values[k]
+    if top == _NEG_INF:
+        return _NEG_INF
+    total = 0.0
+    for k in range(n):
+        if values[k] > top - _NEGLIGIBLE:
+            total += np.exp(values[k] - top)
+    return top + np.log(total)
+
+
+@numba.njit(cache=True)
 def _support(log_duration):
     """First and last duration index (0-based, inclusive) of each state with p_i(d) > 0."""
     n_states, n_durations = log_duration.shape
@@ -61,29 +77,6 @@ def _logsumexp_top(values, n, top):
 
 
 @numba.njit(cache=True)
-def _transition(log_alpha_t, transmat, ended, out):
-    """out_i = log sum_j exp(log_alpha_t_j) a_ji, by one shift and a matrix-vector product.
-
-    N exponentials instead of N^2 (terms below the largest by more than ~700 nats
-    underflow to 0, far below double precision of the sum).
-    """
-    n_states = len(log_alpha_t)
-    top = _NEG_INF
-    for j in range(n_states):
-        top = max(top, log_alpha_t[j])
-    if top == _NEG_INF:
-        out[:] = _NEG_INF
-        return
-    for j in range(n_states):
-        ended[j] = np.exp(log_alpha_t[j] - top)
-    for i in range(n_states):
-        total = 0.0
-        for j in range(n_states):
-            total += ended[j] * transmat[j, i]
-        out[i] = top + np.log(total) if total > 0.0 else _NEG_INF
-
-
-@numba.njit(cache=True)
 def forward(log_emission, log_startprob, log_transmat, log_duration):
     """Segment forward variables (eq. 11) of one sequence.
 
@@ -109,17 +102,17 @@ def forward(log_emission, log_startprob, log_transmat, log_duration):
     n_durations = log_duration.shape[1]
     first, last = _support(log_duration)
     total = _cumulative(log_emission)
-    transmat = np.exp(log_transmat)
     log_alpha = np.empty((n_steps, n_states))
     alpha_in = np.empty((n_states, n_steps))  # log_alpha_in, state-major (see _cumulative)
     terms = np.empty(max(n_durations, n_states))
-    ended = np.empty(n_states)
     for t in range(n_steps):
-        if t == 0:
-            for i in range(n_states):
+        for i in range(n_states):
+            if t == 0:
                 alpha_in[i, t] = log_startprob[i]
-        else:
-            _transition(log_alpha[t - 1], transmat, ended, alpha_in[:, t])
+            else:
+                for j in range(n_states):
+                    terms[j] = log_alpha[t - 1, j] + log_transmat[j, i]
+                alpha_in[i, t] = _logsumexp(terms, n_states)
         for i in range(n_states):
             # Durations d = first + 1 .. min(last + 1, t + 1); segment xi_{t-d+1..t}.
             n_terms = 0
@@ -164,37 +157,26 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
     n_durations = log_duration.shape[1]
     first, last = _support(log_duration)
     total = _cumulative(log_emission)
-    transmat = np.exp(log_transmat)
     beta = np.empty((n_states, n_steps))  # log_beta, state-major (see _cumulative)
     log_beta_in = np.empty((n_steps, n_states))
     transition_counts = np.zeros((n_states, n_states))
     duration_counts = np.zeros((n_states, n_durations))
     terms = np.empty(max(n_durations, n_states))
-    started = np.empty(n_states)
     for s in range(n_steps - 1, -1, -1):
-        if s == n_steps - 1:
-            for i in range(n_states):
+        for i in range(n_states):
+            if s == n_steps - 1:
                 beta[i, s] = 0.0
-        else:
-            # beta_i = log sum_j a_ij exp(beta_in_j), from q_j = exp(beta_in_j - top).
-            top = _NEG_INF
+                continue
             for j in range(n_states):
-                top = max(top, log_beta_in[s + 1, j])
-            for j in range(n_states):  # all 0 if nothing can start at s + 1
-                started[j] = np.exp(log_beta_in[s + 1, j] - top) if top > _NEG_INF else 0.0
-            for i in range(n_states):
-                total_i = 0.0
-                for j in range(n_states):
-                    total_i += transmat[i, j] * started[j]
-                if not total_i > 0.0:
-                    beta[i, s] = _NEG_INF
-                    continue
-                beta[i, s] = top + np.log(total_i)
-                # p(segment of i ends at s, one of j starts at s + 1 | all): the posterior
-                # of the end times the share of j in the sum (both <= 1, no overflow).
-                weight = np.exp(log_alpha[s, i] + beta[i, s] - log_likelihood) / total_i
-                for j in range(n_states):
-                    transition_counts[i, j] += weight * transmat[i, j] * started[j]
+                terms[j] = log_transmat[i, j] + log_beta_in[s + 1, j]
+            beta[i, s] = _logsumexp(terms, n_states)
+            if beta[i, s] == _NEG_INF:
+                continue
+            # p(segment of i ends at s, one of j starts at s + 1 | all).
+            scale = log_alpha[s, i] - log_likelihood
+            for j in range(n_states):
+                if terms[j] > beta[i, s] - _NEGLIGIBLE:
+                    transition_counts[i, j] += np.exp(terms[j] + scale)
         for i in range(n_states):
             # Durations d = first + 1 .. min(last + 1, T - s); segment xi_{s..s+d-1}.
             low = first[i] + 1
