@@ -10,9 +10,16 @@ from multiprocessing.shared_memory import SharedMemory
 import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
+from pydrake.systems.primitives import LogVectorOutput
 
+from hemg_drake.emg.chain import add_emg_gain_chain
 from hemg_drake.emg.libemg import LibEmgSharedMemory
-from hemg_drake.emg.sources import LIVE_COUNTERS, EmgDeviceStalled, LiveEmgSource
+from hemg_drake.emg.sources import (
+    LIVE_COUNTERS,
+    MYO_PERIOD,
+    EmgDeviceStalled,
+    LiveEmgSource,
+)
 
 # ---------------------------------------------------------------- queue policy (fake devices
 
@@ -305,3 +312,22 @@ def test_a_missing_streamer_and_a_wrong_channel_count_are_named(streamers):
     streamer.phase()
     with pytest.raises(ValueError, match="640 bytes, not a whole number of 7-channel"):
         LibEmgSharedMemory(channels=7, tag=streamer.tag)
+
+
+def test_live_source_feeds_the_gain_chain_unchanged(builder):
+    # Blocks of 2 (as the MYO delivers them), one poll each, then one poll with none.
+    rng = np.random.default_rng(4)
+    samples = rng.integers(-128, 128, (60, 8)).astype(float)
+    replies = []
+    for k in range(0, 60, 2):
+        replies += [samples[k:k + 2], None]
+    source = builder.AddSystem(LiveEmgSource(device=ScriptedDevice(replies)))
+    rms, _ = add_emg_gain_chain(builder, source.get_emg_output_port())
+    log = LogVectorOutput(rms.get_envelope_output_port(), builder, publish_period=MYO_PERIOD)
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(60 * MYO_PERIOD)
+    envelope = log.FindLog(simulator.get_context()).data()[0, 1:]
+    # Eqs. 1-2 by hand: RMS over the last 20 samples of the channel sum, zeros before.
+    sums = np.concatenate([np.zeros(19), samples.sum(axis=1)])
+    expected = [np.sqrt(np.mean(sums[k:k + 20] ** 2)) for k in range(60)]
+    np.testing.assert_allclose(envelope, expected, rtol=1e-12)
