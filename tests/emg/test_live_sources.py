@@ -331,3 +331,45 @@ def test_live_source_feeds_the_gain_chain_unchanged(builder):
     sums = np.concatenate([np.zeros(19), samples.sum(axis=1)])
     expected = [np.sqrt(np.mean(sums[k:k + 20] ** 2)) for k in range(60)]
     np.testing.assert_allclose(envelope, expected, rtol=1e-12)
+
+
+def test_myo_reader_queues_every_sample_and_counts_what_it_drops():
+    from hemg_drake.emg._myo import PyomyoDevice
+
+    class PairedMyo:
+        """pyomyo's raw mode: each BLE notification calls the handler twice, in order."""
+
+        def __init__(self, n_pairs):
+            self.handlers, self.sent, self.n_pairs = [], 0, n_pairs
+
+        def add_emg_handler(self, handler):
+            self.handlers.append(handler)
+
+        def run(self):
+            if self.sent < 2 * self.n_pairs:
+                for j in (self.sent, self.sent + 1):
+                    for handler in self.handlers:
+                        handler(tuple(int(v) for v in _sample(j)), 0)
+                self.sent += 2
+            else:
+                time.sleep(0.001)
+
+        def disconnect(self):
+            pass
+
+    device = PyomyoDevice(PairedMyo(30))
+    try:
+        samples = _read_until(device, 60)
+        np.testing.assert_array_equal(samples, [_sample(j) for j in range(60)])
+        assert device.lost == 0
+    finally:
+        device.close()
+    small = PyomyoDevice(PairedMyo(30), max_pending=10)
+    try:
+        deadline = time.monotonic() + 5
+        while small.lost < 50 and time.monotonic() < deadline:
+            time.sleep(0.001)
+        np.testing.assert_array_equal(small.read_samples(), [_sample(j) for j in range(50, 60)])
+        assert small.lost == 50
+    finally:
+        small.close()
