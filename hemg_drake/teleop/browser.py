@@ -51,8 +51,9 @@ END_KEY = "Escape"
 KEY_STEP_MM = 2.0
 ACTIVATION_STEP = 0.05
 # Read-only sliders that show what the hand cannot feel.
-SHOW_FORCE, SHOW_GAIN = "slave force |f_WE| (N)", "gain K (N m/rad)"
-SHOW_TIME, SHOW_RECORDING = "time (s)", "recording (1 yes)"
+# (Meshcat shows about 14 characters of a control's name.)
+SHOW_FORCE, SHOW_GAIN = "force f_WE (N)", "gain K"
+SHOW_TIME, SHOW_RECORDING = "time (s)", "recording"
 MAX_SHOWN_FORCE = 60.0
 
 # Columns of one raw input row, as logged.
@@ -494,7 +495,9 @@ class TeleopPage:
         meshcat.SetObject(f"{self.PATH}/force/shaft/geometry", Cylinder(0.004, 1.0), orange)
         meshcat.SetTransform(f"{self.PATH}/force/shaft/geometry", RigidTransform([0, 0, 0.5]))
         meshcat.SetObject(f"{self.PATH}/force/head", MeshcatCone(0.02, 0.01, 0.01), orange)
-        meshcat.SetObject(f"{self.PATH}/target", Sphere(0.008), Rgba(0.1, 0.6, 1.0, 0.6))
+        meshcat.SetObject(f"{self.PATH}/target", Sphere(0.012), Rgba(0.1, 0.6, 1.0, 0.7))
+        meshcat.SetProperty(f"{self.PATH}/force", "visible", False)
+        meshcat.SetProperty("/Axes", "visible", False)  # the world axes hide the arm's base
         self.updates = 0
 
     def update(self, t, p_WE, f_WE, gain, recording, p_WT=None):
