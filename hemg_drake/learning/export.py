@@ -60,6 +60,12 @@ def _column(array):
     return array[:, np.newaxis] if array.ndim == 1 else array
 
 
+def _write(group, name, array):
+    # gzip (h5py, and so robomimic, decompresses transparently): two pin demonstrations
+    # take 366 kB instead of 438 kB.
+    group.create_dataset(name, data=array, compression="gzip", shuffle=True)
+
+
 def _env_args(metadata):
     task = metadata.get("task", "unknown")
     kwargs = {key: metadata[key] for key in ("task", "log_period") if key in metadata}
@@ -100,19 +106,17 @@ def export_robomimic(path, demos, metadata=None):
             n = len(demo)
             obs = {key: _column(getattr(demo, key)) for key in OBS_KEYS}
             for key, array in obs.items():
-                group.create_dataset(f"obs/{key}", data=array)
-                group.create_dataset(
-                    f"next_obs/{key}", data=np.concatenate([array[1:], array[-1:]])
-                )
+                _write(group, f"obs/{key}", array)
+                _write(group, f"next_obs/{key}", np.concatenate([array[1:], array[-1:]]))
             actions = np.column_stack([getattr(demo, key) for key in ACTION_KEYS])
-            group.create_dataset("actions", data=actions)
-            group.create_dataset("rewards", data=np.zeros(n))
+            _write(group, "actions", actions)
+            _write(group, "rewards", np.zeros(n))
             dones = np.zeros(n)
             dones[-1] = 1.0
-            group.create_dataset("dones", data=dones)
-            group.create_dataset("time", data=demo.time)
+            _write(group, "dones", dones)
+            _write(group, "time", demo.time)
             for key, field in EMG_KEYS.items():
-                group.create_dataset(f"emg/{key}", data=getattr(demo, field))
+                _write(group, f"emg/{key}", getattr(demo, field))
             group.attrs["num_samples"] = n
             group.attrs["seed"] = demo.seed
             total += n
