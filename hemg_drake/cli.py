@@ -241,6 +241,21 @@ def _export(args):
     _print(f"wrote {args.output} ({len(demos)} demonstrations, {total} samples, {args.format})")
 
 
+def _import_robomimic(args):
+    from hemg_drake.learning.demos import save_dataset
+    from hemg_drake.learning.export import load_robomimic
+    from hemg_drake.run_folder import RunFolder
+
+    demos, metadata = load_robomimic(args.input)  # read and checked before the folder
+    check_output_folder(args.out)
+    folder = RunFolder(args.out, create=True)
+    metadata["imported_from"] = str(args.input)
+    with folder.stage("demonstrate"):
+        save_dataset(folder.dataset, demos, metadata)
+        folder.finish("demonstrate", [folder.dataset])
+    _print(f"wrote {folder.dataset} ({len(demos)} demonstrations from {args.input})")
+
+
 def _version():
     from importlib.metadata import PackageNotFoundError, version
 
@@ -378,6 +393,13 @@ def build_parser():
     )  # fmt: skip
     export.add_argument("output", help="file to write, e.g. runs/pin/demos.hdf5")
     export.set_defaults(func=_export)
+    imports = command("import", "read demonstrations exported with export into a run folder")
+    imports.add_argument("input", help="robomimic HDF5 file written by hemg-drake export")
+    imports.add_argument(
+        "--format", choices=["robomimic"], default="robomimic", help="the file's format"
+    )
+    imports.add_argument("--out", required=True, help="run folder to write dataset.npz into")
+    imports.set_defaults(func=_import_robomimic)
 
     teleop = command(
         "teleop", "drive the arm yourself in the browser (Meshcat); append the take to a dataset"

@@ -120,3 +120,24 @@ def test_cli_exports_a_run_folder(tmp_path, demos, capsys):
     assert metadata["num_demonstrations"] == 3 and metadata["task"] == "cotter_pin"
     assert main(["export", str(tmp_path / "nowhere"), "--format", "robomimic", str(out)]) == 2
     assert "nowhere" in capsys.readouterr().err
+
+
+def test_cli_imports_into_a_run_folder_that_learn_accepts(tmp_path, demos, capsys):
+    from hemg_drake.learning.demos import load_dataset
+    from hemg_drake.run_folder import RunFolder
+
+    path = tmp_path / "demos.hdf5"
+    export_robomimic(path, demos, METADATA)
+    run = tmp_path / "imported"
+    assert main(["import", str(path), "--out", str(run)]) == 0
+    assert "3 demonstrations" in capsys.readouterr().out
+    folder = RunFolder(run)
+    folder.check("demonstrate", folder.dataset, run_hint="hemg-drake import")  # recorded
+    loaded, metadata = load_dataset(folder.dataset)
+    np.testing.assert_array_equal(loaded[2].emg, demos[2].emg)
+    assert metadata["scenario"] == METADATA["scenario"] and metadata["imported_from"] == str(path)
+    # A bad file leaves no run folder behind.
+    (tmp_path / "junk.hdf5").write_bytes(b"junk")
+    assert main(["import", str(tmp_path / "junk.hdf5"), "--out", str(tmp_path / "new")]) == 2
+    assert "not a readable HDF5 file" in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()
