@@ -146,3 +146,140 @@ def test_nan_force_is_rejected(mapping):
     for name in finite:
         with pytest.raises(ValueError, match=f"{name} must be finite"):
             motor_force(system, **{**finite, name: [0.0, 0.0, np.nan]})
+
+
+# --- delay and passivity (issue 18) -------------------------------------------------------
+
+
+def test_defaults_keep_the_stateless_feedthrough(mapping):
+    for mode in ("force", "position_error"):
+        system = ForceFeedback(mapping=mapping, mode=mode)
+        assert system.num_discrete_state_groups() == 0 and not system.stateful
+    assert not ForceFeedback(mapping=mapping).HasInputPort("v_MS")
+    assert ForceFeedback(mapping=mapping, passivity="tdpa").HasInputPort("v_MS")
+
+
+def _step_by_step(system, inputs_at, steps):
+    """motor_force at t_k = k T as the master samples it, the inputs of sample k fixed."""
+    simulator = Simulator(system)
+    context = simulator.get_mutable_context()
+    for name, value in inputs_at(0).items():
+        system.GetInputPort(name).FixValue(context, np.asarray(value, float))
+    simulator.Initialize()
+    forces = []
+    for k in range(steps):
+        simulator.AdvanceTo(k * 1e-3)  # the updates of samples 0 .. k-1 are done
+        for name, value in inputs_at(k).items():
+            system.GetInputPort(name).FixValue(context, np.asarray(value, float))
+        forces.append(system.GetOutputPort("motor_force").Eval(context).copy())
+    return np.array(forces), simulator
+
+
+def test_delay_shifts_the_slave_force_by_n_samples(mapping):
+    n, R = 7, mapping.R_WM.matrix()
+    system = ForceFeedback(mapping=mapping, gain=0.5, delay_steps=n)
+
+    def f_WE(k):
+        return np.array([np.sin(0.3 * k), 0.1 * k, -1.0])
+
+    forces, _ = _step_by_step(system, lambda k: {"f_WE": f_WE(k)}, 30)
+    for k in range(30):
+        # Before the start the slave held its first force.
+        expected = 0.5 * R.T @ f_WE(max(k - n, 0)) / 3.0
+        np.testing.assert_allclose(forces[k], expected, rtol=1e-12, atol=1e-15)
+
+
+def test_delay_in_position_error_mode_delays_the_slave_not_the_stylus(mapping):
+    n = 4
+    system = ForceFeedback(mapping=mapping, mode="position_error", delay_steps=n, peak_force=1e3)
+
+    def inputs(k):
+        return dict(p_WE=[0.7 + 0.01 * k, -0.2, 0.3], v_WE=[0.0, 0.02 * k, 0.0],
+                    p_MS=[0.001 * k, 0.0, 0.0], v_MS=[0.0, 0.0, 0.003 * k])  # fmt: skip
+
+    forces, _ = _step_by_step(system, inputs, 12)
+    for k in range(12):
+        slave, master = inputs(max(k - n, 0)), inputs(k)
+        e = mapping.slave_to_master(slave["p_WE"]) - np.array(master["p_MS"])
+        edot = mapping.velocity_to_master(slave["v_WE"]) - np.array(master["v_MS"])
+        np.testing.assert_allclose(forces[k], 50.0 * e + 50.0 * edot, rtol=1e-12, atol=1e-14)
+
+
+def test_passivity_controller_removes_only_the_energy_the_channel_never_took(mapping):
+    # A constant fed-back force F and a stylus velocity v, by hand in M: F = R^T f / 3.
+    R, T = mapping.R_WM.matrix(), 1e-3
+    f_WE = np.array([3.0, -1.5, 2.0])
+    F = R.T @ f_WE / 3.0
+    v = -F / np.linalg.norm(F) * 0.2 + np.array([0.05, 0.0, 0.0])
+    assert F @ v < 0  # the stylus moves against the force: the channel absorbs energy
+    absorb, flip = 10, 25
+
+    def inputs(k):
+        return {"f_WE": f_WE, "v_MS": v if k < absorb else -v}
+
+    system = ForceFeedback(mapping=mapping, passivity="tdpa")
+    forces, simulator = _step_by_step(system, inputs, flip)
+    # Absorbing: the force goes through unchanged; the observer sums -T F.v per sample.
+    np.testing.assert_allclose(forces[:absorb], np.tile(F, (absorb, 1)), rtol=1e-12)
+    # Reversed: the stored energy lets exactly as many samples through as it took.
+    np.testing.assert_allclose(forces[absorb : 2 * absorb - 1], np.tile(F, (absorb - 1, 1)),
+                               rtol=1e-12)  # fmt: skip
+    # Then the controller's damper cancels the force's component along v: no power out.
+    projected = F - (F @ v) / (v @ v) * v
+    for force in forces[2 * absorb + 1 :]:
+        np.testing.assert_allclose(force, projected, rtol=1e-9, atol=1e-12)
+        assert force @ -v == pytest.approx(0.0, abs=1e-12)
+    context = system.GetMyContextFromRoot(simulator.get_context())
+    assert system.energy(context) == pytest.approx(0.0, abs=1e-12)
+
+
+def _delayed_spring_loop(n, passivity, duration=2.0):
+    """Stylus held by a hand (300 N/m, 5 N s/m), the slave following it through an n-sample
+    delay into a 500 N/m spring, the spring's force fed back through another n samples."""
+    from pydrake.systems.primitives import Adder, MatrixGain
+
+    from hemg_drake.teleop.mapping import WorkspaceMap
+
+    mapping = WorkspaceMapping(scale=2.0)
+    builder = DiagramBuilder()
+    master = builder.AddSystem(HapticMaster(p_MS_initial=[0.005, 0.0, 0.0]))
+    channel = builder.AddSystem(WorkspaceMap(mapping=mapping, delay_steps=n))
+    feedback = builder.AddSystem(
+        ForceFeedback(mapping=mapping, delay_steps=n, passivity=passivity, peak_force=1e3)
+    )
+    for name in ("p_MS", "v_MS"):
+        builder.Connect(master.GetOutputPort(name), channel.GetInputPort(name))
+    spring = builder.AddSystem(MatrixGain(-500.0 * np.eye(3)))
+    rest = builder.AddSystem(ConstantVectorSource(500.0 * mapping.master_to_slave(np.zeros(3))))
+    total = builder.AddSystem(Adder(2, 3))
+    builder.Connect(channel.GetOutputPort("p_WE_desired"), spring.get_input_port())
+    builder.Connect(spring.get_output_port(), total.get_input_port(0))
+    builder.Connect(rest.get_output_port(), total.get_input_port(1))
+    builder.Connect(total.get_output_port(), feedback.GetInputPort("f_WE"))
+    if passivity != "none":
+        builder.Connect(master.GetOutputPort("v_MS"), feedback.GetInputPort("v_MS"))
+    builder.Connect(feedback.GetOutputPort("motor_force"), master.GetInputPort("motor_force"))
+    hand = builder.AddSystem(MatrixGain(np.hstack([-300.0 * np.eye(3), -5.0 * np.eye(3)])))
+    builder.Connect(master.GetOutputPort("state"), hand.get_input_port())
+    builder.Connect(hand.get_output_port(), master.GetInputPort("hand_force"))
+    simulator = Simulator(builder.Build())
+    context = simulator.get_mutable_context()
+    x, energy = [], []
+    for t in np.arange(0.01, duration + 1e-9, 0.01):
+        simulator.AdvanceTo(t)
+        x.append(master.GetOutputPort("p_MS").Eval(master.GetMyContextFromRoot(context))[0])
+        if feedback.stateful:
+            energy.append(feedback.energy(feedback.GetMyContextFromRoot(context)))
+    return np.abs(np.array(x)), np.array(energy)
+
+
+def test_delayed_force_feedback_oscillates_and_the_passive_loop_settles():
+    # Without delay the loop settles (the hand's damping wins); 20 ms each way, it keeps
+    # oscillating by centimetres; the passivity controller makes it settle again.
+    settled, _ = _delayed_spring_loop(0, "none")
+    assert settled[-50:].max() < 1e-4
+    plain, _ = _delayed_spring_loop(20, "none")
+    assert plain[-50:].max() > 0.01
+    passive, energy = _delayed_spring_loop(20, "tdpa")
+    assert passive[-50:].max() < 1e-4
+    assert energy.min() > -1e-9  # the channel never gave out more than it took
