@@ -194,6 +194,11 @@ class ForceFeedback(LeafSystem):
         energy = float(state[-1])
         if self.passivity == "none":
             return force, None, energy
+        if not self._inputs["v_MS"].HasValue(context):
+            raise ValueError(
+                "passivity 'tdpa' needs the stylus velocity: connect the master's v_MS to "
+                "the force feedback's v_MS input"
+            )
         v_MS = self._input(context, "v_MS").tolist()
         force, _ = passivity_step(force, v_MS, energy, self.period)
         return saturate_norm(force, self.peak_force), v_MS, energy

@@ -283,3 +283,11 @@ def test_delayed_force_feedback_oscillates_and_the_passive_loop_settles():
     passive, energy = _delayed_spring_loop(20, "tdpa")
     assert passive[-50:].max() < 1e-4
     assert energy.min() > -1e-9  # the channel never gave out more than it took
+
+
+def test_passivity_without_the_stylus_velocity_is_named(mapping):
+    system = ForceFeedback(mapping=mapping, passivity="tdpa")
+    context = system.CreateDefaultContext()
+    system.GetInputPort("f_WE").FixValue(context, np.zeros(3))
+    with pytest.raises(ValueError, match="connect the master's v_MS"):
+        system.GetOutputPort("motor_force").Eval(context)
