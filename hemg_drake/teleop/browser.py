@@ -94,17 +94,20 @@ class BrowserMaster(LeafSystem):
         output_ports:
         - hand_force
         - activation
+        - p_MT
 
     Ports as the SimulatedOperator's (so ``build_demonstration_diagram(operator_factory=)``
     swaps it in): ``p_MS`` (3, m) and ``v_MS`` (3, m/s) the stylus tip in M;
     ``feedback_force`` (3, N, in M) the device motors' force, read by nothing (a keyboard
     renders no force: the page shows the slave's force instead); ``hand_force`` (3, N, in M)
-    for the HapticMaster; ``activation`` (1, in [0, 1]) for the sEMG source.
+    for the HapticMaster; ``activation`` (1, in [0, 1]) for the sEMG source; ``p_MT`` (3, m)
+    the stylus target in M (for the page).
 
     Every ``period`` a discrete update reads one raw row (:data:`COLUMNS`) from ``source``
     and sets the target p_T, its velocity v_T and the activation a:
 
-    - keyboard: s = p_MS_initial + (slider - slider at the first sample), in m;
+    - keyboard: s = p_MS_initial + (slider - slider at the first sample), in m (a
+      non-finite slider value holds that axis);
     - gamepad: displacement g_k = clip(s_k + g_(k-1) + T v_pad, box) - s_k with
       v_pad = speed [dz(axis 0), -dz(axis 3), dz(axis 1)] (dz: :func:`dead_zone`; sticks
       up are negative), so p_T = s + g stays in the workspace box and v_T = (g_k -
@@ -210,15 +213,19 @@ class BrowserMaster(LeafSystem):
     def step(self, row, state):
         """The state after one sample of ``row`` (both lists of floats): the update's maths."""
         col = _COL
-        if state[13] == 0.0:  # first sample: the keyboard's zero
-            first = [row[col["slider_x_mm"]], row[col["slider_y_mm"]], row[col["slider_z_mm"]]]
-        else:
-            first = state[10:13]
-        s = [
-            p0 + 1e-3 * (row[col[name]] - f0)
-            for p0, name, f0 in zip(self.p_MS_initial, ("slider_x_mm", "slider_y_mm", "slider_z_mm"), first)
-        ]
+        sliders = [row[col["slider_x_mm"]], row[col["slider_y_mm"]], row[col["slider_z_mm"]]]
+        # The first sample's slider values are the keyboard's zero.
+        first = sliders if state[13] == 0.0 else state[10:13]
         g_old = state[6:9]
+        s = []
+        for i, (p0, value) in enumerate(zip(self.p_MS_initial, sliders)):
+            s_old = state[i] - g_old[i]  # the keyboard's part of the last target
+            if not math.isfinite(value):  # a bogus slider message: hold that axis
+                s.append(s_old)
+                continue
+            if not math.isfinite(first[i]):  # re-anchor the zero where the target is
+                first[i] = value - 1e3 * (s_old - p0)
+            s.append(p0 + 1e-3 * (value - first[i]))
         dz = self.stick_dead_zone
         if row[col["gamepad_index"]] >= 0:
             ax = [row[col[f"axis_{i}"]] for i in range(N_AXES)]

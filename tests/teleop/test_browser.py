@@ -132,6 +132,18 @@ def test_missing_or_nan_gamepad_moves_nothing_and_is_reported():
     assert "disconnected" in messages
 
 
+def test_nan_slider_holds_its_axis():
+    rows = [row((4.0, 0.0, 0.0)), row((8.0, math.nan, 0.0)), row((math.nan, 2.0, 0.0)),
+            row((math.nan, 2.0, 0.0))]  # fmt: skip
+    _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0])
+    # x holds its last finite offset (+4 mm), y moved +2 mm, z did not move.
+    np.testing.assert_allclose(force, [K_H * 0.004, K_H * 0.002, 0.0], rtol=1e-9, atol=1e-12)
+    # A first sample that is NaN: the zero is taken where the target is when it turns finite.
+    rows = [row((math.nan, 0.0, 0.0)), row((30.0, 0.0, 0.0)), row((36.0, 0.0, 0.0))]
+    _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0])
+    np.testing.assert_allclose(force, [K_H * 0.006, 0.0, 0.0], rtol=1e-9, atol=1e-12)
+
+
 def test_bad_arguments_and_logs_are_refused(tmp_path):
     with pytest.raises(ValueError, match="p_MS_initial"):
         BrowserMaster(source=LoggedInputs([0.0], [row()]), p_MS_initial=[0.2, 0.0, 0.0])
