@@ -28,7 +28,7 @@ import numpy as np
 from hemg_drake.diagrams.reproduction import build_reproduction_diagram, run_reproduction
 from hemg_drake.evaluation import task_metrics
 from hemg_drake.learning.demos import load_dataset
-from hemg_drake.pipeline import demonstrate, fit_model, learning_data
+from hemg_drake.pipeline import demonstrate, fit_model, learning_data, placed_model
 from hemg_drake.placements import moved_demonstration, placed, scene_frame, task_frames
 from hemg_drake.scenario import load_scenario, shipped_scenario
 
@@ -61,7 +61,7 @@ def quiet(line):
 def reproduce_at(scenario, model, demos, frames):
     """Reproduce ``model`` (TP-HSMM: at the scenario's frames) in the scenario's scene;
     metrics against ``demos`` carried from their frames to the scenario's."""
-    hsmm = model.at(*task_frames(scenario)) if hasattr(model, "at") else model
+    hsmm = placed_model(model, scenario)
     here = scene_frame(*task_frames(scenario))
     moved = [moved_demonstration(d, scene_frame(*f), here) for d, f in zip(demos, frames)]
     start = np.mean([d.p_WE[0] for d in moved], axis=0)
@@ -71,11 +71,17 @@ def reproduce_at(scenario, model, demos, frames):
     return task_metrics(scenario.task, moved, result), result, moved
 
 
-def fit_both(scenario, demos, frames):
+MODELS = ("TP-HSMM, scene frame", "TP-HSMM, base and scene", "world HSMM")
+
+
+def fit_all(scenario, demos, frames):
     data = learning_data(demos, scenario)
-    tp = fit_model(data, scenario, frames=frames)
-    world = fit_model(data, scenario)
-    return {"TP-HSMM": tp, "world HSMM": world}
+    both = scenario.replaced(["learning.task_frames=base_and_scene"])
+    return dict(zip(MODELS, (
+        fit_model(data, scenario.replaced(["learning.task_frames=scene"]), frames=frames),
+        fit_model(data, both, frames=frames),
+        fit_model(data, scenario),
+    )))  # fmt: skip
 
 
 def row(task, case, name, metrics):
@@ -120,7 +126,7 @@ def evaluate(task, work, figure_data):
     demos, _ = load_dataset(work / task / "dataset.npz")
     frames = [d.frames for d in demos]
     print(f"{task}: {len(demos)} demonstrations in {time.perf_counter() - began:.0f} s")
-    rows, summary = [], {"TP-HSMM": [], "world HSMM": []}
+    rows, summary = [], {name: [] for name in MODELS}
     for c, demo in enumerate(demos):
         keep = [i for i in range(len(demos)) if i != c]
         train, train_frames = [demos[i] for i in keep], [frames[i] for i in keep]
@@ -128,19 +134,19 @@ def evaluate(task, work, figure_data):
         yaw = float(np.degrees(np.arctan2(R[1, 0], R[0, 0])))
         here = placed(scenario, p, yaw)
         case = f"in {c + 1}: {np.round(p, 3).tolist()}, {yaw:.0f} deg"
-        for name, model in fit_both(scenario, train, train_frames).items():
+        for name, model in fit_all(scenario, train, train_frames).items():
             metrics, _, _ = reproduce_at(here, model, train, train_frames)
             rows.append(row(task, case, name, metrics))
             summary[name].append(metrics)
         print(f"  {case} done after {time.perf_counter() - began:.0f} s", flush=True)
-    models = fit_both(scenario, demos, frames)
+    models = fit_all(scenario, demos, frames)
     for k, (position, yaw) in enumerate(setup["outside"], start=1):
         here = placed(scenario, position, yaw)
         case = f"out {k}: {position}, {yaw:.0f} deg"
         for name, model in models.items():
             metrics, result, _ = reproduce_at(here, model, demos, frames)
             rows.append(row(task, case, name, metrics))
-            if name == "TP-HSMM" and k == 1:
+            if name == MODELS[0] and k == 1:
                 figure_data[task] = (demos, result.log, here)
         print(f"  {case} done after {time.perf_counter() - began:.0f} s", flush=True)
     inside = {name: [m["success"] for m in ms] for name, ms in summary.items()}

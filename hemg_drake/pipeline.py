@@ -87,7 +87,7 @@ def fit_model(data, scenario, *, n_iter=None, frames=None):
     """
     from hemg_drake.learning.hsmm import HSMM
     from hemg_drake.learning.tphsmm import TaskParameterisedHSMM
-    from hemg_drake.placements import frames_vary
+    from hemg_drake.placements import FRAME_SETS, frames_vary, last_frames
 
     settings = scenario.learning
     check_enough_data(data, settings.num_states)
@@ -98,7 +98,8 @@ def fit_model(data, scenario, *, n_iter=None, frames=None):
         seed=scenario.seed,
     )
     if frames is not None and (settings.task_parameterised or frames_vary(frames)):
-        return TaskParameterisedHSMM(settings.num_states, **parameters).fit(data, frames)
+        used = [last_frames(pair, FRAME_SETS[settings.task_frames]) for pair in frames]
+        return TaskParameterisedHSMM(settings.num_states, **parameters).fit(data, used)
     return HSMM(settings.num_states, **parameters).fit(data)
 
 
@@ -211,6 +212,7 @@ def learn(run_dir, *, overrides=(), n_iter=None, progress=print):
     -------
     HSMM, the fitted model.
     """
+    from hemg_drake.placements import last_frames
     from hemg_drake.viz.figures import plot_state_activations, save_figure
 
     folder = RunFolder(run_dir)
@@ -222,14 +224,15 @@ def learn(run_dir, *, overrides=(), n_iter=None, progress=print):
     start = time.perf_counter()
     model = fit_model(data, scenario, n_iter=n_iter, frames=frames)
     iterations = f"{model.n_iter_} EM iteration{'s' if model.n_iter_ != 1 else ''}"
-    kind = "HSMM" if not hasattr(model, "at") else f"TP-HSMM ({model.n_frames_} frames)"
+    frame_names = scenario.learning.task_frames.replace("_", " ")
+    kind = "HSMM" if not hasattr(model, "at") else f"TP-HSMM (task frames: {frame_names})"
     progress(
         f"learn: {kind} N = {model.n_states} on {len(data)} demonstrations, {iterations} in "
         f"{time.perf_counter() - start:.1f} s"
         + ("" if model.converged_ else " (stopped before converging: raise --iterations)")
     )
     with folder.stage("learn"):
-        first = model.at(*frames[0]) if hasattr(model, "at") else model
+        first = model.at(*last_frames(frames[0], model.n_frames_)) if hasattr(model, "at") else model
         figure = plot_state_activations(
             demos[0].time, first.forward_variable(data[0]), task=scenario.task, along=1
         )
@@ -245,9 +248,11 @@ def learn(run_dir, *, overrides=(), n_iter=None, progress=print):
 def placed_model(model, scenario):
     """The HSMM to reproduce with at the scenario's placement: a TP-HSMM's product in the
     scenario's task frames (``hemg_drake.placements.task_frames``), a plain HSMM itself."""
-    from hemg_drake.placements import task_frames
+    from hemg_drake.placements import last_frames, task_frames
 
-    return model.at(*task_frames(scenario)) if hasattr(model, "at") else model
+    if not hasattr(model, "at"):
+        return model
+    return model.at(*last_frames(task_frames(scenario), model.n_frames_))
 
 
 def _checked_model(folder, scenario):

@@ -121,6 +121,16 @@ def task_frames(scenario):
     return A, b
 
 
+# learning.task_frames: how many of the last task frames the TP-HSMM uses (base first).
+FRAME_SETS = {"scene": 1, "base_and_scene": 2}
+
+
+def last_frames(frames, count):
+    """The last ``count`` frames of (A, b): 1 the scene frame alone, 2 the base and the scene."""
+    A, b = frames
+    return np.asarray(A)[-count:], np.asarray(b)[-count:]
+
+
 def frames_vary(frames):
     """True when the demonstrations' frames (list of (A, b)) are not all the same."""
     A0, b0 = frames[0]

@@ -296,6 +296,11 @@ class LearningConfig:
     # Fit a task-parameterised HSMM (frames: robot base and scene; learning/tphsmm.py) even
     # when the demonstrations share one placement (it is fitted whenever they do not).
     task_parameterised: bool = _value(False)
+    # The TP-HSMM's task frames: "scene" (the scene frame T alone) or "base_and_scene" (the
+    # robot's base too, Calinon 2016's product of both). Measured (docs/placements.md): the
+    # base frame pulls the drawing's strokes 8 mm towards where the sheet was on average
+    # (its Gaussians are no wider than the covariance floor), the scene frame alone 0.5 mm.
+    task_frames: str = _value("scene", choices=("scene", "base_and_scene"))
 
 
 @dc.dataclass

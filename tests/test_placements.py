@@ -123,7 +123,8 @@ def test_reproduce_at_a_new_placement_end_to_end(tmp_path):
     """Demonstrations at three placements -> TP-HSMM -> reproduce with the scene moved and
     turned: the start and the comparison are the demonstrations carried there."""
     run = tmp_path / "run"
-    demonstrate(pin(*RANGES, "duration=2.0"), run, replays=False, progress=quiet)
+    both = "learning.task_frames=base_and_scene"  # the robot's base and the scene
+    demonstrate(pin(*RANGES, "duration=2.0", both), run, replays=False, progress=quiet)
     demos, _ = load_dataset(run / "dataset.npz")
     assert len({float(d.frame_b[1, 0]) for d in demos}) == 3
     model = learn(run, progress=quiet)
@@ -138,3 +139,21 @@ def test_reproduce_at_a_new_placement_end_to_end(tmp_path):
     np.testing.assert_allclose(log["x_star"][0], metrics["start"], atol=1e-9)
     assert metrics["position_rmse_m"] < 0.01
     assert metrics["pull_direction_error_deg"] < 10 and metrics["grasp_position_error_m"] < 0.005
+
+
+def test_placements_figure_draws_demonstrations_grey_and_the_reproduction_red():
+    from types import SimpleNamespace
+
+    from hemg_drake.viz.figures import plot_placements
+
+    scenario = pin("scene.yaw_deg=30")
+    frames = task_frames(scenario)
+    demos = [_demo(1, frames), _demo(2, frames)]
+    log = SimpleNamespace(time=demos[0].time, p_WE=demos[0].p_WE + 0.1, f_WE=demos[0].f_WE)
+    figure = plot_placements(demos, log, task="cotter_pin", X_WT=scenario.X_WT())
+    lines = figure.axes[0].get_lines()
+    colours = [line.get_color() for line in lines]
+    assert colours.count("tab:red") == 3  # path, start, frame origin
+    assert sum(c in ("0.6", "0.45") for c in colours) == 6  # two paths, starts, frames
+    labels = [t.get_text() for t in figure.axes[0].get_legend().get_texts()]
+    assert labels == ["demonstrations", "reproduction at a new placement"]

@@ -651,3 +651,63 @@ def plot_strokes(strokes, *, demonstrated=(), title="Drawn strokes seen from abo
         axes.legend(loc="best", fontsize="small")
     axes.set_title(title)
     return figure
+
+
+def plot_placements(demos, log, *, task, X_WT=None, title=None):
+    """Demonstrations at their placements (grey) and a reproduction at a new one (red), seen
+    from above (world x, y).
+
+    Each path is the tool point; for the drawing, the ink (pen on the paper) is drawn thick.
+    A demonstration's scene frame (its ``frame_b``, ``frame_A``: origin and x axis) is marked
+    in grey, the reproduction's (``X_WT``) in red.
+
+    Parameters
+    ----------
+    demos : sequence of Demonstration, with task frames (or None: no frame marks).
+    log : ReproductionLog (time, p_WE, f_WE).
+    task : {"cotter_pin", "drawing"}
+    X_WT : RigidTransform, optional; the reproduction's scene pose.
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure
+    """
+    from hemg_drake.viz.ink import in_contact, ink_strokes
+
+    figure = Figure(figsize=(6, 6), layout="constrained")
+    axes = figure.subplots()
+    span = []
+
+    def draw(time, p_WE, f_WE, color, label):
+        p_WE = np.asarray(p_WE, dtype=float)
+        span.append(p_WE[:, :2])
+        axes.plot(p_WE[:, 0], p_WE[:, 1], color=color, linewidth=0.6, label=label)
+        if task == "drawing":
+            for stroke in ink_strokes(time, p_WE, in_contact(f_WE), min_points=10):
+                axes.plot(stroke[:, 0], stroke[:, 1], color=color, linewidth=2.2)
+        else:
+            axes.plot(*p_WE[0, :2], "o", color=color, markersize=5)
+
+    def frame(R, p, color):
+        axes.plot(*p[:2], "+", color=color, markersize=10, markeredgewidth=1.5)
+        axes.annotate("", xy=p[:2] + 0.03 * R[:2, 0], xytext=p[:2],
+                      arrowprops=dict(arrowstyle="->", color=color, linewidth=1.2))  # fmt: skip
+
+    for c, demo in enumerate(demos):
+        draw(demo.time, demo.p_WE, demo.f_WE, "0.6", "demonstrations" if c == 0 else None)
+        if demo.frames is not None:
+            frame(demo.frame_A[-1], demo.frame_b[-1], "0.45")
+    draw(log.time, log.p_WE, log.f_WE, "tab:red", "reproduction at a new placement")
+    if X_WT is not None:
+        frame(X_WT.rotation().matrix(), X_WT.translation(), "tab:red")
+    points = np.concatenate(span)
+    middle, half = points.mean(axis=0), 0.55 * np.ptp(points, axis=0).max() + 0.03
+    axes.set_xlim(middle[0] - half, middle[0] + half)
+    axes.set_ylim(middle[1] - half, middle[1] + half)
+    axes.set_aspect("equal")
+    axes.set_xlabel("x (m)")
+    axes.set_ylabel("y (m)")
+    axes.legend(loc="best", fontsize="small")
+    name = task.replace("_", " ")
+    axes.set_title(title or f"{name}: demonstrated placements and a new one, from above")
+    return figure
