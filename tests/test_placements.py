@@ -157,3 +157,18 @@ def test_placements_figure_draws_demonstrations_grey_and_the_reproduction_red():
     assert sum(c in ("0.6", "0.45") for c in colours) == 6  # two paths, starts, frames
     labels = [t.get_text() for t in figure.axes[0].get_legend().get_texts()]
     assert labels == ["demonstrations", "reproduction at a new placement"]
+
+
+def test_cli_reproduces_at_a_new_placement(tmp_path, capsys):
+    from hemg_drake.cli import main
+
+    run = tmp_path / "run"
+    demonstrate(pin(*RANGES), run, replays=False, progress=quiet)
+    assert main(["learn", str(run)]) == 0
+    assert main(["reproduce", str(run), "--no-replay", "--out", str(tmp_path / "new"),
+                 "--set", "scene.position=[0.66,-0.85,0.12]", "--set", "scene.yaw_deg=-15"]) == 0  # fmt: skip
+    out = capsys.readouterr().out
+    assert "TP-HSMM (task frames: scene)" in out
+    metrics = json.loads((tmp_path / "new" / "metrics.json").read_text())
+    assert metrics["scene_position"] == [0.66, -0.85, 0.12] and metrics["scene_yaw_deg"] == -15
+    np.testing.assert_allclose(metrics["start"], [0.66, -0.85, 0.12], atol=0.004)
