@@ -169,13 +169,23 @@ def _teleop(args):
     scenario = load_scenario(_scenario_path(args.scenario), overrides=args.set)
     check_output_folder(args.out)
     existing_takes(scenario, args.out)  # refuse a mismatched folder before opening a port
-    if args.replay_inputs is not None and not Path(args.replay_inputs).is_file():
-        raise ValueError(f"{args.replay_inputs}: no such inputs log")
-    written = teleop(
-        scenario, args.out, port=args.port, duration=args.duration,
-        replay_inputs=args.replay_inputs, replays=not args.no_replay, progress=_print,
-    )  # fmt: skip
-    _print("wrote " + ", ".join(str(path) for path in written))
+    meshcat = None
+    if args.replay_inputs is not None:
+        if not Path(args.replay_inputs).is_file():
+            raise ValueError(f"{args.replay_inputs}: no such inputs log")
+        if args.takes != 1:
+            raise ValueError("--takes needs a person at the page; --replay-inputs replays one")
+    else:
+        from hemg_drake.teleop.browser import start_meshcat
+
+        meshcat = start_meshcat(args.port)
+        _print(f"Meshcat: http://localhost:{meshcat.port()}")  # the first line, always
+    for _ in range(args.takes):
+        written = teleop(
+            scenario, args.out, meshcat=meshcat, duration=args.duration,
+            replay_inputs=args.replay_inputs, replays=not args.no_replay, progress=_print,
+        )  # fmt: skip
+        _print("wrote " + ", ".join(str(path) for path in written))
 
 
 def _emg_figure(args):
@@ -417,6 +427,10 @@ def build_parser():
     teleop.add_argument(
         "--replay-inputs", metavar="LOG.npz",
         help="re-drive a take headless from its inputs log (inputs_<c>.npz)",
+    )  # fmt: skip
+    teleop.add_argument(
+        "--takes", type=_positive_int("--takes"), default=1,
+        help="record this many takes in a row on the same page",
     )  # fmt: skip
     teleop.add_argument("--no-replay", action="store_true", help="write no HTML replay")
     add_set(teleop)

@@ -746,8 +746,8 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     take it; an older model and reproduction are removed (they no longer match). Takes
     already there are kept.
 
-    Live (``replay_inputs`` None): the first line given to ``progress`` is
-    ``Meshcat: http://localhost:P``; the take ends with the page's End take button or
+    Live (``replay_inputs`` None): without a ``meshcat``, one is started on ``port`` and
+    the first line given to ``progress`` is ``Meshcat: http://localhost:P``; the take ends with the page's End take button or
     Escape, after ``duration`` simulated seconds, or when the page has been closed for
     2 s, and is saved in each case. Ctrl-C (KeyboardInterrupt) discards it: nothing is
     written. With ``replay_inputs`` (a log path): headless, as fast as it runs, the same
@@ -777,7 +777,7 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
         source, seed, operator_name = "meshcat", scenario.seed + c - 1, "browser"
         if meshcat is None:
             meshcat = start_meshcat(port)
-        progress(f"Meshcat: http://localhost:{meshcat.port()}")
+            progress(f"Meshcat: http://localhost:{meshcat.port()}")
         keys = ", ".join(f"{name}: {down}/{up}" for name, (down, up) in KEYS.items())
         progress(
             f"take {c} into {folder.path}/: keys {keys}; gamepad sticks and right trigger; "

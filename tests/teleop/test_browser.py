@@ -260,21 +260,23 @@ def test_cli_appends_takes_that_learn_accepts_and_replays_them(tmp_path, capsys)
     lines = _first_line(capsys)
     assert lines[0].startswith("Meshcat: http://localhost:")
     assert int(lines[0].rsplit(":", 1)[1]) > 0
-    assert main([*args, "--duration", "0.2"]) == 0
-    capsys.readouterr()
+    assert main([*args, "--duration", "0.2", "--takes", "2"]) == 0  # two on one page
+    lines = _first_line(capsys)
+    assert lines[0].startswith("Meshcat: ") and sum(x.startswith("Meshcat") for x in lines) == 1
     log = load_inputs(out / "inputs_1.npz")
     assert len(log.time) == 30  # 100 Hz
     # Re-driven headless from take 1's log: a third take equal to the first, bit for bit.
     assert main(["teleop", "cotter_pin", "--out", str(out), "--no-replay",
                  "--replay-inputs", str(out / "inputs_1.npz")]) == 0  # fmt: skip
     demos, metadata = load_dataset(out / "dataset.npz")
-    assert len(demos) == 3 and metadata["operators"][:2] == ["browser", "browser"]
-    assert [len(d) for d in demos] == [31, 21, 31]  # the log period, both ends
+    assert len(demos) == 4 and metadata["operators"][:3] == ["browser"] * 3
+    assert metadata["seeds"] == [1, 2, 3, 1]  # scenario.seed + c - 1; the replay: the log's
+    assert [len(d) for d in demos] == [31, 21, 21, 31]  # the log period, both ends
     for field in dc.fields(demos[0]):
-        assert np.array_equal(getattr(demos[0], field.name), getattr(demos[2], field.name))
+        assert np.array_equal(getattr(demos[0], field.name), getattr(demos[3], field.name))
     folder = RunFolder(out)
     folder.check("demonstrate", folder.dataset, run_hint="x")
-    for name in ("inputs_1.npz", "inputs_2.npz", "inputs_3.npz"):
+    for name in ("inputs_1.npz", "inputs_2.npz", "inputs_3.npz", "inputs_4.npz"):
         folder.check("demonstrate", out / name, run_hint="x")
 
 
