@@ -744,13 +744,13 @@ class HSMM:
         )
 
     def bic(self, X, lengths=None):
-        """Bayesian information criterion: -2 log L + n_parameters_ log(n_samples). Lower is better."""
+        """BIC = -2 log L + n_parameters_ log(n_samples); lower is better."""
         demos = self._sequences(X, lengths)
         n_samples = sum(len(demo) for demo in demos)
         return -2.0 * self.score(demos) + self.n_parameters_ * np.log(n_samples)
 
     def aic(self, X, lengths=None):
-        """Akaike information criterion: -2 log L + 2 n_parameters_. Lower is better."""
+        """AIC = -2 log L + 2 n_parameters_; lower is better."""
         return -2.0 * self.score(self._sequences(X, lengths)) + 2.0 * self.n_parameters_
 
     def state_order(self, threshold=0.9):

@@ -25,10 +25,8 @@ def all_segmentations(n_steps, n_states, max_duration):
 def path_log_probabilities(model, demo):
     """log p(demo, segmentation) of every segmentation, from scipy densities."""
     n = model.n_states
-    log_b = np.stack(
-        [multivariate_normal(model.means_[i], model.covariances_[i]).logpdf(demo) for i in range(n)],
-        axis=1,
-    ).reshape(len(demo), n)
+    densities = [multivariate_normal(model.means_[i], model.covariances_[i]) for i in range(n)]
+    log_b = np.stack([density.logpdf(demo) for density in densities], axis=1).reshape(-1, n)
     d = np.arange(1, model.max_duration_ + 1)
     log_d = norm.logpdf(d[None, :], model.duration_means_[:, None], model.duration_stds_[:, None])
     with np.errstate(divide="ignore"):
