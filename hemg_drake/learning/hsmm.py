@@ -183,7 +183,7 @@ class HSMM:
         (``benchmarks/bench_lasa.py --held-out --full``; docs/learning.md.)
     min_duration_std : float, optional
         Floor on sigma_i^D, in steps. Default: 2 % of the initial segments' mean
-        duration, at least 1 step (1 step at 55-step segments, 11 at 555), so the floor
+        duration, at least 1 step (1.1 steps at 55-step segments, 11 at 555), so the floor
         scales with the sampling rate (``min_duration_std_``).
     n_iter : int
         Maximum number of EM iterations.
