@@ -13,7 +13,8 @@ each deflection of the left stick it prints the wall time until the BrowserMaste
 it and until the stylus had moved 0.05 mm (the demonstration log's 10 ms resolution).
 
 ``--chromium``: the speed again with the page open in headless Chromium on the same
-cores (software WebGL, the worst case for a browser on this machine).
+cores (software WebGL, the worst case for a browser on this machine), and the latency
+from a key press in that page (DevTools) to the BrowserMaster's sample of the slider.
 
 ``--screenshot PNG``: a picture of the live page (headless Chromium) mid-take, with the
 controls open and the arm pulling the pin, e.g. docs/img/teleop_page.png.
@@ -162,6 +163,40 @@ def latency(seconds):
     )
 
 
+def keyboard_latency(seconds):
+    """Key presses in the real page (headless Chromium, DevTools) to the sampled slider."""
+    scenario = load_scenario(shipped_scenario("cotter_pin"))
+    meshcat = start_meshcat(0)
+    presses = []
+    with HeadlessPage(meshcat.web_url()) as page:
+
+        def script(t):
+            if not presses:
+                deadline = time.monotonic() + 60
+                while not page.evaluate("document.body.innerText.includes('stylus x')"):
+                    if time.monotonic() > deadline:
+                        raise RuntimeError("the page never showed its controls")
+                    time.sleep(0.05)
+            if t > 0.5 and (not presses or t - presses[-1][1] > 0.3):
+                presses.append((time.monotonic(), t))
+                page.press("ArrowRight")
+
+        take = run_take(scenario, seed=1, meshcat=meshcat, duration=seconds, realtime=True,
+                        on_step=script, progress=lambda line: None, scene=False)  # fmt: skip
+    slider = take.inputs.rows[:, COLUMNS.index("slider_x_mm")]
+    walls = take.inputs.wall_time
+    delays = []
+    for n, (pressed_at, _) in enumerate(presses[1:], start=1):
+        # After the n-th press the slider reads n steps of 2 mm over its start.
+        later = np.nonzero((walls >= pressed_at) & (slider - slider[0] >= 2.0 * (n + 1) - 1e-9))[0]
+        if len(later):
+            delays.append(walls[later[0]] - pressed_at)
+    print(
+        f"key press in the page -> sampled slider, {len(delays)} presses at real time: median "
+        f"{1e3 * np.median(delays):.1f} ms (max {1e3 * np.max(delays):.1f})"
+    )
+
+
 def screenshot(path):
     scenario = load_scenario(shipped_scenario("cotter_pin"))
     meshcat = start_meshcat(0)
@@ -207,6 +242,8 @@ def main():
         if args.chromium:
             speed(task, args.seconds, chromium=True)
     latency(args.seconds)
+    if args.chromium:
+        keyboard_latency(args.seconds)
 
 
 if __name__ == "__main__":
