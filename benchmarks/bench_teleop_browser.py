@@ -19,7 +19,8 @@ from a key press in that page (DevTools) to the BrowserMaster's sample of the sl
 ``--screenshot PNG``: a picture of the live page (headless Chromium) mid-take, with the
 controls open and the arm pulling the pin, e.g. docs/img/teleop_page.png.
 
-    .venv/bin/python benchmarks/bench_teleop_browser.py [--seconds 6] [--chromium] [--screenshot PNG]
+    .venv/bin/python benchmarks/bench_teleop_browser.py [--seconds 6] [--chromium]
+    .venv/bin/python benchmarks/bench_teleop_browser.py --screenshot docs/img/teleop_page.png
 """
 
 import argparse
@@ -124,8 +125,8 @@ def latency(seconds):
         while not listener.stop:
             buttons = [0.0] * 17
             sends.append((time.monotonic(), value))
-            listener.send(type="gamepad", name="",
-                          gamepad=dict(index=0, button_values=buttons, axes=[value, 0.0, 0.0, 0.0]))  # fmt: skip
+            pad = dict(index=0, button_values=buttons, axes=[value, 0.0, 0.0, 0.0])
+            listener.send(type="gamepad", name="", gamepad=pad)
             value = 0.0 if value else 1.0
             time.sleep(0.337 if value == 0.0 else 0.291)
 

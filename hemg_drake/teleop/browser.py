@@ -395,7 +395,9 @@ class LoggedInputs:
         self.times = np.asarray(times, dtype=float)
         self.rows = np.asarray(rows, dtype=float)
         if self.rows.ndim != 2 or self.rows.shape[1] != len(COLUMNS):
-            raise ValueError(f"input rows must have shape (N, {len(COLUMNS)}), got {self.rows.shape}")
+            raise ValueError(
+                f"input rows must have shape (N, {len(COLUMNS)}), got {self.rows.shape}"
+            )
         if self.times.shape != (len(self.rows),):
             raise ValueError("input times must have one entry per row")
         self._next = 0
@@ -604,7 +606,10 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
     -------
     Take
     """
-    from hemg_drake.diagrams.demonstration import build_demonstration_diagram, demonstration_from_logs
+    from hemg_drake.diagrams.demonstration import (
+        build_demonstration_diagram,
+        demonstration_from_logs,
+    )
     from hemg_drake.viz.ink import add_ink_to_recording, in_contact
 
     live = isinstance(source, str)
@@ -657,6 +662,7 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
     context = simulator.get_context()
     station = built.station.diagram
     gain_system = diagram.GetSubsystemByName("variable_gain")
+    gain_port = gain_system.get_gain_output_port()
     if recorder is not None:
         recorder.start()
     began = time.perf_counter()
@@ -677,7 +683,7 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
                 t,
                 station.GetOutputPort("p_WE").Eval(station_context),
                 station.GetOutputPort("f_WE").Eval(station_context),
-                gain_system.get_gain_output_port().Eval(gain_system.GetMyContextFromRoot(context))[0],
+                gain_port.Eval(gain_system.GetMyContextFromRoot(context))[0],
                 True,
                 p_WT,
             )  # fmt: skip
@@ -692,7 +698,9 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
     wall = time.perf_counter() - began
     if page is not None:
         page.update(t, np.zeros(3), np.zeros(3), scenario.emg.k_min, False)
-    demo = demonstration_from_logs(built.logger.FindLog(context), built.emg_logger.FindLog(context), seed)
+    demo = demonstration_from_logs(
+        built.logger.FindLog(context), built.emg_logger.FindLog(context), seed
+    )
     if replay_path is not None:
         if scenario.task == "drawing" and built.scene is not None:
             add_ink_to_recording(recorder.meshcat, demo.time, demo.p_WE, in_contact(demo.f_WE),
@@ -747,11 +755,12 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     already there are kept.
 
     Live (``replay_inputs`` None): without a ``meshcat``, one is started on ``port`` and
-    the first line given to ``progress`` is ``Meshcat: http://localhost:P``; the take ends with the page's End take button or
-    Escape, after ``duration`` simulated seconds, or when the page has been closed for
-    2 s, and is saved in each case. Ctrl-C (KeyboardInterrupt) discards it: nothing is
-    written. With ``replay_inputs`` (a log path): headless, as fast as it runs, the same
-    demonstration bit for bit (the log's seed, the scenario must be the log's).
+    the first line given to ``progress`` is ``Meshcat: http://localhost:P``. The take
+    ends with the page's End take button or Escape, after ``duration`` simulated seconds,
+    or when the page has been closed for 2 s, and is saved in each case. Ctrl-C
+    (KeyboardInterrupt) discards it: nothing is written. With ``replay_inputs`` (a log
+    path): headless, as fast as it runs, the same demonstration bit for bit (the log's
+    seed; the scenario must be the log's).
 
     Returns
     -------
@@ -860,7 +869,9 @@ class HeadlessPage:
 
         chromium = find_chromium()
         if chromium is None:
-            raise FileNotFoundError("chromium not found on PATH: install it (apt-get install chromium)")
+            raise FileNotFoundError(
+                "chromium not found on PATH: install it (apt-get install chromium)"
+            )
         self._profile = tempfile.TemporaryDirectory(prefix="hemg-teleop-chromium-")
         command = [
             chromium, "--headless=new", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",

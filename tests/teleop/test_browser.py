@@ -205,11 +205,11 @@ def test_gamepad_and_button_over_the_websocket(scenario, meshcat):
         sent[stage] = True
         buttons = [0.0] * 7 + [0.8] + [0.0] * 9
         if stage == 1:
-            send(ws, type="gamepad", name="", gamepad=dict(index=0, button_values=buttons,
-                                                         axes=[0.575, 0.0, 0.0, 0.0]))  # fmt: skip
+            pad = dict(index=0, button_values=buttons, axes=[0.575, 0.0, 0.0, 0.0])
+            send(ws, type="gamepad", name="", gamepad=pad)
         elif stage == 3:
-            send(ws, type="gamepad", name="", gamepad=dict(index=0, button_values=buttons,
-                                                         axes=[math.nan, 0.0, 0.0, 0.0]))  # fmt: skip
+            pad = dict(index=0, button_values=buttons, axes=[math.nan, 0.0, 0.0, 0.0])
+            send(ws, type="gamepad", name="", gamepad=pad)
         elif stage == 4:
             send(ws, type="gamepad", name="", gamepad={})  # disconnected
         elif stage == 6:
