@@ -720,6 +720,23 @@ def _takes_hint(folder):
     return f"hemg-drake teleop SCENARIO --out {folder.path} (or hemg-drake demonstrate)"
 
 
+# Keys a take does not read (its length is the person's; the count is demonstrate's):
+# scenarios that differ only there record compatible takes.
+TAKE_FREE_KEYS = ("duration", "num_demonstrations")
+
+
+def same_takes(yaml_a, yaml_b):
+    """Whether two scenarios (YAML texts) record the same kind of take: equal but for
+    :data:`TAKE_FREE_KEYS`."""
+    from hemg_drake.scenario import parse_scenario
+
+    def normal(text):
+        scenario = parse_scenario(text, source="a dataset's scenario")
+        return scenario.replaced(["duration=1.0", "num_demonstrations=1"]).to_yaml()
+
+    return yaml_a == yaml_b or normal(yaml_a) == normal(yaml_b)
+
+
 def existing_takes(scenario, out_dir):
     """The demonstrations already in ``out_dir/dataset.npz`` and its metadata, checked.
 
@@ -734,7 +751,7 @@ def existing_takes(scenario, out_dir):
         return [], {}
     folder.check("demonstrate", folder.dataset, run_hint=_takes_hint(folder))
     demos, metadata = load_dataset(folder.dataset)
-    if metadata.get("scenario") != scenario.to_yaml():
+    if "scenario" not in metadata or not same_takes(metadata["scenario"], scenario.to_yaml()):
         raise ValueError(
             f"{folder.dataset}: holds demonstrations of another scenario (or other --set "
             "values); give a new --out folder for this one"
@@ -776,7 +793,7 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     c = len(demos) + 1
     if replay_inputs is not None:
         source = load_inputs(replay_inputs)
-        if source.scenario != scenario.to_yaml():
+        if not same_takes(source.scenario, scenario.to_yaml()):
             raise ValueError(
                 f"{replay_inputs}: recorded with another scenario (or other --set values) "
                 "than the one given"
@@ -827,8 +844,9 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
         demos = [*demos, demo]
         operators = metadata.get("operators", ["simulated"] * (len(demos) - 1))
         record = dict(
-            scenario=scenario.to_yaml(), task=scenario.task, log_period=scenario.log_period,
-            operators=[*operators, operator_name],
+            # The dataset keeps the scenario it was begun with (takes differ only in length).
+            scenario=metadata.get("scenario", scenario.to_yaml()), task=scenario.task,
+            log_period=scenario.log_period, operators=[*operators, operator_name],
         )  # fmt: skip
         save_dataset(folder.dataset, demos, record)
     except BaseException:

@@ -352,3 +352,18 @@ def test_keys_in_the_real_page_move_the_stylus_and_escape_ends_the_take(
     assert take.demonstration.p_MS[-1, 0] - take.master.p_MS_initial[0] == pytest.approx(
         0.010, abs=5e-4
     )
+
+
+def test_a_take_joins_simulated_demonstrations_and_learn_takes_them(tmp_path, capsys):
+    out = str(tmp_path / "run")
+    short = ["--set", "duration=0.4"]
+    assert main(["demonstrate", "cotter_pin", "--out", out, "--demos", "1", "--no-replay",
+                 *short]) == 0  # fmt: skip
+    # The shipped scenario as it is: only the length and count differ, which takes ignore.
+    assert main(["teleop", "cotter_pin", "--out", out, "--port", "0", "--duration", "0.3",
+                 "--no-replay"]) == 0  # fmt: skip
+    demos, metadata = load_dataset(tmp_path / "run" / "dataset.npz")
+    assert metadata["operators"] == ["simulated", "browser"]
+    assert (demos[0].frame_A is None) == (demos[1].frame_A is None)
+    assert main(["learn", out, "--set", "learning.num_states=2"]) == 0
+    assert "wrote" in capsys.readouterr().out
