@@ -30,7 +30,7 @@ STAGES = ("demonstrate", "learn", "reproduce")
 # Files each stage writes (glob patterns, relative to the folder).
 OUTPUTS = {
     "demonstrate": (
-        DATASET, "replay_*.html", "demonstrations.png", "fig6_emg.png",
+        DATASET, "replay_*.html", "inputs_*.npz", "demonstrations.png", "fig6_emg.png",
         "demonstration_diagram.svg", "demonstration_diagram.dot",
     ),
     "learn": (MODEL, "state_activations.png", "reproduction_diagram.svg", "reproduction_diagram.dot"),
