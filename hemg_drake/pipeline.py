@@ -404,7 +404,53 @@ def write_diagrams(scenario, model, run_dir, *, progress=print):
     return written
 
 
-def run_demo(out_dir="runs", *, tasks=TASKS, overrides=(), replays=True, progress=print):
+# run_demo(placements=True): each task demonstrated at placements drawn from a modest range
+# around its shipped pose, then reproduced at a pose beyond it (position m, yaw deg).
+PLACEMENT_DEMOS = {
+    "cotter_pin": (
+        ["scene.placements.position_range=[[0.622,-0.857,0.11],[0.662,-0.817,0.13]]",
+         "scene.placements.yaw_range_deg=[-20,20]"],
+        ([0.66, -0.80, 0.12], 25.0),
+    ),
+    "drawing": (
+        ["scene.placements.position_range=[[0.585,-0.715,0.085],[0.615,-0.685,0.095]]",
+         "scene.placements.yaw_range_deg=[-8,8]"],
+        ([0.615, -0.685, 0.09], 12.0),
+    ),
+}  # fmt: skip
+
+
+def placement_demo(scenario, run_dir, *, replays=True, progress=print):
+    """Demonstrate ``scenario`` at the placements of ``PLACEMENT_DEMOS`` (its task), learn the
+    TP-HSMM and reproduce at the new pose; writes the stages' outputs and
+    ``placements.png`` (demonstrations grey, the reproduction red, from above).
+
+    Returns
+    -------
+    dict, run name ("TASK (new placement)") -> metrics.
+    """
+    from hemg_drake.diagrams.reproduction import ReproductionLog
+    from hemg_drake.viz.figures import plot_placements, save_figure
+
+    ranges, (position, yaw) = PLACEMENT_DEMOS[scenario.task]
+    folder = Path(run_dir)
+    demonstrate(scenario.replaced(ranges), folder, replays=False, progress=progress)
+    learn(folder, progress=progress)
+    values = ",".join(repr(float(v)) for v in position)
+    new = [f"scene.position=[{values}]", f"scene.yaw_deg={float(yaw)!r}"]
+    metrics = reproduce(folder, overrides=new, replay=replays, progress=progress)
+    demos, recorded = load_demonstrations(folder / "dataset.npz")
+    with np.load(folder / "reproduction.npz") as arrays:
+        log = ReproductionLog(**{name: arrays[name] for name in arrays.files})
+    figure = plot_placements(demos, log, task=scenario.task, X_WT=recorded.replaced(new).X_WT())
+    save_figure(figure, folder / "placements.png")
+    progress(f"wrote {folder / 'placements.png'}")
+    return {f"{scenario.task} (new placement)": metrics}
+
+
+def run_demo(
+    out_dir="runs", *, tasks=TASKS, overrides=(), replays=True, placements=False, progress=print
+):  # fmt: skip
     """The full demo: for each task, demonstrate, learn, reproduce (from the demonstrated
     start and from each of ``reproduction.start_offsets``), draw and measure.
 
@@ -420,6 +466,9 @@ def run_demo(out_dir="runs", *, tasks=TASKS, overrides=(), replays=True, progres
     overrides : sequence of str, ``key=value`` changes for every task's scenario (e.g.
         ``"num_demonstrations=2"`` for small-scale runs).
     replays : bool, write the HTML replays.
+    placements : bool
+        Also demonstrate each task at several placements and reproduce it at a new one
+        (:func:`placement_demo`, in ``out_dir/TASK/placements/``).
     progress : callable taking one line of text.
 
     Returns
@@ -455,6 +504,10 @@ def run_demo(out_dir="runs", *, tasks=TASKS, overrides=(), replays=True, progres
             )  # fmt: skip
         for path in write_diagrams(scenario, model, run_dir, progress=progress):
             progress(f"wrote {path}")
+        if placements:
+            results.update(
+                placement_demo(scenario, run_dir / "placements", replays=replays, progress=progress)
+            )
         progress(f"== {task} done after {time.perf_counter() - began:.0f} s")
     write_text_atomic(out_dir / "metrics.json", json.dumps(results, indent=2) + "\n")
     progress(format_metrics(results))

@@ -172,3 +172,18 @@ def test_cli_reproduces_at_a_new_placement(tmp_path, capsys):
     metrics = json.loads((tmp_path / "new" / "metrics.json").read_text())
     assert metrics["scene_position"] == [0.66, -0.85, 0.12] and metrics["scene_yaw_deg"] == -15
     np.testing.assert_allclose(metrics["start"], [0.66, -0.85, 0.12], atol=0.004)
+
+
+def test_run_demo_with_placements_reproduces_each_task_at_a_new_placement(tmp_path):
+    from hemg_drake.pipeline import PLACEMENT_DEMOS, run_demo
+
+    results = run_demo(tmp_path, tasks=["cotter_pin"], overrides=["num_demonstrations=2", "duration=1.0"],
+                       replays=False, placements=True, progress=quiet)  # fmt: skip
+    assert set(results) == {"cotter_pin", "cotter_pin (start 3 cm away)", "cotter_pin (new placement)"}
+    new = results["cotter_pin (new placement)"]
+    position, yaw = PLACEMENT_DEMOS["cotter_pin"][1]
+    assert new["scene_position"] == position and new["scene_yaw_deg"] == yaw
+    folder = tmp_path / "cotter_pin" / "placements"
+    assert (folder / "placements.png").is_file()
+    assert isinstance(load_model(folder / "model.npz"), TaskParameterisedHSMM)
+    assert json.loads((tmp_path / "metrics.json").read_text())["cotter_pin (new placement)"] == new
