@@ -218,17 +218,20 @@ def _emg_figure(args):
 
 
 def _sweep(args):
-    from hemg_drake.sweep import run_sweep, summary
+    from hemg_drake.sweep import load_sweep, run_sweep, summary
 
     if args.address and args.backend != "ray":
         raise ValueError("--address joins a Ray cluster: it needs --backend ray")
     check_output_folder(args.out)
-    records = run_sweep(
-        args.sweep, args.out, backend=args.backend, workers=args.workers,
-        address=args.address, resume=args.resume,
-    )  # fmt: skip
-    from hemg_drake.sweep import load_sweep
-
+    try:
+        records = run_sweep(
+            args.sweep, args.out, backend=args.backend, workers=args.workers,
+            address=args.address, resume=args.resume,
+        )  # fmt: skip
+    except KeyboardInterrupt:
+        print(f"hemg-drake sweep: finished trials are kept in {args.out}/trials/: run again "
+              f"with --resume to go on", file=sys.stderr)  # fmt: skip
+        raise
     spec = load_sweep(args.sweep)[0]
     for line in summary(records, spec):
         _print(line)

@@ -892,8 +892,12 @@ def plot_results(records, spec, path, *, title=None):
         numeric = [_as_float(label) for label in labels]
         numeric_x = all(v is not None for v in numeric)
         x = np.array(numeric if numeric_x else range(len(labels)), dtype=float)
-        others = [a.name for a in axes_ if a is not axis] if spec.design == "grid" else []
-        groups = sorted({tuple(r["labels"].get(n, "") for n in others) for r in done})
+        others = [a for a in axes_ if a is not axis] if spec.design == "grid" else []
+        present = {tuple(r["labels"].get(a.name, "") for a in others) for r in done}
+        # The other axes' cases in the sweep file's order.
+        ordered = itertools.product(*[[label for label, _ in _axis_points(a)] for a in others])
+        groups = [group for group in ordered if group in present]
+        others = [a.name for a in others]
         for row, metric in enumerate(metrics_):
             ax = grid[row][column]
             for group in groups:
@@ -918,7 +922,7 @@ def plot_results(records, spec, path, *, title=None):
             if column == 0:
                 ax.set_ylabel(metric.replace(".", ".\n", 1), fontsize=8)
             ax.grid(alpha=0.3)
-            if row == 0 and column == len(axes_) - 1 and groups and groups[0]:
+            if row == 0 and groups and groups[0]:
                 ax.legend(fontsize=7)
     seeds = len(spec.seeds)
     figure.suptitle(title or f"{len(done)} trials, mean and +-1 std over {seeds} seed(s)",

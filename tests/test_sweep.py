@@ -80,7 +80,10 @@ def test_resume_skips_finished_trials_and_retries_failed_ones(swept, capfd):
     # Without --resume an existing sweep folder is refused in one line.
     assert main(["sweep", str(path), "--out", str(out)]) == 2
     assert "--resume" in capfd.readouterr().err
+    # A killed sweep leaves a trial's temporary folder: resume removes it.
+    (out / "trials" / ".tmp-killed-123").mkdir()
     assert main(["sweep", str(path), "--out", str(out), "--resume", "--workers", "1"]) == 0
+    assert not (out / "trials" / ".tmp-killed-123").exists()
     err = capfd.readouterr().err
     assert "4/4 done (2 failed)" in err
     assert stamps == {t: (out / "trials" / t / "trial.json").stat().st_mtime_ns for t in done}

@@ -78,7 +78,7 @@ class ForceFeedback(LeafSystem):
     output is a direct feedthrough of the inputs, without state; the HapticMaster samples
     it at its own rate. NaN inputs raise ValueError.
 
-    Delay and passivity (``docs/teleop.md``). ``delay_steps`` = n > 0 delays the slave's
+    Delay and passivity (``docs/studies.md``). ``delay_steps`` = n > 0 delays the slave's
     side of the inputs (``f_WE``, or ``p_WE`` and ``v_WE``) by n samples of ``period``: the
     slave-to-master half of the teleoperation channel (the workspace map delays the
     master-to-slave half). The output at sample k uses the slave's values of sample k - n
