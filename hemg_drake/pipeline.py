@@ -232,7 +232,9 @@ def learn(run_dir, *, overrides=(), n_iter=None, progress=print):
         + ("" if model.converged_ else " (stopped before converging: raise --iterations)")
     )
     with folder.stage("learn"):
-        first = model.at(*last_frames(frames[0], model.n_frames_)) if hasattr(model, "at") else model
+        first = model
+        if hasattr(model, "at"):  # a TP-HSMM: its HSMM where demonstration 1 was
+            first = model.at(*last_frames(frames[0], model.n_frames_))
         figure = plot_state_activations(
             demos[0].time, first.forward_variable(data[0]), task=scenario.task, along=1
         )

@@ -683,7 +683,9 @@ def _check_values(scenario):
         )
     yaws = placements.yaw_range_deg
     if yaws and yaws[0] > yaws[1]:
-        raise ValueError(f"key 'scene.placements.yaw_range_deg' must be [smallest, largest], got {yaws}")
+        raise ValueError(
+            f"key 'scene.placements.yaw_range_deg' must be [smallest, largest], got {yaws}"
+        )
     offsets = scenario.reproduction.start_offsets
     if any(len(offset) != 3 for offset in offsets):
         raise ValueError(f"key 'reproduction.start_offsets' must hold [dx, dy, dz] lists, got {offsets}")

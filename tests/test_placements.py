@@ -165,8 +165,10 @@ def test_cli_reproduces_at_a_new_placement(tmp_path, capsys):
     run = tmp_path / "run"
     demonstrate(pin(*RANGES), run, replays=False, progress=quiet)
     assert main(["learn", str(run)]) == 0
-    assert main(["reproduce", str(run), "--no-replay", "--out", str(tmp_path / "new"),
-                 "--set", "scene.position=[0.66,-0.85,0.12]", "--set", "scene.yaw_deg=-15"]) == 0  # fmt: skip
+    assert main([
+        "reproduce", str(run), "--no-replay", "--out", str(tmp_path / "new"),
+        "--set", "scene.position=[0.66,-0.85,0.12]", "--set", "scene.yaw_deg=-15",
+    ]) == 0  # fmt: skip
     out = capsys.readouterr().out
     assert "TP-HSMM (task frames: scene)" in out
     metrics = json.loads((tmp_path / "new" / "metrics.json").read_text())
@@ -177,9 +179,12 @@ def test_cli_reproduces_at_a_new_placement(tmp_path, capsys):
 def test_run_demo_with_placements_reproduces_each_task_at_a_new_placement(tmp_path):
     from hemg_drake.pipeline import PLACEMENT_DEMOS, run_demo
 
-    results = run_demo(tmp_path, tasks=["cotter_pin"], overrides=["num_demonstrations=2", "duration=1.0"],
+    results = run_demo(tmp_path, tasks=["cotter_pin"],
+                       overrides=["num_demonstrations=2", "duration=1.0"],
                        replays=False, placements=True, progress=quiet)  # fmt: skip
-    assert set(results) == {"cotter_pin", "cotter_pin (start 3 cm away)", "cotter_pin (new placement)"}
+    assert set(results) == {
+        "cotter_pin", "cotter_pin (start 3 cm away)", "cotter_pin (new placement)"
+    }  # fmt: skip
     new = results["cotter_pin (new placement)"]
     position, yaw = PLACEMENT_DEMOS["cotter_pin"][1]
     assert new["scene_position"] == position and new["scene_yaw_deg"] == yaw

@@ -196,7 +196,9 @@ class TaskParameterisedHSMM:
 
     def _check_fitted(self):
         if not hasattr(self, "stacked_"):
-            raise ValueError("this TaskParameterisedHSMM is not fitted yet: call fit(demos, frames)")
+            raise ValueError(
+                "this TaskParameterisedHSMM is not fitted yet: call fit(demos, frames)"
+            )
 
     @property
     def n_iter_(self):
@@ -319,7 +321,8 @@ class TaskParameterisedHSMM:
         for name in _hsmm._FITTED:
             setattr(stacked, name, arrays[name].astype(float))
         stacked.max_duration_ = int(arrays["max_duration_"])
-        stacked.log_likelihood_history_ = arrays.get("log_likelihood_history_", np.empty(0)).tolist()
+        history = arrays.get("log_likelihood_history_", np.empty(0))
+        stacked.log_likelihood_history_ = history.tolist()
         stacked.n_iter_ = len(stacked.log_likelihood_history_)
         stacked.converged_ = None
         stacked._check_loaded(path)
