@@ -440,7 +440,10 @@ def build_parser():
     teleop.set_defaults(func=_teleop)
 
     sweep = command("sweep", "run a sweep file's trials on all cores (or Ray); table + figure")
-    sweep.add_argument("sweep", help="sweep YAML file, e.g. hemg_drake/sweeps/example_delay.yaml")
+    sweep.add_argument(
+        "sweep", help="sweep YAML file, or a shipped one (hemg_drake/sweeps/): example_delay, "
+        "delay, delay_drawing, emg_cotter_pin, emg_drawing, learning",
+    )  # fmt: skip
     sweep.add_argument("--out", required=True, help="output folder, e.g. runs/sweep/")
     sweep.add_argument(
         "--backend", choices=["local", "ray"], default="local",
