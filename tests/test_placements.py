@@ -139,6 +139,12 @@ def test_reproduce_at_a_new_placement_end_to_end(tmp_path):
     np.testing.assert_allclose(log["x_star"][0], metrics["start"], atol=1e-9)
     assert metrics["position_rmse_m"] < 0.01
     assert metrics["pull_direction_error_deg"] < 10 and metrics["grasp_position_error_m"] < 0.005
+    # The LQR tracker takes the placed model unchanged too.
+    lqr = ["reproduction.tracker=lqr", "reproduction.restoring_gain=0"]
+    other = reproduce(run, overrides=[*overrides, *lqr], out_dir=tmp_path / "lqr", replay=False,
+                      progress=quiet)  # fmt: skip
+    assert other["tracker"] == "lqr" and other["position_rmse_m"] < 0.01
+    np.testing.assert_allclose(other["start"], metrics["start"], atol=1e-12)
 
 
 def test_placements_figure_draws_demonstrations_grey_and_the_reproduction_red():

@@ -79,6 +79,18 @@ def test_equivariance_under_a_rigid_motion(fitted):
         assert np.ptp(rep.x[:, 2]) > 0.05  # it did move
 
 
+def test_states_hold_one_gaussian_per_frame(fitted):
+    """No covariance between frames: the emission is the product of the frames' Gaussians."""
+    _, _, model = fitted
+    covariances = model.stacked_.covariances_
+    base, scene = model._indices(0), model._indices(1)
+    assert len(base) == 6 and len(scene) == 7  # the stiffness in the scene frame only
+    assert np.all(covariances[:, base][:, :, scene] == 0.0)
+    assert np.all(covariances[:, scene][:, :, base] == 0.0)
+    for j in (0, 1):  # each frame's Gaussian a proper one
+        np.linalg.cholesky(model.frame_gaussians(j)[1])
+
+
 def test_one_identity_frame_is_the_plain_hsmm_bit_for_bit():
     demos, _ = placed_demos(PLACEMENTS[:3])
     identity = (np.eye(3)[None], np.zeros((1, 3)))
