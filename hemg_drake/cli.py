@@ -108,8 +108,9 @@ def _demo(args):
 
     check_output_folder(args.out)
     run_demo(
-        args.out, tasks=args.tasks, overrides=args.set, replays=not args.no_replay, progress=_print
-    )
+        args.out, tasks=args.tasks, overrides=args.set, replays=not args.no_replay,
+        placements=not args.no_placements, progress=_print,
+    )  # fmt: skip
 
 
 def _demonstrate(args):
@@ -318,6 +319,11 @@ def build_parser():
         choices=["cotter_pin", "drawing"], help="tasks to run",
     )  # fmt: skip
     demo.add_argument("--no-replay", action="store_true", help="write no HTML replays")
+    demo.add_argument(
+        "--no-placements", action="store_true",
+        help="skip the demonstrations at several placements and the reproduction at a new one "
+        "(TASK/placements/, about 45 s)",
+    )  # fmt: skip
     add_set(demo)
     demo.set_defaults(func=_demo)
 

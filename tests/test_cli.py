@@ -106,6 +106,7 @@ def test_writable_output_folder_reaches_the_pipeline(tmp_path, capsys, monkeypat
     ((folder, kwargs),) = calls
     assert str(folder) == str(out) and kwargs["tasks"] == ["drawing"]
     assert kwargs["overrides"] == ["num_demonstrations=2"] and kwargs["replays"] is False
+    assert kwargs["placements"] is True  # make demo shows the tasks at new placements too
 
 
 @pytest.mark.parametrize(

@@ -120,6 +120,7 @@ class HsmmGmrPolicy:
                 f"restoring_gain must be finite, >= 0 and < 1 / dt = {1 / dt:g} 1/s, "
                 f"got {restoring_gain!r}"
             )
+        model.check_weighting(weighting)  # warns where the combination is known to fail
         self.forward = ResidualForward(model)
         self.weighting = weighting
         self.dt = float(dt)
@@ -264,6 +265,7 @@ class HsmmLqrPolicy:
         if state_cost not in STATE_COSTS:
             raise ValueError(f"state_cost must be one of {STATE_COSTS}, got {state_cost!r}")
         self.state_cost = state_cost
+        model.check_weighting(weighting)  # warns where the combination is known to fail
         self.forward = ResidualForward(model)
         self.weighting = weighting
         self.dt = float(dt)

@@ -210,3 +210,19 @@ def test_the_worked_example_in_the_docs_runs(capsys):
     printed = section[section.index("prints\n\n```\n") + 12 :]
     exec(compile(code, "docs/learning.md", "exec"), {})
     assert capsys.readouterr().out == printed[: printed.index("```")]
+
+
+def test_reproduce_warns_for_temporal_weighting_on_a_branching_model(models):
+    from hemg_drake.learning.reproduce import reproduce
+
+    branching = models.set_parameters(
+        means=np.zeros((3, 2)), covariances=np.tile(np.eye(2), (3, 1, 1)),
+        startprob=[0.0, 1.0, 0.0], transmat=[[0, 0, 0], [0.4, 0, 0.6], [1, 0, 0]],
+        duration_means=[5, 5, 5], duration_stds=[1, 1, 1], max_duration=20, n_position=1,
+    )  # fmt: skip
+    for tracker in ("gmr", "lqr"):
+        with pytest.warns(UserWarning, match="temporal weighting follows the HSMM's timing"):
+            reproduce(branching, [0.0], 5, weighting="temporal", tracker=tracker)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            reproduce(branching, [0.0], 5, weighting="forward", tracker=tracker)
