@@ -22,7 +22,9 @@ demo: install
 test: install
 	$(PY) -m pytest -n 2 --dist loadfile
 
+# The benchmarks' own data and baselines (the bench extra) install on first use.
 bench: install
+	$(PY) -m pip install --quiet -e '.[dev,bench]'
 	for f in benchmarks/bench_*.py; do echo "== $$f"; $(PY) $$f || exit 1; done
 
 # Caches and build outputs only. runs/ is left alone: the README has users keep their own
