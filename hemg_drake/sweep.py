@@ -945,7 +945,7 @@ def summary(records, spec):
     lines.append("  ".join(header))
     for key, group in groups.items():
         done = [r for r in group if r["status"] == "done"]
-        cells = [str(k) for k in key] + [f"{len(done)}/{len(group)}"]
+        cells = [str(k) if k != "" else "-" for k in key] + [f"{len(done)}/{len(group)}"]
         for metric in spec.metrics:
             values = [_number(r["metrics"].get(metric)) for r in done]
             values = [v for v in values if math.isfinite(v)]
