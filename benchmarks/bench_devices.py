@@ -97,14 +97,15 @@ class NewestOnly:
         return None if block is None else block[-1:]
 
 
-def bench_live_chain(seconds=5.0, rate=200.0, newest_only=False):
+def bench_live_chain(seconds=5.0, rate=200.0, newest_only=False, locks=True):
     context = multiprocessing.get_context("fork")
     lock, ready = context.Lock(), context.Event()
     tag = f"hemg_bench_{uuid.uuid4().hex[:10]}"
     process = context.Process(target=_streamer, args=(tag, 1000, lock, 1 / rate, seconds + 1, ready))
     process.start()
     ready.wait(10)
-    reader = LibEmgSharedMemory(channels=CHANNELS, tag=tag, lock=lock, count_lock=lock)
+    shared = {"lock": lock, "count_lock": lock} if locks else {}
+    reader = LibEmgSharedMemory(channels=CHANNELS, tag=tag, **shared)
     builder = DiagramBuilder()
     source = builder.AddSystem(LiveEmgSource(device=NewestOnly(reader) if newest_only else reader))
     add_emg_gain_chain(builder, source.get_emg_output_port())
@@ -117,8 +118,10 @@ def bench_live_chain(seconds=5.0, rate=200.0, newest_only=False):
     wall = time.perf_counter() - t0
     counters = source.counters_dict(simulator.get_context())
     policy = "newest sample per poll" if newest_only else "queue"
+    policy += "" if locks else ", no locks"
     print(f"live chain ({policy}), device at {rate:g} Hz, {seconds:g} s at real-time rate "
-          f"(wall {wall:.2f} s): streamer wrote ~{int(reader._count[0, 0])}, {counters}")
+          f"(wall {wall:.2f} s): streamer wrote ~{int(reader._count[0, 0])}, {counters}, "
+          f"reader retries {reader.retries}, realigned {reader.realigned}")
     reader.close()
     process.join(15)
 
@@ -177,6 +180,7 @@ if __name__ == "__main__":
         "newest": lambda: bench_live_chain(newest_only=True),
         "fast": lambda: bench_live_chain(rate=202.0),
         "slow": lambda: bench_live_chain(rate=198.0),
+        "lockfree": lambda: bench_live_chain(locks=False),
     }
     which = sys.argv[1:] or ["read", *chains, "master", "export"]
     for name in which:

@@ -21,7 +21,11 @@ incremented, or (without the lock) a buffer copied mid-shift. ``read_samples`` t
 snapshot it can check: the count before and after two copies of the rows it needs must
 agree, the copies must be equal, and the row just past the new ones must be the newest
 sample of the previous read (the buffer is a shift register). A snapshot that fails is
-retried a few times and otherwise left for the next poll, so nothing is lost or doubled.
+retried a few times and otherwise left for the next poll. Without the locks, a streamer
+preempted in the middle of its copy leaves a torn buffer that can pass those checks, so a
+lock-free snapshot is emitted only once a later one confirms it (one poll of latency).
+Guarantee, tested against a writer that never pauses: the samples come whole, in order,
+none twice, and ``len(all returned) + lost`` is the number written.
 """
 
 import contextlib
@@ -36,6 +40,15 @@ COUNT_DTYPE = np.int32
 # two critical sections are microseconds apart).
 SNAPSHOT_ATTEMPTS = 5
 SNAPSHOT_PAUSE = 50e-6
+# Wait before trusting a snapshot that cannot be aligned with the previous read.
+SETTLE_PAUSE = 200e-6
+# Samples an unaligned read may have taken early at most (a streamer's packet).
+MAX_CATCH_UP = 64
+# Lock-free reading: an unchanged snapshot confirms a pending one only this much later
+# (a streamer preempted in the middle of its copy rarely stays so that long).
+CONFIRM_AFTER = 2e-3
+# Reads in a row without a consistent snapshot before the alignment is given up.
+RESYNC_AFTER = 20
 _INSTALL_HINT = "start the LibEMG streamer first (docs/emg.md, 'Live sources')"
 
 
@@ -81,6 +94,12 @@ class LibEmgSharedMemory:
         Times the counter went back (``OnlineDataHandler.reset()``, a restarted streamer).
     retries : int
         Snapshots found inconsistent and taken again (a write was in progress).
+    realigned : int
+        Reads that found an earlier unaligned read had taken samples not yet counted
+        (after a reset or a loss, with a writer preempted between its two steps).
+    resyncs : int
+        Times the alignment with the previous read was given up after ``RESYNC_AFTER``
+        reads in a row without a consistent snapshot.
     """
 
     def __init__(self, *, channels, tag="emg", lock=None, count_lock=None, start="now", wait=5.0):
@@ -119,11 +138,15 @@ class LibEmgSharedMemory:
         # Distinct locks, taken in one fixed order (as LibEMG's reader does).
         given = {id(lk): lk for lk in (lock, count_lock) if lk is not None}
         self._locks = [given[key] for key in sorted(given)]
-        self.lost = self.resets = self.retries = 0
+        self.lost = self.resets = self.retries = self.realigned = self.resyncs = 0
+        self._pending = None  # lock-free reading: the snapshot awaiting confirmation
+        self._failures = 0  # reads in a row without a consistent snapshot
         count = int(self._count[0, 0])
-        held = min(count, self.rows)
-        self._last = count if start == "now" else count - held
-        self._newest = self._emg[0].copy() if start == "now" and count > 0 else None
+        self._last = count if start == "now" else max(count - self.rows, 0)
+        # The row just past the unread ones: the newest read sample, or one of the zeros
+        # the streamer filled the buffer with; unknown if that row was overwritten.
+        behind = count - self._last
+        self._newest = self._emg[behind].copy() if behind < self.rows else None
 
     @contextlib.contextmanager
     def _locked(self):
@@ -133,7 +156,10 @@ class LibEmgSharedMemory:
             yield
 
     def _snapshot(self):
-        """(count, rows newest first) if consistent, else None; rows empty when none new."""
+        """(count, rows newest first) if consistent, else None; rows empty when none new.
+
+        The rows are samples count - len(rows) .. count - 1.
+        """
         with self._locked():
             count = int(self._count[0, 0])
             new = count - self._last
@@ -146,22 +172,38 @@ class LibEmgSharedMemory:
             unchanged = int(self._count[0, 0]) == count
         if not (unchanged and np.array_equal(first, second)):
             return None
-        if new < self.rows and self._newest is not None and not np.array_equal(
-            first[new], self._newest
-        ):
-            return None  # shifted, not yet counted (or torn): the write is in progress
-        return count, first[: min(new, self.rows)]
+        if self._newest is None or new >= self.rows:
+            # Nothing to align with (samples lost, or a late start after a full ring): let a write
+            # caught between its two critical sections finish, then check nothing moved.
+            time.sleep(SETTLE_PAUSE)
+            with self._locked():
+                moved = int(self._count[0, 0]) != count or not np.array_equal(
+                    self._emg[0], first[0]
+                )
+            return None if moved else (count, first[: min(new, self.rows)])
+        if np.array_equal(first[new], self._newest):
+            return count, first[:new]
+        # An unaligned read may still have taken k samples shifted in but not yet counted
+        # (the writer paused between its two steps): the previous newest is then k rows
+        # nearer the top, and those k were emitted then (and as many of the oldest missed,
+        # which ``_emit`` counts as lost: these rows start k samples late).
+        for k in range(1, min(new, MAX_CATCH_UP) + 1):
+            if np.array_equal(first[new - k], self._newest):
+                self.realigned += 1
+                return count, first[: new - k]
+        return None  # shifted, not yet counted (or torn): the write is in progress
 
     def read_samples(self):
         """Every sample written since the last call, shape (n, channels), oldest first.
 
         None when nothing new arrived, or when no consistent snapshot could be had this
-        time (those samples come with the next call).
+        time (those samples come with a later call). Without the streamer's locks a
+        snapshot is emitted only once a later one confirms it (next section).
         """
         count = int(self._count[0, 0])
         if count < self._last:  # zeroed by OnlineDataHandler.reset() or a new streamer
             self.resets += 1
-            self._last, self._newest = 0, None
+            self._last, self._newest, self._pending = 0, np.zeros(self.channels), None
         for attempt in range(SNAPSHOT_ATTEMPTS):
             snapshot = self._snapshot()
             if snapshot is not None:
@@ -169,13 +211,57 @@ class LibEmgSharedMemory:
             self.retries += 1
             time.sleep(SNAPSHOT_PAUSE)
         else:
+            self._failures += 1
+            if self._failures >= RESYNC_AFTER:
+                # The previous newest sample is nowhere to be found (say, a row torn in
+                # the middle was taken for it): align on the count alone from now on.
+                self._newest, self._failures = None, 0
+                self.resyncs += 1
             return None
+        self._failures = 0
         count, rows = snapshot
-        if len(rows) == 0:
+        if not self._locks:
+            count, rows = self._confirmed(count, rows)
+        if rows is None or len(rows) == 0:
             return None
-        self.lost += max(0, count - self._last - self.rows)
+        self.lost += max(0, count - len(rows) - self._last)
         self._last, self._newest = count, rows[0].copy()
         return rows[::-1].copy()
+
+    def _confirmed(self, count, rows):
+        """Lock-free reading: the rows of the pending snapshot that this one confirms.
+
+        Without the locks, a streamer preempted in the middle of its copy leaves a torn
+        buffer (its top rows shifted, the rest not), which may look consistent for as
+        long as it is preempted. So a snapshot waits: it is emitted once a later one shows
+        the same rows where they must be, either unchanged (count unchanged: the streamer
+        is idle) or moved down by exactly the samples counted since. Costs one poll of
+        latency (MYO through LibEMG: 5 ms at most).
+
+        Returns (count, rows) to emit, or (count, None).
+        """
+        now = time.monotonic()
+        pending, self._pending = self._pending, ((count, rows, now) if len(rows) else None)
+        if pending is None or not len(rows):
+            return count, None
+        pending_count, pending_rows, taken = pending
+        offset = count - pending_count
+        if offset == 0:
+            if not np.array_equal(rows, pending_rows):
+                return count, None
+            if now - taken < CONFIRM_AFTER:
+                self._pending = pending  # too soon to tell an idle streamer from a stalled copy
+                return count, None
+            self._pending = None
+            return pending_count, pending_rows
+        # The pending rows that this snapshot still holds (all, unless the ring moved on).
+        common = min(len(pending_rows), len(rows) - offset)
+        if offset > 0 and common > 0 and np.array_equal(
+            rows[offset : offset + common], pending_rows[:common]
+        ):
+            self._pending = (count, rows[:offset], now)
+            return pending_count, pending_rows[:common]
+        return count, None
 
     def _close_blocks(self):
         for block in (self._emg_block, self._count_block):

@@ -226,6 +226,18 @@ def _packets(first, total, size):
     return [(j, min(size, first + total - j)) for j in range(first, first + total, size)]
 
 
+def _drain(reader):
+    """What a reader returns for an idle streamer: read until nothing more comes (without
+    the locks, a snapshot is emitted when the next read confirms it)."""
+    blocks, empty = [], 0
+    while empty < 10:  # 10 ms without a sample
+        block = reader.read_samples()
+        empty = empty + 1 if block is None else 0
+        blocks += [] if block is None else [block]
+        time.sleep(0.001)
+    return np.concatenate(blocks) if blocks else None
+
+
 def _read_until(reader, n_expected, timeout=10.0):
     blocks, deadline = [], time.monotonic() + timeout
     got = 0
@@ -252,7 +264,7 @@ def test_reader_gets_every_sample_in_order_while_the_streamer_writes(
         streamer.phase(wait=False)
         samples = _read_until(reader, 600)
         assert streamer.written.wait(10)
-        assert reader.read_samples() is None
+        assert _drain(reader) is None
         np.testing.assert_array_equal(samples, [_value(j) for j in range(600)])
         assert reader.lost == 0 and reader.resets == 0
 
@@ -262,12 +274,12 @@ def test_a_late_reader_starts_from_now_or_from_the_buffer(streamers):
     streamer.phase()  # 300 samples before anyone reads
     now = LibEmgSharedMemory(channels=CHANNELS, tag=streamer.tag)
     held = LibEmgSharedMemory(channels=CHANNELS, tag=streamer.tag, start="buffer")
-    assert now.read_samples() is None
+    assert _drain(now) is None
     # The ring holds the newest 120 of the first 300: samples 180..299.
-    np.testing.assert_array_equal(held.read_samples(), [_value(j) for j in range(180, 300)])
+    np.testing.assert_array_equal(_drain(held), [_value(j) for j in range(180, 300)])
     streamer.phase()
-    np.testing.assert_array_equal(now.read_samples(), [_value(j) for j in range(300, 350)])
-    np.testing.assert_array_equal(held.read_samples(), [_value(j) for j in range(300, 350)])
+    np.testing.assert_array_equal(_drain(now), [_value(j) for j in range(300, 350)])
+    np.testing.assert_array_equal(_drain(held), [_value(j) for j in range(300, 350)])
     assert now.lost == 0 and held.lost == 0
     now.close()
     held.close()
@@ -279,10 +291,10 @@ def test_a_streamer_faster_than_the_reader_overwrites_and_is_counted(streamers):
     streamer.phase()
     with LibEmgSharedMemory(channels=CHANNELS, tag=streamer.tag) as reader:
         streamer.phase()  # 500 samples while the reader sleeps: the ring keeps 64
-        np.testing.assert_array_equal(reader.read_samples(), [_value(j) for j in range(446, 510)])
+        np.testing.assert_array_equal(_drain(reader), [_value(j) for j in range(446, 510)])
         assert reader.lost == 500 - 64
         streamer.phase()
-        np.testing.assert_array_equal(reader.read_samples(), [_value(j) for j in range(510, 516)])
+        np.testing.assert_array_equal(_drain(reader), [_value(j) for j in range(510, 516)])
 
 
 def test_a_stopped_streamer_leaves_the_source_holding_with_counters(streamers):
@@ -291,6 +303,8 @@ def test_a_stopped_streamer_leaves_the_source_holding_with_counters(streamers):
     reader = LibEmgSharedMemory(channels=CHANNELS, tag=streamer.tag)
     source = LiveEmgSource(device=reader)
     simulator = Simulator(source)
+    # Real time, as with a device: a lock-free read is confirmed by the next poll, 5 ms on.
+    simulator.set_target_realtime_rate(1.0)
     simulator.AdvanceTo(0.0201)  # 5 polls with nothing yet
     streamer.phase()  # 12 samples, then the streamer stops writing
     simulator.AdvanceTo(0.2)  # 40 polls in all
@@ -303,6 +317,38 @@ def test_a_stopped_streamer_leaves_the_source_holding_with_counters(streamers):
     np.testing.assert_array_equal(source.get_emg_output_port().Eval(context), _value(11))
     assert "12 samples received, 12 emitted, 28 polls with none waiting" in source.status(context)
     reader.close()
+    # With a timeout, the silence is named; what was read came out in order first.
+    late = LibEmgSharedMemory(channels=CHANNELS, tag=streamer.tag, start="buffer")
+    strict = LiveEmgSource(device=late, timeout=0.05)
+    simulator = Simulator(strict)
+    simulator.set_target_realtime_rate(1.0)
+    with pytest.raises(EmgDeviceStalled, match=r"0\.05 s .*12 samples received in all"):
+        simulator.AdvanceTo(1.0)
+    np.testing.assert_array_equal(
+        strict.get_emg_output_port().Eval(simulator.get_context()), _value(11)
+    )
+    late.close()
+
+
+def test_lock_free_reads_against_a_streamer_flat_out_are_never_torn_or_doubled(streamers):
+    # No locks at the reader (a LibEMG in another environment), a writer without pauses:
+    # whatever is read is whole samples, in order, none twice; the rest is counted lost.
+    total = 20000
+    streamer = streamers([[], _packets(0, total, 2)], rows=1000)
+    streamer.phase()
+    with LibEmgSharedMemory(channels=CHANNELS, tag=streamer.tag) as reader:
+        streamer.phase(wait=False)
+        blocks = []
+        while not streamer.written.is_set():
+            block = reader.read_samples()
+            if block is not None:
+                blocks.append(block)
+        rest = _drain(reader)
+        samples = np.concatenate(blocks + ([] if rest is None else [rest]))
+        index = samples[:, 0]
+        np.testing.assert_array_equal(samples, [_value(j) for j in index.astype(int)])
+        assert np.all(np.diff(index) >= 1) and index[-1] == total - 1
+        assert len(samples) + reader.lost == total
 
 
 def test_a_missing_streamer_and_a_wrong_channel_count_are_named(streamers):
