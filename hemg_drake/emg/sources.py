@@ -481,8 +481,6 @@ class LiveEmgSource(_SampledSource):
             raise ValueError(f"max_backlog must be a positive integer or None, got {max_backlog!r}")
         if timeout is not None:
             timeout = as_scalar("timeout", timeout)
-            if not timeout > 0:
-                raise ValueError(f"timeout must be positive or None, got {timeout!r}")
         self._device = device
         self._channels = channels
         self._units = units
@@ -549,9 +547,10 @@ class LiveEmgSource(_SampledSource):
         else:
             underruns += 1
             self._silent_polls += 1
-            if self._timeout is not None and self._silent_polls * self._period >= self._timeout:
+            silence = self._silent_polls * self._period
+            if self._timeout is not None and silence >= self._timeout - 1e-12:
                 raise EmgDeviceStalled(
-                    f"no sEMG sample for {self._silent_polls * self._period:.3g} s "
+                    f"no sEMG sample for {silence:.3g} s "
                     f"({self._silent_polls} polls; timeout {self._timeout:g} s): the device "
                     f"stopped or is disconnected ({received} samples received in all)"
                 )
