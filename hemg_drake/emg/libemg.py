@@ -279,3 +279,29 @@ class LibEmgSharedMemory:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def libemg_emg_source(*, channels=8, units="int8", period=None, tag="emg", timeout=None,
+                      wait=5.0, **reader_options):
+    """A ``LiveEmgSource`` reading a LibEMG streamer's shared memory, and its reader.
+
+    The defaults fit LibEMG's ``myo_streamer(filtered=False)``: 8 int8 channels at
+    200 Hz. Close the reader (``reader.close()``) when the simulation is over.
+
+    Returns
+    -------
+    source : LiveEmgSource
+    reader : LibEmgSharedMemory
+    """
+    from hemg_drake.emg.sources import MYO_PERIOD, LiveEmgSource
+
+    reader = LibEmgSharedMemory(channels=channels, tag=tag, wait=wait, **reader_options)
+    try:
+        source = LiveEmgSource(
+            device=reader, channels=channels, units=units,
+            period=MYO_PERIOD if period is None else period, timeout=timeout,
+        )  # fmt: skip
+    except ValueError:
+        reader.close()
+        raise
+    return source, reader

@@ -419,3 +419,21 @@ def test_myo_reader_queues_every_sample_and_counts_what_it_drops():
         assert small.lost == 50
     finally:
         small.close()
+
+
+def test_libemg_source_in_one_call(streamers):
+    from hemg_drake.emg.libemg import libemg_emg_source
+
+    streamer = streamers([[], _packets(0, 4, 2)], rows=50)
+    streamer.phase()
+    source, reader = libemg_emg_source(tag=streamer.tag, lock=streamer.locks[0],
+                                       count_lock=streamer.locks[1])  # fmt: skip
+    streamer.phase()
+    simulator = Simulator(source)
+    simulator.AdvanceTo(0.0151)  # polls at 0, 5, 10, 15 ms: the four samples in order
+    np.testing.assert_array_equal(source.get_emg_output_port().Eval(simulator.get_context()),
+                                  _value(3))  # fmt: skip
+    assert source.counters_dict(simulator.get_context())["emitted"] == 4
+    reader.close()
+    with pytest.raises(ValueError, match="units must be one of"):
+        libemg_emg_source(tag=streamer.tag, units="mV")
