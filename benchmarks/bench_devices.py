@@ -101,7 +101,8 @@ def bench_live_chain(seconds=5.0, rate=200.0, newest_only=False, locks=True):
     context = multiprocessing.get_context("fork")
     lock, ready = context.Lock(), context.Event()
     tag = f"hemg_bench_{uuid.uuid4().hex[:10]}"
-    process = context.Process(target=_streamer, args=(tag, 1000, lock, 1 / rate, seconds + 1, ready))
+    args = (tag, 1000, lock, 1 / rate, seconds + 1, ready)
+    process = context.Process(target=_streamer, args=args)
     process.start()
     ready.wait(10)
     shared = {"lock": lock, "count_lock": lock} if locks else {}
