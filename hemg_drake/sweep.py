@@ -785,10 +785,9 @@ def run_sweep(path, out, *, backend="local", workers=None, address=None, resume=
             records[trial.id] = record
     todo = [t for t in all_trials if t.id not in records]
     progress = Progress(len(all_trials), min(workers, max(len(todo), 1)), stream)
-    for _ in records:
-        progress.update("done", skipped=True)
-    if not records:
-        progress.update()
+    # Trials done in an earlier run count as done, not in the time left.
+    progress.done = progress.skipped = len(records)
+    progress.update()
 
     def on_record(record):
         records[record["id"]] = record
