@@ -53,7 +53,8 @@ def excursion(delay_steps, passivity, k_env=500.0):
     x, energy = [], []
     for t in np.arange(0.01, DURATION + 1e-9, 0.01):
         simulator.AdvanceTo(t)
-        x.append(abs(master.GetOutputPort("p_MS").Eval(master.GetMyContextFromRoot(context))[0]))
+        p_MS = master.GetOutputPort("p_MS").Eval(master.GetMyContextFromRoot(context))
+        x.append(abs(p_MS[0]))
         if feedback.stateful:
             energy.append(feedback.energy(feedback.GetMyContextFromRoot(context)))
     return max(x[-100:]), min(energy) if energy else 0.0
@@ -68,8 +69,10 @@ def main():
         plain, _ = excursion(delay, "none")
         passive, least = excursion(delay, "tdpa")
         rows[delay] = (plain, passive)
-        print(f"delay {delay:3d} ms each way: last-second excursion plain {1e3 * plain:7.3f} mm,"
-              f" passive {1e3 * passive:7.3f} mm (observer's least energy {least:.1e} J)")  # fmt: skip
+        print(
+            f"delay {delay:3d} ms each way: last-second excursion plain {1e3 * plain:7.3f} "
+            f"mm, passive {1e3 * passive:7.3f} mm (observer's least energy {least:.1e} J)"
+        )
     if args.figure:
         import matplotlib
 

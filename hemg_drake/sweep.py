@@ -125,7 +125,8 @@ def _yaml_text(value):
     """A YAML value as one line of YAML (an override's value)."""
     if isinstance(value, str):
         return value
-    return yaml.safe_dump(value, default_flow_style=True, width=10**6).strip().removesuffix("...").strip()
+    text = yaml.safe_dump(value, default_flow_style=True, width=10**6)
+    return text.strip().removesuffix("...").strip()
 
 
 def _normalise(raw, source):
@@ -141,9 +142,7 @@ def _normalise(raw, source):
                 axis["values"] = [_yaml_text(v) for v in axis["values"]]
             if isinstance(axis.get("cases"), dict):
                 # YAML reads `off:` and `on:` as booleans; a case name is its text.
-                axis["cases"] = {
-                    _case_name(k): v for k, v in axis["cases"].items()
-                }
+                axis["cases"] = {_case_name(k): v for k, v in axis["cases"].items()}
     return raw
 
 
@@ -180,7 +179,9 @@ def _check_types(value, schema, key):
             raise ValueError(f"{where} must be {_TYPE_NAMES[schema]}, got {value!r}")
     else:
         if not isinstance(value, dict):
-            raise ValueError(f"{where} must be a mapping of {schema.__name__}'s fields, got {value!r}")
+            raise ValueError(
+                f"{where} must be a mapping of {schema.__name__}'s fields, got {value!r}"
+            )
         hints = typing.get_type_hints(schema)
         unknown = sorted(set(value) - set(hints))
         if unknown:
@@ -205,7 +206,8 @@ def parse_sweep(text, *, source="<sweep>"):
     except yaml.YAMLError as error:
         mark = getattr(error, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        raise ValueError(f"{source}: malformed YAML{where}: {getattr(error, 'problem', error)}") from None
+        problem = getattr(error, "problem", error)
+        raise ValueError(f"{source}: malformed YAML{where}: {problem}") from None
     if raw is None:
         raise ValueError(f"{source}: the sweep file is empty; give at least its 'scenario'")
     try:
@@ -245,11 +247,14 @@ def _check_spec(spec):
             for override in overrides:
                 if "=" not in override:
                     raise ValueError(
-                        f"key '{where}.cases.{name}': an override must read key=value, got {override!r}"
+                        f"key '{where}.cases.{name}': an override must read key=value, "
+                        f"got {override!r}"
                     )
         names.append(axis.name)
     if len(set(names)) != len(names) or {"seed", "trial", "status"} & set(names):
-        raise ValueError(f"key 'axes': names must be distinct and not seed, trial, status; got {names}")
+        raise ValueError(
+            f"key 'axes': names must be distinct and not seed, trial, status; got {names}"
+        )
     if not spec.seeds or len(set(spec.seeds)) != len(spec.seeds) or min(spec.seeds) < 0:
         raise ValueError(f"key 'seeds' must list distinct non-negative integers, got {spec.seeds}")
     unknown = [s for s in spec.steps if s not in STEPS]
@@ -257,7 +262,9 @@ def _check_spec(spec):
         raise ValueError(f"key 'steps' must be among {STEPS}, got {spec.steps}")
     expected = list(STEPS[: len(spec.steps)])
     if spec.steps != expected:
-        raise ValueError(f"key 'steps' must be the first steps of {STEPS} in order, got {spec.steps}")
+        raise ValueError(
+            f"key 'steps' must be the first steps of {STEPS} in order, got {spec.steps}"
+        )
     if "heldout" in spec.steps and spec.heldout < 1:
         raise ValueError(f"key 'heldout' must be at least 1 with step heldout, got {spec.heldout}")
     if spec.heldout < 0:
@@ -425,7 +432,8 @@ def demonstration_metrics(scenario, demos):
         energy = 0.5 * scenario.master.mass * np.sum(v_MS**2, axis=1)
         record["master_energy_peak_mj"].append(1e3 * float(energy.max()))
         record["master_hit_wall"].append(float(np.any(np.abs(demo.p_MS) > half_box)))
-        record["gain_lag_s"].append(_lag(demo.emg_time, demo.muscle_activation, demo.time, demo.gain))
+        lag = _lag(demo.emg_time, demo.muscle_activation, demo.time, demo.gain)
+        record["gain_lag_s"].append(lag)
         if scenario.task == "cotter_pin":
             task["pin_out"].append(float(demo.p_WE[:, 2].max() - demo.p_WE[0, 2] >= 0.08))
         else:
@@ -546,7 +554,8 @@ def _trial_metrics(task, run):
         result.update(flatten("demonstration", demonstration_metrics(scenario, demos)))
     if "learn" in steps:
         model = pipeline.learn(run, overrides=overrides, progress=_quiet)
-        result.update({"learn.n_iter": int(model.n_iter_), "learn.converged": bool(model.converged_)})
+        result["learn.n_iter"] = int(model.n_iter_)
+        result["learn.converged"] = bool(model.converged_)
     if "reproduce" in steps:
         reproduced = pipeline.reproduce(run, overrides=overrides, replay=False, progress=_quiet)
         reproduced = {k: v for k, v in reproduced.items() if k not in ("start", "start_offset")}

@@ -119,7 +119,10 @@ def test_trials_of_a_grid_and_one_at_a_time():
     [
         ("axes: []\n", "key 'scenario' is required"),
         ("scenario: x\nbogus: 1\n", "unknown key(s) ['bogus']"),
-        ("scenario: x\naxes: [{name: a, values: [1], bogus: 2}]\n", "unknown key(s) ['axes[0].bogus']"),
+        (
+            "scenario: x\naxes: [{name: a, values: [1], bogus: 2}]\n",
+            "unknown key(s) ['axes[0].bogus']",
+        ),
         ("scenario: x\nseeds: [1, a]\n", "key 'seeds[1]' must be an integer"),
         ("scenario: x\naxes: [{name: a}]\n", "key 'axes[0]' needs either 'values' or 'cases'"),
         ("scenario: x\nsteps: [learn]\n", "key 'steps' must be the first steps"),
