@@ -935,7 +935,7 @@ def plot_results(records, spec, path, *, title=None):
     seeds = len(spec.seeds)
     figure.suptitle(title or f"{len(done)} trials, mean and +-1 std over {seeds} seed(s)",
                     fontsize=10)  # fmt: skip
-    figure.tight_layout()
+    figure.tight_layout(rect=(0, 0, 1, 1 - 0.25 / figure.get_figheight()))
     save_figure(figure, path)
     plt.close(figure)
     return path
