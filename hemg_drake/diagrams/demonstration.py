@@ -199,6 +199,8 @@ def build_demonstration_diagram(
     f_WE = slave.GetOutputPort("f_WE")
     if scenario.feedback.mode == "force":
         connect(f_WE, force_feedback.GetInputPort("f_WE"))
+        if force_feedback.HasInputPort("v_MS"):  # the passivity controller reads the stylus
+            connect(master.GetOutputPort("v_MS"), force_feedback.GetInputPort("v_MS"))
     else:
         connect(slave.GetOutputPort("p_WE"), force_feedback.GetInputPort("p_WE"))
         connect(slave.GetOutputPort("v_WE"), force_feedback.GetInputPort("v_WE"))

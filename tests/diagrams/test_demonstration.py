@@ -360,3 +360,19 @@ def test_plot_demonstrations_layouts(free_space):
         plot_demonstrations([demo], task="welding")
     with pytest.raises(ValueError, match="at least one"):
         plot_demonstrations([], task="drawing")
+
+
+def test_passive_force_feedback_reads_the_stylus_velocity():
+    """In force mode the passivity controller needs v_MS: the builder connects it."""
+    from hemg_drake.diagrams.demonstration import build_demonstration_diagram
+    from hemg_drake.scenario import load_scenario, shipped_scenario
+
+    scenario = load_scenario(
+        shipped_scenario("cotter_pin"), overrides=["feedback.passivity=tdpa", "duration=0.05"]
+    )
+    built = build_demonstration_diagram(scenario, seed=1)
+    feedback = built.diagram.GetSubsystemByName("force_feedback")
+    context = built.diagram.CreateDefaultContext()
+    feedback_context = feedback.GetMyContextFromRoot(context)
+    assert feedback.GetInputPort("v_MS").HasValue(feedback_context)
+    feedback.GetOutputPort("motor_force").Eval(feedback_context)  # no unconnected input
