@@ -15,6 +15,8 @@ SET_HELP = (
     "override a scenario key, in YAML value syntax (repeatable), e.g. --set emg.k_max=150 "
     "--set scene.position=[0.65,-0.80,0.12]"
 )
+# The extra that installs each optional package a command may need (pyproject.toml).
+OPTIONAL_EXTRAS = {"h5py": "export", "ray": "ray", "pyOpenHaptics": "touchx", "pyomyo": "myo"}
 # emg-figure's synthetic recording: at most this long (s); a longer one takes minutes and
 # gigabytes to plot for no more insight.
 MAX_EMG_FIGURE_DURATION = 600.0
@@ -480,6 +482,16 @@ def main(argv=None):
     except KeyboardInterrupt:
         print(f"hemg-drake {args.command}: interrupted; no partial output kept", file=sys.stderr)
         return 130
+    except ImportError as error:
+        # An optional dependency (pyproject.toml's extras) that this install lacks.
+        extra = OPTIONAL_EXTRAS.get((error.name or "").split(".")[0])
+        how = f": pip install 'hemg-drake[{extra}]'" if extra else ""
+        print(
+            f"hemg-drake {args.command}: error: needs the optional package "
+            f"{error.name or error}{how}",
+            file=sys.stderr,
+        )
+        return 2
     except (ValueError, OSError) as error:
         # Bad input and unwritable or missing files are reported in one line.
         print(f"hemg-drake {args.command}: error: {_one_line(error)}", file=sys.stderr)

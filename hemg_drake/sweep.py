@@ -713,6 +713,17 @@ def _crashed(task, error):
                 error=f"worker died: {type(error).__name__}: {_first_line(error)}")  # fmt: skip
 
 
+
+def only_loopback():
+    """True if this process's network interfaces are just ``lo`` (a loopback-only network
+    namespace); ``socket.if_nameindex`` asks the kernel for this process's namespace."""
+    import socket
+
+    try:
+        return [name for _, name in socket.if_nameindex()] == ["lo"]
+    except OSError:
+        return False
+
 def _run_ray(tasks, workers, address, on_record):
     try:
         import ray
@@ -724,7 +735,16 @@ def _run_ray(tasks, workers, address, on_record):
     if address:
         ray.init(address=address, runtime_env=runtime_env, log_to_driver=False)
     else:
-        # A private local instance on the loopback address only, without the dashboard.
+        # Ray binds the machine's own address whatever _node_ip_address says (measured with
+        # Ray 2.60): start a local instance only where the loopback is the only network.
+        if not only_loopback():
+            raise ValueError(
+                "--backend ray without --address starts a local Ray, which binds this "
+                "machine's network address; run it in a loopback-only network namespace "
+                "(as root: unshare -n, then ip link set lo up), or join a cluster with "
+                "--address, or use the local backend (the default)"
+            )
+        # A private local instance, without the dashboard.
         ray.init(
             _node_ip_address="127.0.0.1", include_dashboard=False, num_cpus=workers,
             object_store_memory=RAY_OBJECT_STORE_BYTES, runtime_env=runtime_env,

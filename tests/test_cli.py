@@ -280,3 +280,16 @@ def test_closed_stdout_is_tolerated(tmp_path):
     assert process.wait(timeout=60) == 0
     assert "BrokenPipe" not in err and "Traceback" not in err
     assert out.is_file()
+
+
+def test_a_missing_optional_package_is_one_line_naming_its_extra(tmp_path, capsys, monkeypatch):
+    from hemg_drake import cli
+
+    def needs_h5py(args):
+        raise ModuleNotFoundError("No module named 'h5py'", name="h5py")
+
+    monkeypatch.setattr(cli, "_export", needs_h5py)
+    code, out, err = run(["export", str(tmp_path), "--format", "robomimic",
+                          str(tmp_path / "x.hdf5")], capsys)  # fmt: skip
+    assert code == 2 and "Traceback" not in err and err.count("\n") == 1
+    assert "needs the optional package h5py: pip install 'hemg-drake[export]'" in err

@@ -12,19 +12,8 @@ from pathlib import Path
 
 import pytest
 
+from hemg_drake.sweep import only_loopback as _only_loopback
 from hemg_drake.sweep import run_sweep
-
-
-def _only_loopback():
-    """The process's network interfaces are just ``lo`` (socket.if_nameindex asks the
-    kernel for this process's namespace; /sys/class/net shows the namespace sysfs was
-    mounted in, which ``unshare -n`` does not remount)."""
-    import socket
-
-    try:
-        return [name for _, name in socket.if_nameindex()] == ["lo"]
-    except OSError:
-        return False
 
 
 pytestmark = [

@@ -245,7 +245,7 @@ class HsmmLqrPolicy:
         self,
         model,
         *,
-        weighting="temporal",
+        weighting="forward",
         dt=0.01,
         horizon=DEFAULT_HORIZON,
         control_cost=DEFAULT_CONTROL_COST,

@@ -171,6 +171,8 @@ class ForceFeedback(LeafSystem):
 
     def _slave_sample(self, context):
         """The slave's side of the inputs now: f_WE, or [p_WE, v_WE]."""
+        if len(self._slave_names) == 1:  # force mode, at 1 kHz: no copy
+            return self._input(context, self._slave_names[0])
         return np.concatenate([self._input(context, name) for name in self._slave_names])
 
     def _force(self, context, slave):
