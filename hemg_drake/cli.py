@@ -15,6 +15,8 @@ SET_HELP = (
     "override a scenario key, in YAML value syntax (repeatable), e.g. --set emg.k_max=150 "
     "--set scene.position=[0.65,-0.80,0.12]"
 )
+# Longest demonstration (s), as the scenario's check has it.
+MAX_DURATION = 600.0
 # The extra that installs each optional package a command may need (pyproject.toml).
 OPTIONAL_EXTRAS = {"h5py": "export", "ray": "ray", "pyOpenHaptics": "touchx", "pyomyo": "myo"}
 # emg-figure's synthetic recording: at most this long (s); a longer one takes minutes and
@@ -200,7 +202,8 @@ def _emg_figure(args):
     check_output_file(args.output)
     if args.input:
         samples = load_emg_recording(args.input)
-        source = f"{args.input} ({len(samples)} samples)"
+        count = len(samples)
+        source = f"{args.input} ({count} sample{'s' if count != 1 else ''})"
     else:
         if args.duration * MYO_RATE < 1:
             raise ValueError(f"--duration must be at least one sample (5 ms), got {args.duration}")
@@ -294,7 +297,7 @@ class _Formatter(argparse.ArgumentDefaultsHelpFormatter):
     """Show defaults, but not for flags and options whose default is None."""
 
     def _get_help_string(self, action):
-        if action.default in (None, False) or action.default == []:
+        if action.default is None or action.default is False or action.default == []:
             return action.help
         return super()._get_help_string(action)
 
@@ -337,14 +340,16 @@ def build_parser():
     )
     demonstrate.add_argument("--out", required=True, help="output folder, e.g. runs/pin/")
     demonstrate.add_argument(
-        "--demos", type=_positive_int("--demos"), help="number of demonstrations C"
+        "--demos", type=_positive_int("--demos"),
+        help="number of demonstrations C (default: the scenario's num_demonstrations)",
     )
     demonstrate.add_argument(
-        "--duration", type=_finite_float("--duration", positive=True),
-        help="seconds per demonstration",
+        "--duration", type=_finite_float("--duration", positive=True, maximum=MAX_DURATION),
+        help="seconds per demonstration (default: the scenario's duration)",
     )  # fmt: skip
     demonstrate.add_argument(
-        "--seed", type=_non_negative_int("--seed"), help="seed of the first demonstration"
+        "--seed", type=_non_negative_int("--seed"),
+        help="seed of the first demonstration (default: the scenario's seed)",
     )
     demonstrate.add_argument("--no-replay", action="store_true", help="write no HTML replays")
     add_set(demonstrate)

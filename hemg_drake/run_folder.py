@@ -20,6 +20,7 @@ there, naming the model and dataset it came from.
 import contextlib
 import hashlib
 import json
+import shutil
 from pathlib import Path
 
 from hemg_drake.fileio import write_text_atomic
@@ -41,6 +42,9 @@ OUTPUTS = {
 }  # fmt: skip
 # Sub-folders of extra reproductions (``start_offset``, ``start_offset_<i>``).
 REPRODUCTION_FOLDERS = "start_offset*"
+# Sub-folder of the full demo's placements run (pipeline.placement_demo): a run of its own,
+# made from this folder's scenario, removed with the folder's demonstrations.
+PLACEMENTS_FOLDER = "placements"
 
 
 def file_hash(path):
@@ -111,6 +115,11 @@ class RunFolder:
         later = STAGES[STAGES.index(stage) :]
         self.clean_temporaries()
         removed = []
+        placements = self.path / PLACEMENTS_FOLDER
+        if stage == "demonstrate" and placements.is_dir():
+            removed += [f"{PLACEMENTS_FOLDER}/{p.relative_to(placements)}"
+                        for p in sorted(placements.rglob("*")) if p.is_file()]  # fmt: skip
+            shutil.rmtree(placements)
         for name in later:
             for pattern in OUTPUTS[name]:
                 for path in self.path.glob(pattern):
@@ -162,6 +171,8 @@ class RunFolder:
 
         ``run_hint`` is the command that makes it (named in the message).
         """
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"no {Path(path).name} in {self.path}: run {run_hint}")
         entry = self.manifest().get(stage)
         name = self._name(path)
         if entry is None or name not in entry["files"]:

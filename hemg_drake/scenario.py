@@ -55,6 +55,9 @@ from hemg_drake.teleop.master import MasterDynamics
 from hemg_drake.teleop.operator import OperatorModel
 
 TASKS = ("cotter_pin", "drawing")
+# Longest demonstration (s): 10 minutes of a 1 kHz diagram is minutes to simulate and about
+# 0.5 GB of logs; a longer one is more likely a typo than a plan.
+MAX_DURATION = 600.0
 # Where each task's scene stands by default (scene frame T's origin, m, in W).
 DEFAULT_POSITIONS = {"cotter_pin": cotter_pin.DEFAULT_POSITION, "drawing": drawing.DEFAULT_POSITION}
 # The scenarios shipped with the package (hemg_drake/scenarios/<name>.yaml).
@@ -70,7 +73,7 @@ def _value(default, **checks):
     """A dataclass field with its default and its range checks, read by ``_check_values``.
 
     Checks (numbers must be >= 0 unless ``signed``): ``positive``, ``signed``, ``fraction``
-    (in [0, 1]), ``size`` (a vector's length), ``choices`` (allowed values).
+    (in [0, 1]), ``maximum``, ``size`` (a vector's length), ``choices`` (allowed values).
     """
     if isinstance(default, (list, tuple, np.ndarray)):
         items = list(default)
@@ -361,7 +364,7 @@ class Scenario:
     # Drake's simulator settings (target_realtime_rate 0: as fast as possible).
     simulator: SimulatorConfig = dc.field(default_factory=SimulatorConfig)
     # Simulated length of one demonstration (s).
-    duration: float = _value(8.0, positive=True)
+    duration: float = _value(8.0, positive=True, maximum=MAX_DURATION)
     # Sample period of the logged demonstration (s; Table I: 0.01).
     log_period: float = _value(0.01, positive=True)
     # Number of demonstrations C (cotter pin 4, drawing 3).
@@ -664,6 +667,9 @@ def _check_values(scenario):
             raise ValueError(f"key '{key}' must be positive, got {value!r}")
         if not checks.get("signed") and np.any(numbers < 0):
             raise ValueError(f"key '{key}' must not be negative, got {value!r}")
+        maximum = checks.get("maximum")
+        if maximum is not None and np.any(numbers > maximum):
+            raise ValueError(f"key '{key}' must be at most {maximum:g}, got {value!r}")
         if checks.get("fraction") and np.any(numbers > 1):
             raise ValueError(f"key '{key}' must lie in [0, 1], got {value!r}")
     settings = scenario.reproduction

@@ -168,7 +168,10 @@ def build_demonstration_diagram(
     workspace_map = add(
         "workspace_map",
         WorkspaceMap(
-            mapping=mapping, delay_steps=scenario.mapping.delay_steps, p_MS_initial=p_MS_initial
+            mapping=mapping,
+            delay_steps=scenario.mapping.delay_steps,
+            period=scenario.master.period,  # the channel's samples are the master's
+            p_MS_initial=p_MS_initial,
         ),
     )
     emg_source = add("emg_source", SyntheticEmgSource(seed=seed))
@@ -183,7 +186,8 @@ def build_demonstration_diagram(
     envelope.set_name("envelope")
     variable_gain.set_name("variable_gain")
     force_feedback = add(
-        "force_feedback", ForceFeedback(mapping=mapping, **dc.asdict(scenario.feedback))
+        "force_feedback",
+        ForceFeedback(mapping=mapping, period=scenario.master.period, **dc.asdict(scenario.feedback)),
     )
 
     connect = builder.Connect

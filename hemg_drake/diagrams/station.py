@@ -181,7 +181,13 @@ def make_slave_station(
         if scenario.clik.orientation_gain > 0:
             # Start with the tool's axis where the CLIK's orientation task holds it.
             axes = dict(axis_E=scenario.clik.axis_E, axis_W=scenario.clik.axis_W_desired)
-        q0 = solve_tool_point_ik(plant, arm, start, **axes)
+        try:
+            q0 = solve_tool_point_ik(plant, arm, start, **axes)
+        except ValueError as error:
+            raise ValueError(
+                f"the task's start {np.round(start, 4).tolist()} m (the plan's first point, "
+                f"placed by scene.position and scene.yaw_deg) is out of the arm's reach: {error}"
+            ) from None
     q0 = np.array(q0, dtype=float)
     plant.SetDefaultPositions(arm.model_instance, q0)
 

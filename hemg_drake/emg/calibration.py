@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 
-from hemg_drake.emg.envelope import _check_window, moving_rms
+from hemg_drake.emg.envelope import DEFAULT_WINDOW, _check_window, moving_rms
 from hemg_drake.fileio import write_text_atomic
 
 
@@ -35,7 +35,7 @@ class EmgCalibration:
     # Mean RMS envelope of the maximum-contraction recording (MYO units).
     mvc_level: float = 1.0
     # L_win of the envelope the levels were measured with.
-    window: int = 20
+    window: int = DEFAULT_WINDOW
     # True when the levels are of the per-channel envelope.
     per_channel: bool = False
 
@@ -53,7 +53,7 @@ class EmgCalibration:
         _check_window(self.window)
 
     @classmethod
-    def from_recordings(cls, rest, mvc, window=20, *, per_channel=False):
+    def from_recordings(cls, rest, mvc, window=DEFAULT_WINDOW, *, per_channel=False):
         """Levels from a rest and a maximum-contraction recording.
 
         Each level is the mean of the recording's ``moving_rms`` envelope,

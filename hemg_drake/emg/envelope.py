@@ -32,7 +32,10 @@ def _combine(mean_squares):
     return np.sqrt(mean_squares).sum(axis=-1)
 
 
-def moving_rms(samples, window=20, *, per_channel=False):
+# The paper's moving-RMS window L_win (200 Hz samples): the default everywhere.
+DEFAULT_WINDOW = 20
+
+def moving_rms(samples, window=DEFAULT_WINDOW, *, per_channel=False):
     """Moving-window RMS envelope of multichannel sEMG (eqs. 1-2).
 
     By default, the paper's form: u_k = sum_i samples[k, i] (eq. 1), then
@@ -120,7 +123,7 @@ class RmsEnvelope(LeafSystem):
         Sample period in s (MYO: 1/200).
     """
 
-    def __init__(self, *, window=20, per_channel=False, period=MYO_PERIOD):
+    def __init__(self, *, window=DEFAULT_WINDOW, per_channel=False, period=MYO_PERIOD):
         LeafSystem.__init__(self)
         self._window = _check_window(window)
         self._per_channel = bool(per_channel)

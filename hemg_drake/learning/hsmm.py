@@ -99,14 +99,14 @@ def check_demos(demos, n_dims=None):
         raise ValueError("demos is empty: give at least one array of shape (T, D)")
     for c, demo in enumerate(demos):
         if demo.ndim != 2 or demo.shape[0] < 1 or demo.shape[1] < 1:
-            raise ValueError(f"demo {c} must have shape (T, D), got {demo.shape}")
+            raise ValueError(f"demonstration {c + 1} must have shape (T, D), got {demo.shape}")
         if not np.all(np.isfinite(demo)):
-            raise ValueError(f"demo {c} contains NaN or inf")
+            raise ValueError(f"demonstration {c + 1} contains NaN or inf")
         expected = demos[0].shape[1] if n_dims is None else n_dims
         if demo.shape[1] != expected:
             where = "the model's" if n_dims is not None else "demo 0's"
             raise ValueError(
-                f"demo {c} has D = {demo.shape[1]} dimensions, {where} is D = {expected}"
+                f"demonstration {c + 1} has D = {demo.shape[1]} dimensions, {where} is D = {expected}"
             )
     return demos
 
@@ -371,7 +371,7 @@ class HSMM:
         for c, demo in enumerate(demos):
             if len(demo) < self.n_states:
                 raise ValueError(
-                    f"demo {c} has {len(demo)} steps, fewer than n_states = {self.n_states}"
+                    f"demonstration {c + 1} has {len(demo)} steps, fewer than the N = {self.n_states} states"
                 )
         samples = np.concatenate(demos)
         self.data_range_ = np.stack([samples.min(axis=0), samples.max(axis=0)])
@@ -878,7 +878,13 @@ class HSMM:
         path = Path(path)
         arrays = load_npz(path, kind="HSMM model")
         version = arrays.get("format_version")
-        if version is None or version.shape != () or int(version) != FORMAT_VERSION:
+        if version is None:
+            what = "a dataset (dataset.npz)" if "metadata" in arrays else "another kind of file"
+            raise ValueError(
+                f"{path}: not an HSMM model: it holds no format version, like {what}; fit "
+                f"a model with hemg-drake learn"
+            )
+        if version.shape != () or int(version) != FORMAT_VERSION:
             raise ValueError(
                 f"{path}: HSMM model format version {version}, this code reads "
                 f"{FORMAT_VERSION} (fit the model again, e.g. hemg-drake learn)"
@@ -910,11 +916,13 @@ class HSMM:
         }  # fmt: skip
         for name, shape in shapes.items():
             value = getattr(self, name)
-            if value.shape != shape or not np.all(np.isfinite(value)):
+            if value.shape != shape:
                 raise ValueError(
-                    f"{path}: damaged HSMM model file, {name} has shape {value.shape} "
-                    f"(expected {shape}) or non-finite values"
+                    f"{path}: damaged HSMM model file, {name} has shape {value.shape}, "
+                    f"expected {shape}"
                 )
+            if not np.all(np.isfinite(value)):
+                raise ValueError(f"{path}: damaged HSMM model file, {name} holds NaN or inf")
         try:
             np.linalg.cholesky(self.covariances_)
         except np.linalg.LinAlgError:

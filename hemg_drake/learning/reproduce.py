@@ -60,6 +60,10 @@ from hemg_drake.learning.gmr import Gmr, softmax
 
 WEIGHTINGS = ("temporal", "spatial", "forward")
 TRACKERS = ("gmr", "lqr")
+# The defaults of every reproducer (numpy and Drake), in one place.
+DEFAULT_DT = 0.01
+DEFAULT_WEIGHTING = "forward"
+DEFAULT_RESTORING_GAIN = 0.0
 # The LQR tracks a sequence of states over time: the spatial weighting predicts none.
 LQR_WEIGHTINGS = ("temporal", "forward")
 # Receding horizon of the LQR, steps (1 s at 0.01 s): several of its time constants (0.03-0.2 s
@@ -110,7 +114,10 @@ class HsmmGmrPolicy:
         1 (explicit Euler, eq. 18).
     """
 
-    def __init__(self, model, *, weighting="forward", dt=0.01, restoring_gain=0.0):
+    def __init__(
+        self, model, *, weighting=DEFAULT_WEIGHTING, dt=DEFAULT_DT,
+        restoring_gain=DEFAULT_RESTORING_GAIN,
+    ):  # fmt: skip
         if weighting not in WEIGHTINGS:
             raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
         if not (np.isfinite(dt) and dt > 0):
@@ -245,8 +252,8 @@ class HsmmLqrPolicy:
         self,
         model,
         *,
-        weighting="forward",
-        dt=0.01,
+        weighting=DEFAULT_WEIGHTING,
+        dt=DEFAULT_DT,
         horizon=DEFAULT_HORIZON,
         control_cost=DEFAULT_CONTROL_COST,
         state_cost=DEFAULT_STATE_COST,
@@ -432,9 +439,9 @@ def reproduce(
     start,
     n_steps,
     *,
-    dt=0.01,
-    weighting="forward",
-    restoring_gain=0.0,
+    dt=DEFAULT_DT,
+    weighting=DEFAULT_WEIGHTING,
+    restoring_gain=DEFAULT_RESTORING_GAIN,
     tracker="gmr",
     horizon=DEFAULT_HORIZON,
     control_cost=DEFAULT_CONTROL_COST,

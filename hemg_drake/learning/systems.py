@@ -5,9 +5,12 @@ from pydrake.systems.framework import LeafSystem
 
 from hemg_drake.learning.reproduce import (
     DEFAULT_CONTROL_COST,
-    DEFAULT_MAX_LEAD,
-    DEFAULT_STATE_COST,
+    DEFAULT_DT,
     DEFAULT_HORIZON,
+    DEFAULT_MAX_LEAD,
+    DEFAULT_RESTORING_GAIN,
+    DEFAULT_STATE_COST,
+    DEFAULT_WEIGHTING,
     HsmmGmrPolicy,
     HsmmLqrPolicy,
 )
@@ -58,7 +61,10 @@ class HsmmGmrReproducer(LeafSystem):
         the demonstrated path decays with the time constant 1 / kappa.
     """
 
-    def __init__(self, *, model, start, dt=0.01, weighting="forward", restoring_gain=0.0):
+    def __init__(
+        self, *, model, start, dt=DEFAULT_DT, weighting=DEFAULT_WEIGHTING,
+        restoring_gain=DEFAULT_RESTORING_GAIN,
+    ):  # fmt: skip
         LeafSystem.__init__(self)
         self._policy = HsmmGmrPolicy(
             model, weighting=weighting, dt=dt, restoring_gain=restoring_gain
@@ -164,8 +170,8 @@ class HsmmLqrReproducer(LeafSystem):
         *,
         model,
         start,
-        dt=0.01,
-        weighting="forward",
+        dt=DEFAULT_DT,
+        weighting=DEFAULT_WEIGHTING,
         horizon=DEFAULT_HORIZON,
         control_cost=DEFAULT_CONTROL_COST,
         max_lead=DEFAULT_MAX_LEAD,

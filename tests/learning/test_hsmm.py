@@ -253,13 +253,13 @@ def test_bad_demos_are_rejected():
     good = rng.standard_normal((20, 3))
     with_nan = good.copy()
     with_nan[3, 1] = np.nan
-    with pytest.raises(ValueError, match="demo 1 contains NaN"):
+    with pytest.raises(ValueError, match="demonstration 2 contains NaN"):
         HSMM(2).fit([good, with_nan])
-    with pytest.raises(ValueError, match="demo 0 contains NaN or inf"):
+    with pytest.raises(ValueError, match="demonstration 1 contains NaN or inf"):
         HSMM(2).fit([np.where(with_nan == with_nan, good, np.inf)])
-    with pytest.raises(ValueError, match="demo 1 has D = 2"):
+    with pytest.raises(ValueError, match="demonstration 2 has D = 2"):
         HSMM(2).fit([good, good[:, :2]])
-    with pytest.raises(ValueError, match="fewer than n_states"):
+    with pytest.raises(ValueError, match="demonstration 2 has 3 steps, fewer than the N = 4 states"):
         HSMM(4).fit([good, good[:3]])
     with pytest.raises(ValueError, match="shape"):
         HSMM(2).fit([good[:, 0]])
@@ -328,3 +328,23 @@ def test_polyline_init_gives_a_state_per_straight_run(models):
     assert np.all(np.sum(directions * runs, axis=1) > 0.95)
     history = np.asarray(model.log_likelihood_history_)
     assert np.all(np.diff(history) >= -1e-9 * np.abs(history[1:]))
+
+
+def test_a_dataset_or_a_nan_model_given_as_a_model_is_named_so(tmp_path, models):
+    import numpy as np
+
+    from hemg_drake.learning.hsmm import HSMM
+
+    dataset = tmp_path / "dataset.npz"
+    np.savez(dataset, metadata=np.array("{}"), **{"demo0.time": np.zeros(3)})
+    with pytest.raises(ValueError, match="not an HSMM model: .* like a dataset .*hemg-drake learn"):
+        HSMM.load(dataset)
+    model = models.set_parameters(
+        means=np.zeros((2, 1)), covariances=np.ones((2, 1, 1)), startprob=[1.0, 0.0],
+        transmat=[[0, 1], [0, 0]], duration_means=[5, 5], duration_stds=[1, 1], max_duration=20,
+    )  # fmt: skip
+    model.means_[1, 0] = np.nan
+    path = tmp_path / "nan.npz"
+    model.save(path)
+    with pytest.raises(ValueError, match=r"means_ holds NaN or inf$"):
+        HSMM.load(path)
