@@ -170,7 +170,7 @@ def test_demonstrating_another_task_into_the_folder_refuses_the_old_model(pin_ru
     assert metadata["task"] == "drawing"
 
     def refused():
-        with pytest.raises(ValueError) as error:
+        with pytest.raises((ValueError, FileNotFoundError)) as error:
             reproduce(run, replay=False, progress=quiet)
         message = str(error.value)
         assert "\n" not in message and message.endswith(f"run hemg-drake learn {run}")
