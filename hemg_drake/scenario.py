@@ -55,6 +55,8 @@ from hemg_drake.teleop.master import MasterDynamics
 from hemg_drake.teleop.operator import OperatorModel
 
 TASKS = ("cotter_pin", "drawing")
+# Where a demonstration's raw sEMG comes from (emg.source).
+EMG_SOURCES = ("synthetic", "myo", "libemg")
 # Longest demonstration (s): 10 minutes of a 1 kHz diagram is minutes to simulate and about
 # 0.5 GB of logs; a longer one is more likely a typo than a plan.
 MAX_DURATION = 600.0
@@ -234,6 +236,13 @@ class EmgConfig:
     # Length of the synthetic rest and maximum-contraction recordings (s) from which the
     # envelope's calibration is computed before each demonstration.
     calibration_duration: float = _value(2.0, positive=True)
+    # Where the raw sEMG comes from: "synthetic" (SyntheticEmgSource, driven by the
+    # operator's activation), or a live armband read by LiveEmgSource: "myo" (pyomyo,
+    # hemg-drake[myo]) or "libemg" (a LibEMG streamer's shared memory, tag libemg_tag).
+    # A live source needs the simulator at real time (simulator.target_realtime_rate: 1,
+    # as hemg-drake teleop runs).
+    source: str = _value("synthetic", choices=EMG_SOURCES)
+    libemg_tag: str = "emg"
 
 
 @dc.dataclass

@@ -111,6 +111,22 @@ def emg_calibration(scenario):
     )
 
 
+def make_emg_source(scenario, seed):
+    """The raw sEMG source of ``scenario.emg.source``: the seeded synthetic armband, or a
+    live one (``LiveEmgSource``: a MYO through pyomyo, or a LibEMG streamer's shared memory).
+    """
+    source = scenario.emg.source
+    if source == "synthetic":
+        return SyntheticEmgSource(seed=seed)
+    if source == "myo":
+        from hemg_drake.emg.sources import LiveEmgSource, open_myo_device
+
+        return LiveEmgSource(device=open_myo_device())
+    from hemg_drake.emg.libemg import libemg_emg_source
+
+    return libemg_emg_source(tag=scenario.emg.libemg_tag)[0]
+
+
 def build_demonstration_diagram(
     scenario, *, seed, meshcat=None, recorder=None, scene=True, operator_factory=None
 ):
@@ -174,7 +190,7 @@ def build_demonstration_diagram(
             p_MS_initial=p_MS_initial,
         ),
     )
-    emg_source = add("emg_source", SyntheticEmgSource(seed=seed))
+    emg_source = add("emg_source", make_emg_source(scenario, seed))
     envelope, variable_gain = add_emg_gain_chain(
         builder,
         emg_source.get_emg_output_port(),
@@ -192,7 +208,8 @@ def build_demonstration_diagram(
 
     connect = builder.Connect
     connect(operator.GetOutputPort("hand_force"), master.GetInputPort("hand_force"))
-    connect(operator.GetOutputPort("activation"), emg_source.get_activation_input_port())
+    if emg_source.num_input_ports():  # the synthetic armband reads the operator's activation
+        connect(operator.GetOutputPort("activation"), emg_source.get_activation_input_port())
     for name in ("p_MS", "v_MS"):
         connect(master.GetOutputPort(name), operator.GetInputPort(name))
         connect(master.GetOutputPort(name), workspace_map.GetInputPort(name))

@@ -376,3 +376,41 @@ def test_passive_force_feedback_reads_the_stylus_velocity():
     feedback_context = feedback.GetMyContextFromRoot(context)
     assert feedback.GetInputPort("v_MS").HasValue(feedback_context)
     feedback.GetOutputPort("motor_force").Eval(feedback_context)  # no unconnected input
+
+
+def test_a_scenario_names_a_live_semg_source(monkeypatch):
+    """emg.source: libemg puts a LiveEmgSource where the synthetic armband was, fed by the
+    device (a fake LibEMG reader here) and read by the same envelope and gain law."""
+    import numpy as np
+    from pydrake.systems.analysis import Simulator
+
+    from hemg_drake.diagrams.demonstration import build_demonstration_diagram
+    from hemg_drake.emg import libemg
+    from hemg_drake.emg.sources import LiveEmgSource
+    from hemg_drake.scenario import load_scenario, shipped_scenario
+
+    class Device:
+        def __init__(self):
+            self.count = 0
+
+        def read_samples(self):
+            self.count += 1
+            return np.full((1, 8), 50.0)  # one strong sample per poll
+
+    device = Device()
+    monkeypatch.setattr(
+        libemg, "libemg_emg_source",
+        lambda *, tag, **_: (LiveEmgSource(device=device), None) if tag == "armband" else None,
+    )  # fmt: skip
+    scenario = load_scenario(
+        shipped_scenario("cotter_pin"),
+        overrides=["emg.source=libemg", "emg.libemg_tag=armband", "duration=0.2"],
+    )
+    built = build_demonstration_diagram(scenario, seed=1)
+    source = built.diagram.GetSubsystemByName("emg_source")
+    assert isinstance(source, LiveEmgSource) and source.num_input_ports() == 0
+    simulator = Simulator(built.diagram)
+    simulator.AdvanceTo(0.2)
+    gain = built.diagram.GetSubsystemByName("variable_gain")
+    k = gain.get_gain_output_port().Eval(gain.GetMyContextFromRoot(simulator.get_context()))
+    assert device.count >= 40 and k[0] > scenario.emg.k_min  # the live samples set the gain
