@@ -85,3 +85,21 @@ def _reason(error):
     if isinstance(error, zipfile.BadZipFile):
         return "not a zip archive (truncated, or another kind of file)"
     return (str(error).strip().splitlines() or [type(error).__name__])[0]
+
+
+def read_yaml_text(path, *, kind):
+    """The UTF-8 text of a YAML file, or a one-line error naming it and what it should be.
+
+    ``kind`` names the file in the messages ("scenario", "sweep"): a folder is a ValueError
+    ("is a folder, not a scenario file"), a missing file a FileNotFoundError, and bytes that
+    are not UTF-8 a ValueError naming the first bad byte.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{path}: is a folder, not a {kind} file (a .yaml file)")
+    if not path.is_file():
+        raise FileNotFoundError(f"{kind} file not found: {path}")
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as error:
+        raise ValueError(f"{path}: not UTF-8 text (byte {error.start}): not a YAML file") from None

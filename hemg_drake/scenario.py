@@ -39,6 +39,7 @@ from hemg_drake.control.pd import MAX_TIME_STEP
 from hemg_drake.emg.envelope import RmsEnvelope
 from hemg_drake.emg.gain import VariableGain
 from hemg_drake.emg.sources import MYO_RATE
+from hemg_drake.fileio import read_yaml_text
 from hemg_drake.learning.hsmm import HSMM, INITS as HSMM_INITS
 from hemg_drake.learning.reproduce import STATE_COSTS, TRACKERS, WEIGHTINGS, reproduce
 from hemg_drake.learning.systems import HsmmLqrReproducer
@@ -472,14 +473,7 @@ def load_scenario(path, *, overrides=()):
         a malformed override: the message names the file (or the override) and the key.
     """
     path = Path(path)
-    if path.is_dir():
-        raise ValueError(f"{path}: is a folder, not a scenario file (a .yaml file)")
-    if not path.is_file():
-        raise FileNotFoundError(f"scenario file not found: {path}")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as error:
-        raise ValueError(f"{path}: not UTF-8 text (byte {error.start}): not a YAML file") from None
+    text = read_yaml_text(path, kind="scenario")
     if not text.strip() or (_parses(text) and yaml_load(data=text) in (None, {})):
         # An empty file would silently run the default scenario.
         raise ValueError(f"{path}: the scenario file is empty; give at least its 'task'")

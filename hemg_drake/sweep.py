@@ -48,7 +48,7 @@ from pathlib import Path
 
 import yaml
 
-from hemg_drake.fileio import write_bytes_atomic, write_text_atomic
+from hemg_drake.fileio import read_yaml_text, write_bytes_atomic, write_text_atomic
 
 STEPS = ("demonstrate", "learn", "reproduce", "heldout")
 DESIGNS = ("grid", "one_at_a_time")
@@ -292,14 +292,7 @@ def load_sweep(path):
     from hemg_drake.scenario import TASKS, load_scenario, shipped_scenario
 
     path = sweep_path(path)
-    if path.is_dir():
-        raise ValueError(f"{path}: is a folder, not a sweep file (a .yaml file)")
-    if not path.is_file():
-        raise FileNotFoundError(f"sweep file not found: {path}")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as error:
-        raise ValueError(f"{path}: not UTF-8 text (byte {error.start}): not a YAML file") from None
+    text = read_yaml_text(path, kind="sweep")
     spec = parse_sweep(text, source=str(path))
     scenario_path = path.parent / spec.scenario
     if not scenario_path.is_file() and spec.scenario in TASKS:
