@@ -47,7 +47,10 @@ def add_emg_gain_chain(
     """
     calibration = EmgCalibration() if calibration is None else calibration
     rms = builder.AddSystem(
-        RmsEnvelope(window=calibration.window, per_channel=calibration.per_channel, period=period)
+        RmsEnvelope(
+            window=calibration.window, per_channel=calibration.per_channel, period=period,
+            channels=emg_output.size(),  # 8 for a MYO, 16 for other armbands
+        )  # fmt: skip
     )
     gain = builder.AddSystem(
         VariableGain(calibration=calibration, A_emg=A_emg, k_min=k_min, k_max=k_max)

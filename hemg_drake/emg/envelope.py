@@ -121,15 +121,22 @@ class RmsEnvelope(LeafSystem):
         Per-channel RMS summed over channels instead of the RMS of the sum.
     period : float
         Sample period in s (MYO: 1/200).
+    channels : int
+        Values per sample (MYO: 8; other armbands 16, in volts).
     """
 
-    def __init__(self, *, window=DEFAULT_WINDOW, per_channel=False, period=MYO_PERIOD):
+    def __init__(
+        self, *, window=DEFAULT_WINDOW, per_channel=False, period=MYO_PERIOD,
+        channels=MYO_CHANNELS,
+    ):  # fmt: skip
         LeafSystem.__init__(self)
         self._window = _check_window(window)
         self._per_channel = bool(per_channel)
-        self._columns = MYO_CHANNELS if per_channel else 1
+        if isinstance(channels, bool) or not isinstance(channels, (int, np.integer)) or channels < 1:
+            raise ValueError(f"channels must be a positive integer, got {channels!r}")
+        self._columns = int(channels) if per_channel else 1
         period = as_scalar("period", period)
-        self._emg_input = self.DeclareVectorInputPort("emg", MYO_CHANNELS)
+        self._emg_input = self.DeclareVectorInputPort("emg", int(channels))
         # Layout: ring of squares (window x columns, row-major), running sum
         # (columns), index of the oldest row.
         self._ring_state = self.DeclareDiscreteState((self._window + 1) * self._columns + 1)

@@ -110,3 +110,29 @@ def test_bad_samples():
         moving_rms(np.full((4, 8), np.nan), 3)
     with pytest.raises(ValueError, match="period"):
         RmsEnvelope(period=-1.0)
+
+
+def test_a_sixteen_channel_armband_in_volts_through_the_envelope():
+    """The envelope takes the source's channel count: 16 channels of volts, both forms."""
+    import numpy as np
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import ConstantVectorSource
+
+    from hemg_drake.emg.envelope import RmsEnvelope
+
+    sample = np.linspace(-1e-4, 2e-4, 16)  # volts
+    for per_channel, expected in ((False, abs(sample.sum())), (True, None)):
+        builder = DiagramBuilder()
+        source = builder.AddSystem(ConstantVectorSource(sample))
+        rms = builder.AddSystem(RmsEnvelope(window=5, per_channel=per_channel, channels=16))
+        builder.Connect(source.get_output_port(), rms.get_emg_input_port())
+        simulator = Simulator(builder.Build())
+        simulator.AdvanceTo(0.1)  # 20 samples: the window is full of the constant sample
+        context = rms.GetMyContextFromRoot(simulator.get_context())
+        envelope = rms.get_envelope_output_port().Eval(context)[0]
+        if per_channel:  # each channel's RMS is |x_c|, summed over the channels
+            expected = float(np.sum(np.abs(sample)))
+        assert envelope == pytest.approx(expected, rel=1e-12)
+    with pytest.raises(ValueError, match="channels must be a positive integer"):
+        RmsEnvelope(channels=0)
