@@ -1,12 +1,13 @@
 """The Baxter right arm (7 DOF) in a ``MultibodyPlant``: loading, frames, limits.
 
 The model is ``models/baxter_right_arm.urdf``, written from the published facts in
-``docs/facts.md`` (joint origins, axes, limits, inertials of Rethink's ``baxter_description``). It is found from this package's
-location (or the installed copy, see :func:`find_models_dir`), never from the current
-directory, and parsed with the package map entry ``package://hemg_drake_models/``.
+``docs/facts.md`` (joint origins, axes, limits, inertials of Rethink's
+``baxter_description``). It is found as this package's data (see :func:`find_models_dir`),
+never from the current directory, and parsed with the package map entry
+``package://hemg_drake_models/``.
 """
 
-import sys
+import importlib.resources
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,15 +19,15 @@ from pydrake.multibody.tree import Frame, ModelInstanceIndex
 def find_models_dir(candidates=None):
     """The project's ``models/`` folder: the first candidate that holds its ``package.xml``.
 
-    By default: beside the package (a source checkout, or an editable install), then the copy
-    that a regular ``pip install`` puts under ``<prefix>/share/hemg-drake/models`` (the
-    ``data-files`` of pyproject.toml). If neither holds the models, the first candidate is
+    By default: the package's own ``hemg_drake/models`` (package data in any install, found
+    with ``importlib.resources``; in a checkout a link to the repository's ``models/``), then
+    ``models/`` beside the package. If neither holds the models, the first candidate is
     returned and loading a model raises ``FileNotFoundError`` naming the missing file.
     """
     if candidates is None:
         candidates = (
+            Path(str(importlib.resources.files("hemg_drake") / "models")),
             Path(__file__).resolve().parents[2] / "models",
-            Path(sys.prefix) / "share" / "hemg-drake" / "models",
         )
     candidates = [Path(candidate) for candidate in candidates]
     for candidate in candidates:
