@@ -367,3 +367,40 @@ def test_a_take_joins_simulated_demonstrations_and_learn_takes_them(tmp_path, ca
     assert (demos[0].frame_A is None) == (demos[1].frame_A is None)
     assert main(["learn", out, "--set", "learning.num_states=2"]) == 0
     assert "wrote" in capsys.readouterr().out
+
+
+def test_a_keyboard_take_draws_the_first_stroke_on_the_sheet(meshcat):
+    """A person's key presses (2 mm per press, scripted through the page's sliders) steer the
+    stylus along the drawing's first stroke: the pen touches the sheet and draws the line."""
+    from hemg_drake.evaluation import strokes
+    from hemg_drake.tasks.metrics import stroke_errors
+    from hemg_drake.teleop.browser import SLIDER_Y, SLIDER_Z
+
+    scenario = load_scenario(shipped_scenario("drawing"), overrides=["duration=2.9"])
+    plan, mapping = scenario.task_plan(), scenario.workspace_mapping()
+    end = 2.8  # the first stroke is drawn and the pen lifted by then
+    press_mm = 2.0  # one key press moves the target 2 mm
+
+    def script(t):
+        target_mm = 1e3 * mapping.slave_to_master(plan.position(min(t + 0.1, end)))
+        pressing = plan.segment(min(t, end)).pen_down
+        for name, value in zip((SLIDER_X, SLIDER_Y, SLIDER_Z), target_mm):
+            # While drawing, the person keeps the pen pressed: the vertical key (SLIDER_Y,
+            # W/S) rounds down, into the sheet; the others to the nearest press.
+            steps = math.floor(value / press_mm) if name == SLIDER_Y and pressing else round(
+                value / press_mm
+            )
+            meshcat.SetSliderValue(name, press_mm * steps)
+        meshcat.SetSliderValue(SLIDER_ACTIVATION, 0.8 if pressing else 0.2)
+
+    take = run_take(scenario, seed=5, meshcat=meshcat, duration=2.9, realtime=False,
+                    on_step=script, progress=lambda line: None)  # fmt: skip
+    demo = take.demonstration
+    drawn = strokes(demo.time, demo.p_WE, demo.f_WE)
+    assert len(drawn) == 1
+    # The plan's line, seen from above, against the ink: the same 11 cm line within 5 mm.
+    first, second = [i for i, down in enumerate(plan.pen_down) if down][:2]
+    line = plan.points[[first + 1, second + 1], :2]  # pressed at the line's start, its end
+    length = np.linalg.norm(drawn[0][-1, :2] - drawn[0][0, :2])
+    assert length == pytest.approx(np.linalg.norm(line[-1] - line[0]), abs=0.015)
+    assert stroke_errors(drawn[0][:, :2], [line])["shape"] < 0.005
