@@ -15,7 +15,7 @@ vector sizes, finite and non-negative numbers, choices) and reports every proble
 ``overrides=["emg.k_max=150", "scene.position=[0.65, -0.80, 0.12]"]`` (YAML value syntax;
 the CLI's ``--set``)::
 
-    scenario = load_scenario("scenarios/cotter_pin.yaml", overrides=["scene.yaw_deg=20"])
+    scenario = load_scenario(shipped_scenario("cotter_pin"), overrides=["scene.yaw_deg=20"])
     plan = scenario.task_plan()          # in the world, where the scene stands
 """
 
