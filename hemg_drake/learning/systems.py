@@ -16,7 +16,35 @@ from hemg_drake.learning.reproduce import (
 )
 
 
-class HsmmGmrReproducer(LeafSystem):
+class _Reproducer(LeafSystem):
+    """What both reproducers share: input ``p_WE``; the state groups x*, xdot*, k*, h and the
+    predicted forward variable, updated every ``dt``; the first four as state output ports."""
+
+    def _declare(self, start, xdot, k, h, predicted, dt):
+        self._forward_shape = predicted.shape
+        self._p_WE_input = self.DeclareVectorInputPort("p_WE", len(start))
+        self._x_star_state = self.DeclareDiscreteState(start)
+        self._xdot_star_state = self.DeclareDiscreteState(xdot)
+        self._k_star_state = self.DeclareDiscreteState(k)
+        self._h_state = self.DeclareDiscreteState(h)
+        self._forward_state = self.DeclareDiscreteState(predicted.ravel())
+        self.DeclarePeriodicDiscreteUpdateEvent(
+            period_sec=dt, offset_sec=0.0, update=self._calc_step
+        )
+        self._x_star_output = self.DeclareStateOutputPort("x_star", self._x_star_state)
+        self._xdot_star_output = self.DeclareStateOutputPort("xdot_star", self._xdot_star_state)
+        self._k_star_output = self.DeclareStateOutputPort("k_star", self._k_star_state)
+        self._h_output = self.DeclareStateOutputPort("h", self._h_state)
+
+    def _store(self, discrete_state, x_star, xdot_star, k_star, h, predicted):
+        discrete_state.set_value(self._x_star_state, x_star)
+        discrete_state.set_value(self._xdot_star_state, xdot_star)
+        discrete_state.set_value(self._k_star_state, k_star)
+        discrete_state.set_value(self._h_state, h)
+        discrete_state.set_value(self._forward_state, predicted.ravel())
+
+
+class HsmmGmrReproducer(_Reproducer):
     """Generates the reference x*, xdot*, stiffness k* and state weights h from a fitted HSMM.
 
     .. pydrake_system::
@@ -72,21 +100,7 @@ class HsmmGmrReproducer(LeafSystem):
         start = self._policy.check_position(start, "start")
         predicted = self._policy.forward.initial()
         h, xdot, k, _, _ = self._policy.step(start, start, predicted)
-        self._forward_shape = predicted.shape
-
-        self._p_WE_input = self.DeclareVectorInputPort("p_WE", len(start))
-        self._x_star_state = self.DeclareDiscreteState(start)
-        self._xdot_star_state = self.DeclareDiscreteState(xdot)
-        self._k_star_state = self.DeclareDiscreteState(k)
-        self._h_state = self.DeclareDiscreteState(h)
-        self._forward_state = self.DeclareDiscreteState(predicted.ravel())
-        self.DeclarePeriodicDiscreteUpdateEvent(
-            period_sec=dt, offset_sec=0.0, update=self._calc_step
-        )
-        self._x_star_output = self.DeclareStateOutputPort("x_star", self._x_star_state)
-        self._xdot_star_output = self.DeclareStateOutputPort("xdot_star", self._xdot_star_state)
-        self._k_star_output = self.DeclareStateOutputPort("k_star", self._k_star_state)
-        self._h_output = self.DeclareStateOutputPort("h", self._h_state)
+        self._declare(start, xdot, k, h, predicted, dt)
 
     def _calc_step(self, context, discrete_state):
         p_WE = self._policy.check_position(self._p_WE_input.Eval(context), "p_WE")
@@ -95,14 +109,10 @@ class HsmmGmrReproducer(LeafSystem):
         h, xdot, k, x_star_next, predicted_next = self._policy.step(
             p_WE, x_star, predicted.reshape(self._forward_shape)
         )
-        discrete_state.set_value(self._x_star_state, x_star_next)
-        discrete_state.set_value(self._xdot_star_state, xdot)
-        discrete_state.set_value(self._k_star_state, k)
-        discrete_state.set_value(self._h_state, h)
-        discrete_state.set_value(self._forward_state, predicted_next.ravel())
+        self._store(discrete_state, x_star_next, xdot, k, h, predicted_next)
 
 
-class HsmmLqrReproducer(LeafSystem):
+class HsmmLqrReproducer(_Reproducer):
     """Re-plans an LQR over the HSMM's predicted state sequence from the measured tool point.
 
     .. pydrake_system::
@@ -193,22 +203,8 @@ class HsmmLqrReproducer(LeafSystem):
         xdot = np.zeros_like(start)
         predicted = self._policy.forward.initial()
         h, k, _, _, _ = self._policy.step(0, start, xdot, predicted)
-        self._forward_shape = predicted.shape
-
-        self._p_WE_input = self.DeclareVectorInputPort("p_WE", len(start))
-        self._x_star_state = self.DeclareDiscreteState(start)
-        self._xdot_star_state = self.DeclareDiscreteState(xdot)
-        self._k_star_state = self.DeclareDiscreteState(k)
-        self._h_state = self.DeclareDiscreteState(h)
-        self._forward_state = self.DeclareDiscreteState(predicted.ravel())
+        self._declare(start, xdot, k, h, predicted, dt)
         self._step_state = self.DeclareDiscreteState(1)  # index k of the next update
-        self.DeclarePeriodicDiscreteUpdateEvent(
-            period_sec=dt, offset_sec=0.0, update=self._calc_step
-        )
-        self._x_star_output = self.DeclareStateOutputPort("x_star", self._x_star_state)
-        self._xdot_star_output = self.DeclareStateOutputPort("xdot_star", self._xdot_star_state)
-        self._k_star_output = self.DeclareStateOutputPort("k_star", self._k_star_state)
-        self._h_output = self.DeclareStateOutputPort("h", self._h_state)
 
     def _calc_step(self, context, discrete_state):
         p_WE = self._policy.check_position(self._p_WE_input.Eval(context), "p_WE")
@@ -224,11 +220,7 @@ class HsmmLqrReproducer(LeafSystem):
         h, k, x_next, xdot_next, predicted_next = self._policy.step(
             step, x_star, xdot, predicted.reshape(self._forward_shape), observed=p_WE
         )
-        discrete_state.set_value(self._x_star_state, x_next)
-        discrete_state.set_value(self._xdot_star_state, xdot_next)
-        discrete_state.set_value(self._k_star_state, k)
-        discrete_state.set_value(self._h_state, h)
-        discrete_state.set_value(self._forward_state, predicted_next.ravel())
+        self._store(discrete_state, x_next, xdot_next, k, h, predicted_next)
         discrete_state.set_value(self._step_state, [step + 1.0])
 
 
