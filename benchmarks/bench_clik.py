@@ -3,10 +3,11 @@
 1. One ``Clik`` update (the 1 kHz callback itself, best of 7 x 2000 calls) for each law,
    without and with the pen-axis task (``orientation_gain`` 10 1/s).
 2. The pen's tilt from vertical while it touches the paper over the whole default drawing
-   plan (plan -> Clik -> VariableGainPd at K = 100, 1 ms plant step, the measured arm's
-   pose logged at 0.01 s), with the position-only law and with the axis task, for the
-   default sheet and for one moved toward the robot; the arm starts on the plan's first
-   point with its pen as vertical as IK can put it (``solve_tool_point_ik``).
+   plan (the shipped drawing scenario's station followed at K = 100 by
+   ``build_plan_follower``, the measured arm's pose logged at 0.01 s), with the
+   position-only law and with the axis task, for the earlier sheet and the shipped one;
+   the station starts the arm on the plan's first point by IK, with the pen vertical when
+   the axis task is on.
 3. ``solve_tool_point_ik`` (Drake's InverseKinematics + SNOPT) against the damped Newton
    loop the station used before (written out below), best of 5, on the drawing plant.
 
@@ -16,19 +17,18 @@ Prints its figures; the machine is shared (2 cores), so take the best of several
 import time
 
 import numpy as np
-from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, ContactModel
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import LogVectorOutput, TrajectorySource
-from pydrake.trajectories import PiecewisePolynomial
+from pydrake.systems.primitives import LogVectorOutput
 
 from hemg_drake.control.clik import Clik, velocity_columns
 from hemg_drake.control.ik import solve_tool_point_ik
-from hemg_drake.control.pd import VariableGainPd
+from hemg_drake.diagrams.plan_follower import build_plan_follower
 from hemg_drake.robots.baxter import add_baxter_arm
-from hemg_drake.tasks.drawing import DEFAULT_POSITION, add_drawing_scene, default_drawing_plan
+from hemg_drake.scenario import load_scenario, shipped_scenario
+from hemg_drake.tasks.drawing import DEFAULT_POSITION, add_drawing_scene
 from hemg_drake.viz.ink import in_contact, ink_strokes
 
 AXIS_GAIN = 10.0
@@ -77,42 +77,19 @@ def update_cost():
             )
 
 
-def draw(X_WT, axis_gain):
-    """The whole default plan; returns (max tilt in contact (deg), strokes, wall s)."""
-    builder, plant, arm, scene = drawing_plant(X_WT=X_WT)
-    plan = default_drawing_plan(X_WT=X_WT)
-    for tolerance in (0.01, 0.02, 0.05, 0.1, 0.2, 0.4):
-        try:
-            q0 = solve_tool_point_ik(
-                plant, arm, plan.points[0], axis_E=[0, 0, 1], axis_W=[0, 0, -1],
-                angle_tolerance=tolerance,
-            )
-            break
-        except ValueError:
-            continue
-    plant.SetDefaultPositions(arm.model_instance, q0)
-    times = np.arange(plan.start_time, plan.end_time, 0.005)
-    source = builder.AddSystem(
-        TrajectorySource(PiecewisePolynomial.FirstOrderHold(times, plan.position(times).T))
-    )
-    clik = builder.AddSystem(
-        Clik(
-            plant=plant,
-            model_instance=arm.model_instance,
-            frame_E=arm.tool_frame,
-            orientation_gain=axis_gain,
-        )
-    )
-    pd = builder.AddSystem(VariableGainPd(plant=plant, arm=arm, gain=100.0))
-    arm_state = plant.get_state_output_port(arm.model_instance)
-    builder.Connect(source.get_output_port(), clik.GetInputPort("p_WE_desired"))
-    builder.Connect(arm_state, clik.GetInputPort("state"))
-    builder.Connect(arm_state, pd.state_input)
-    builder.Connect(clik.GetOutputPort("q_desired"), pd.q_desired_input)
-    builder.Connect(clik.GetOutputPort("v_desired"), pd.v_desired_input)
-    builder.Connect(pd.torque_output, plant.get_actuation_input_port(arm.model_instance))
-    state_log = LogVectorOutput(arm_state, builder, 0.01)
-    force_log = LogVectorOutput(scene.force_output_port(builder), builder, 0.01)
+def draw(position, axis_gain):
+    """The whole default plan on the shipped drawing scenario's station (plan follower at
+    K = 100) with the sheet at ``position``; returns (max tilt in contact (deg), strokes,
+    ink's farthest point from the plan (m), wall s, simulated s)."""
+    scenario = load_scenario(shipped_scenario("drawing"), overrides=[
+        f"scene.position={list(position)}", f"clik.orientation_gain={axis_gain}",
+    ])  # fmt: skip
+    follower = build_plan_follower(scenario, gain=100.0)
+    plan, plant, arm = follower.plan, follower.plant, follower.station.arm
+    builder = DiagramBuilder()
+    diagram = builder.AddSystem(follower.diagram)
+    state_log = LogVectorOutput(diagram.GetOutputPort("arm_state"), builder, 0.01)
+    force_log = LogVectorOutput(diagram.GetOutputPort("f_WE"), builder, 0.01)
     simulator = Simulator(builder.Build())
     start = time.perf_counter()
     simulator.AdvanceTo(plan.end_time)
@@ -143,9 +120,8 @@ def _distance_to_polyline(points, polyline):
 def tilt_while_drawing():
     print(f"pen tilt from vertical while touching, whole plan (axis gain {AXIS_GAIN} 1/s)")
     for name, position in (("default sheet", DEFAULT_POSITION), ("moved sheet", MOVED_SHEET)):
-        X_WT = RigidTransform(position)
         for axis_gain in (0.0, AXIS_GAIN):
-            tilt, strokes, error, wall, duration = draw(X_WT, axis_gain)
+            tilt, strokes, error, wall, duration = draw(position, axis_gain)
             print(
                 f"  {name} {tuple(position)}, axis task {'on ' if axis_gain else 'off'}: "
                 f"max {tilt:5.2f} deg, {strokes} strokes, ink within {1e3 * error:.1f} mm "

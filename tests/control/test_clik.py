@@ -341,59 +341,32 @@ def test_bad_axis_parameters_are_named(kwargs, message):
 
 
 def _draw_first_stroke(orientation_gain):
-    """The drawing scene with its sheet moved toward the robot (where a vertical pen reaches
-    every stroke), the arm started pen-down by IK, plan -> Clik -> PD (K = 100) until the
-    end of stroke 1. Returns the pen tilt (rad), the tip and the contact force, logged."""
-    from pydrake.math import RigidTransform
-    from pydrake.multibody.plant import ContactModel
-    from pydrake.systems.primitives import LogVectorOutput, TrajectorySource
-    from pydrake.trajectories import PiecewisePolynomial
+    """The shipped drawing scenario (its sheet where a vertical pen reaches every stroke)
+    on the product's station: plan -> Clik -> PD (K = 100, ``build_plan_follower``) until
+    the end of stroke 1, the arm started pen-down by IK. Returns the pen tilt (rad), the tip
+    and the contact force, logged."""
+    from pydrake.systems.primitives import LogVectorOutput
 
-    from hemg_drake.control.ik import solve_tool_point_ik
-    from hemg_drake.control.pd import VariableGainPd
-    from hemg_drake.tasks.drawing import add_drawing_scene, default_drawing_plan, drawing_steps
+    from hemg_drake.diagrams.plan_follower import build_plan_follower
+    from hemg_drake.scenario import load_scenario, shipped_scenario
+    from hemg_drake.tasks.drawing import drawing_steps
 
+    scenario = load_scenario(
+        shipped_scenario("drawing"), overrides=[f"clik.orientation_gain={orientation_gain}"]
+    )
+    follower = build_plan_follower(scenario, gain=100.0)
     builder = DiagramBuilder()
-    plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
-    plant.set_contact_model(ContactModel.kPoint)
-    arm = add_baxter_arm(plant)
-    X_WT = RigidTransform([0.60, -0.70, 0.09])
-    scene = add_drawing_scene(plant, arm, X_WT=X_WT)
-    plant.Finalize()
-    plan = default_drawing_plan(X_WT=X_WT)
-    q0 = solve_tool_point_ik(
-        plant, arm, plan.points[0], axis_E=[0, 0, 1], axis_W=[0, 0, -1], angle_tolerance=0.01
-    )
-    plant.SetDefaultPositions(arm.model_instance, q0)
-    times = np.arange(plan.start_time, plan.end_time, 0.005)
-    source = builder.AddSystem(
-        TrajectorySource(PiecewisePolynomial.FirstOrderHold(times, plan.position(times).T))
-    )
-    clik = builder.AddSystem(
-        Clik(
-            plant=plant,
-            model_instance=arm.model_instance,
-            frame_E=arm.tool_frame,
-            orientation_gain=orientation_gain,
-        )
-    )
-    pd = builder.AddSystem(VariableGainPd(plant=plant, arm=arm, gain=100.0))
-    arm_state = plant.get_state_output_port(arm.model_instance)
-    builder.Connect(source.get_output_port(), clik.GetInputPort("p_WE_desired"))
-    builder.Connect(arm_state, clik.GetInputPort("state"))
-    builder.Connect(arm_state, pd.state_input)
-    builder.Connect(clik.GetOutputPort("q_desired"), pd.q_desired_input)
-    builder.Connect(clik.GetOutputPort("v_desired"), pd.v_desired_input)
-    builder.Connect(pd.torque_output, plant.get_actuation_input_port(arm.model_instance))
-    state_log = LogVectorOutput(arm_state, builder, 0.01)
-    force_log = LogVectorOutput(scene.force_output_port(builder), builder, 0.01)
+    diagram = builder.AddSystem(follower.diagram)
+    state_log = LogVectorOutput(diagram.GetOutputPort("arm_state"), builder, 0.01)
+    force_log = LogVectorOutput(diagram.GetOutputPort("f_WE"), builder, 0.01)
     simulator = Simulator(builder.Build())
-    simulator.AdvanceTo(drawing_steps(plan)[1])
+    simulator.AdvanceTo(drawing_steps(follower.plan)[1])
     context = simulator.get_context()
+    plant, arm = follower.plant, follower.station.arm
     poses = [_tool_axis_and_point(plant, arm, q) for q in state_log.FindLog(context).data()[:7].T]
     tilt = np.array([_tilt(axis) for axis, _ in poses])
     p_WP = np.array([p for _, p in poses])
-    return tilt, p_WP, force_log.FindLog(context).data().T, plan
+    return tilt, p_WP, force_log.FindLog(context).data().T, follower.plan
 
 
 def test_pen_stays_vertical_while_drawing_with_the_axis_task():
