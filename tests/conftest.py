@@ -42,3 +42,20 @@ def graphviz():
     """Graphviz's dot draws the diagram pictures."""
     if shutil.which("dot") is None:
         _missing_tool("dot", "graphviz")
+
+
+@pytest.fixture
+def run_cli(capsys):
+    """``run_cli(argv)``: (exit status, stdout, stderr) of ``hemg-drake argv``, argparse's
+    exits included."""
+    from hemg_drake.cli import main
+
+    def run(argv):
+        try:
+            code = main(argv)
+        except SystemExit as exit:
+            code = exit.code
+        captured = capsys.readouterr()
+        return code, captured.out, captured.err
+
+    return run

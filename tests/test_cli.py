@@ -16,16 +16,6 @@ from hemg_drake.run_folder import RunFolder
 from hemg_drake.scenario import load_scenario, shipped_scenario
 
 
-def run(argv, capsys):
-    """(exit status, stdout, stderr) of ``hemg-drake argv``; argparse's exits included."""
-    try:
-        code = main(argv)
-    except SystemExit as exit:
-        code = exit.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
-
-
 @pytest.fixture
 def no_simulation(monkeypatch):
     """Whatever simulates or fits fails the test if it is called: the diagrams' builders
@@ -75,7 +65,7 @@ def assert_one_line_error(code, err, command):
     assert err.count("\n") == 1 and err.startswith(f"hemg-drake {command}: error:"), err
 
 
-def test_output_paths_are_checked_before_any_simulation(tmp_path, capsys, no_simulation):
+def test_output_paths_are_checked_before_any_simulation(tmp_path, run_cli, no_simulation):
     file = tmp_path / "file"
     file.write_text("not a folder\n")
     cases = [
@@ -87,19 +77,19 @@ def test_output_paths_are_checked_before_any_simulation(tmp_path, capsys, no_sim
         (["reproduce", str(tmp_path), "--out", str(file / "x")], "reproduce", "cannot write"),
     ]
     for argv, command, words in cases:
-        code, out, err = run(argv, capsys)
+        code, out, err = run_cli(argv)
         assert_one_line_error(code, err, command)
         assert words in err, argv
     assert file.read_text() == "not a folder\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
 
 
-def test_writable_output_folder_reaches_the_pipeline(tmp_path, capsys, monkeypatch):
+def test_writable_output_folder_reaches_the_pipeline(tmp_path, run_cli, monkeypatch):
     calls = []
     monkeypatch.setattr(pipeline, "run_demo", lambda out, **kwargs: calls.append((out, kwargs)))
     out = tmp_path / "new" / "runs"
-    code, _, err = run(["demo", "--out", str(out), "--tasks", "drawing", "--no-replay",
-                        "--set", "num_demonstrations=2"], capsys)  # fmt: skip
+    code, _, err = run_cli(["demo", "--out", str(out), "--tasks", "drawing", "--no-replay",
+                            "--set", "num_demonstrations=2"])  # fmt: skip
     assert (code, err) == (0, "")
     # Checked, not made: the job makes it once its inputs are checked too.
     assert not out.exists()
@@ -129,23 +119,23 @@ def test_writable_output_folder_reaches_the_pipeline(tmp_path, capsys, monkeypat
     ],
 )  # fmt: skip
 def test_bad_input_is_one_line(
-    tmp_path, capsys, no_simulation, synthetic_run, argv, command, words
+    tmp_path, run_cli, no_simulation, synthetic_run, argv, command, words
 ):
     (tmp_path / "empty.yaml").write_text("")
     argv = [a.format(tmp=tmp_path, run=synthetic_run) for a in argv]
     if command in ("demo", "demonstrate"):
         argv += ["--out", str(tmp_path / "out")]
-    code, _, err = run(argv, capsys)
+    code, _, err = run_cli(argv)
     assert_one_line_error(code, err, command)
     for word in words:
         assert word in err
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
 
 
-def test_learn_set_reaches_the_fit(synthetic_run, capsys):
+def test_learn_set_reaches_the_fit(synthetic_run, run_cli):
     # A real (cheap) fit: the override is applied to the dataset's scenario.
-    code, out, err = run(["learn", str(synthetic_run), "--set", "learning.num_states=2",
-                          "--iterations", "2"], capsys)  # fmt: skip
+    code, out, err = run_cli(["learn", str(synthetic_run), "--set", "learning.num_states=2",
+                              "--iterations", "2"])  # fmt: skip
     assert (code, err) == (0, ""), err
     assert "HSMM N = 2" in out and "2 EM iterations" in out
 
@@ -166,16 +156,16 @@ OPTION_MISTAKES = [
 
 
 @pytest.mark.parametrize("argv, words", OPTION_MISTAKES)
-def test_bad_option_is_one_line(tmp_path, capsys, no_simulation, argv, words):
-    code, out, err = run([a.format(tmp=tmp_path) for a in argv], capsys)
+def test_bad_option_is_one_line(tmp_path, run_cli, no_simulation, argv, words):
+    code, out, err = run_cli([a.format(tmp=tmp_path) for a in argv])
     assert code == 2 and out == "" and "Traceback" not in err
     assert err.count("\n") == 1, err
     assert err.startswith(f"hemg-drake {argv[0]}: error:") and words in err
     assert not (tmp_path / "o").exists()
 
 
-def test_help_still_shows_the_usage(capsys):
-    code, out, _ = run(["demonstrate", "--help"], capsys)
+def test_help_still_shows_the_usage(run_cli):
+    code, out, _ = run_cli(["demonstrate", "--help"])
     assert code == 0 and out.startswith("usage: hemg-drake demonstrate")
 
 
@@ -188,20 +178,20 @@ def test_help_still_shows_the_usage(capsys):
         (["reproduce", "{tmp}"], "reproduce"),
     ],
 )
-def test_ctrl_c_is_one_line_and_exit_130(tmp_path, capsys, monkeypatch, command, job):
+def test_ctrl_c_is_one_line_and_exit_130(tmp_path, run_cli, monkeypatch, command, job):
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
     monkeypatch.setattr(pipeline, job, interrupted)
     try:
-        code, _, err = run([a.format(tmp=tmp_path) for a in command], capsys)
+        code, _, err = run_cli([a.format(tmp=tmp_path) for a in command])
     except KeyboardInterrupt:
         pytest.fail("the KeyboardInterrupt escaped main()")
     assert code == 130 and "Traceback" not in err
     assert err == f"hemg-drake {command[0]}: interrupted; no partial output kept\n"
 
 
-def test_demonstrate_options_become_overrides(tmp_path, capsys, monkeypatch):
+def test_demonstrate_options_become_overrides(tmp_path, run_cli, monkeypatch):
     calls = []
 
     def record(scenario, out, *, replays, progress):
@@ -213,7 +203,7 @@ def test_demonstrate_options_become_overrides(tmp_path, capsys, monkeypatch):
     argv = ["demonstrate", "drawing", "--out", str(tmp_path), "--demos", "2", "--duration",
             "1.5", "--seed", "7", "--no-replay", "--set", "emg.k_max=150",
             "--set", "scene.yaw_deg=10"]  # fmt: skip
-    code, out, err = run(argv, capsys)
+    code, out, err = run_cli(argv)
     assert (code, err) == (0, "")
     ((scenario, replays),) = calls
     assert scenario.task == "drawing" and replays is False
@@ -223,13 +213,13 @@ def test_demonstrate_options_become_overrides(tmp_path, capsys, monkeypatch):
     assert "drawing: 2 demonstrations of 1.5 s" in out
 
 
-def test_reproduce_options_become_overrides(tmp_path, capsys, monkeypatch):
+def test_reproduce_options_become_overrides(tmp_path, run_cli, monkeypatch):
     calls = []
     monkeypatch.setattr(pipeline, "reproduce", lambda run, **kwargs: calls.append(kwargs))
     argv = ["reproduce", str(tmp_path), "--weighting", "spatial", "--restoring-gain", "0.5",
             "--start-offset", "0", "0.01", "0", "--set", "reproduction.settle_time=0.5",
             "--no-replay"]  # fmt: skip
-    code, _, err = run(argv, capsys)
+    code, _, err = run_cli(argv)
     assert (code, err) == (0, "")
     (kwargs,) = calls
     assert kwargs["overrides"] == [
@@ -239,8 +229,8 @@ def test_reproduce_options_become_overrides(tmp_path, capsys, monkeypatch):
     assert kwargs["start_offset"] == [0.0, 0.01, 0.0] and kwargs["replay"] is False
 
 
-def test_version(capsys):
-    code, out, _ = run(["--version"], capsys)
+def test_version(run_cli):
+    code, out, _ = run_cli(["--version"])
     assert code == 0 and out == f"hemg-drake {version('hemg-drake')}\n"
 
 
@@ -253,8 +243,8 @@ def test_version(capsys):
         ("reproduce", "(default: [0.0, 0.0, 0.0])"),
     ],
 )
-def test_help_shows_defaults(capsys, command, default):
-    code, out, _ = run([command, "--help"], capsys)
+def test_help_shows_defaults(run_cli, command, default):
+    code, out, _ = run_cli([command, "--help"])
     assert code == 0
     assert default in " ".join(out.split())
     # Options without a default show none.
@@ -282,14 +272,14 @@ def test_closed_stdout_is_tolerated(tmp_path):
     assert out.is_file()
 
 
-def test_a_missing_optional_package_is_one_line_naming_its_extra(tmp_path, capsys, monkeypatch):
+def test_a_missing_optional_package_is_one_line_naming_its_extra(tmp_path, run_cli, monkeypatch):
     from hemg_drake import cli
 
     def needs_h5py(args):
         raise ModuleNotFoundError("No module named 'h5py'", name="h5py")
 
     monkeypatch.setattr(cli, "_export", needs_h5py)
-    code, out, err = run(["export", str(tmp_path), "--format", "robomimic",
-                          str(tmp_path / "x.hdf5")], capsys)  # fmt: skip
+    code, out, err = run_cli(["export", str(tmp_path), "--format", "robomimic",
+                              str(tmp_path / "x.hdf5")])  # fmt: skip
     assert code == 2 and "Traceback" not in err and err.count("\n") == 1
     assert "needs the optional package h5py: pip install 'hemg-drake[export]'" in err

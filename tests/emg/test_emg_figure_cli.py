@@ -11,16 +11,6 @@ from hemg_drake.fileio import write_text_atomic
 PNG = b"\x89PNG\r\n\x1a\n"
 
 
-def run(argv, capsys):
-    """(exit status, stdout, stderr) of ``hemg-drake argv``; argparse's exits included."""
-    try:
-        code = main(argv)
-    except SystemExit as exit:
-        code = exit.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
-
-
 @pytest.fixture
 def no_figure(monkeypatch):
     """Drawing the figure fails the test: a refused input must be refused before it."""
@@ -52,10 +42,10 @@ def short_recording(tmp_path):
     return path
 
 
-def test_synthetic_figure(tmp_path, capsys):
+def test_synthetic_figure(tmp_path, run_cli):
     out = tmp_path / "fig6.png"
     argv = ["emg-figure", "--duration", "2", "--windows", "10", "20", "-o", str(out)]
-    code, stdout, _ = run(argv, capsys)
+    code, stdout, _ = run_cli(argv)
     assert code == 0
     assert out.read_bytes()[:8] == PNG
     assert str(out) in stdout
@@ -69,20 +59,20 @@ def test_figure_from_csv_recording(tmp_path, short_recording):
     assert main(["emg-figure", str(short_recording), "--windows", "300", "-o", str(out)]) == 0
 
 
-def test_bad_recording_is_a_one_line_error(tmp_path, capsys):
+def test_bad_recording_is_a_one_line_error(tmp_path, run_cli):
     recording = tmp_path / "bad.csv"
     write_text_atomic(recording, "1,2,3\n")
     out = tmp_path / "fig.png"
-    code, _, err = run(["emg-figure", str(recording), "-o", str(out)], capsys)
+    code, _, err = run_cli(["emg-figure", str(recording), "-o", str(out)])
     assert code == 2
     assert err.count("\n") == 1 and "bad.csv: line 1: expected 8" in err
     assert not out.exists()
 
 
-def test_window_longer_than_the_recording_is_refused(tmp_path, capsys, short_recording, no_figure):
+def test_window_longer_than_the_recording_is_refused(tmp_path, run_cli, short_recording, no_figure):
     out = tmp_path / "fig.png"
-    code, _, err = run(
-        ["emg-figure", str(short_recording), "--windows", "20", "5000", "-o", str(out)], capsys
+    code, _, err = run_cli(
+        ["emg-figure", str(short_recording), "--windows", "20", "5000", "-o", str(out)]
     )
     assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
     assert err.startswith("hemg-drake emg-figure: error: --windows [5000] longer than")
@@ -90,19 +80,19 @@ def test_window_longer_than_the_recording_is_refused(tmp_path, capsys, short_rec
     assert not out.exists()
 
 
-def test_window_longer_than_the_synthetic_recording_is_refused(tmp_path, capsys, no_figure):
+def test_window_longer_than_the_synthetic_recording_is_refused(tmp_path, run_cli, no_figure):
     # 0.1 s at 200 Hz: 20 samples, so L_win = 30 does not fit.
-    code, _, err = run(["emg-figure", "--duration", "0.1", "--windows", "30",
-                        "-o", str(tmp_path / "f.png")], capsys)  # fmt: skip
+    code, _, err = run_cli(["emg-figure", "--duration", "0.1", "--windows", "30",
+                            "-o", str(tmp_path / "f.png")])  # fmt: skip
     assert code == 2 and err.count("\n") == 1 and "--windows [30] longer than" in err
 
 
 @pytest.mark.parametrize("kind", ["folder", "under a file"])
-def test_unwritable_output_is_one_line_before_any_work(tmp_path, capsys, no_synthesis, kind):
+def test_unwritable_output_is_one_line_before_any_work(tmp_path, run_cli, no_synthesis, kind):
     file = tmp_path / "file"
     file.write_text("x")
     target = tmp_path if kind == "folder" else file / "fig6.png"
-    code, _, err = run(["emg-figure", "-o", str(target)], capsys)
+    code, _, err = run_cli(["emg-figure", "-o", str(target)])
     assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
     expected = (
         f"{tmp_path}: is a folder" if kind == "folder" else f"{file}: exists and is not a folder"
@@ -123,9 +113,9 @@ def test_unwritable_output_is_one_line_before_any_work(tmp_path, capsys, no_synt
         (["--seed", "-1"], "--seed must not be negative, got -1"),
     ],
 )
-def test_bad_option_is_one_line(tmp_path, capsys, no_synthesis, options, message):
+def test_bad_option_is_one_line(tmp_path, run_cli, no_synthesis, options, message):
     out = tmp_path / "f.png"
-    code, stdout, err = run(["emg-figure", *options, "-o", str(out)], capsys)
+    code, stdout, err = run_cli(["emg-figure", *options, "-o", str(out)])
     assert code == 2 and stdout == "" and "Traceback" not in err
     assert err == f"hemg-drake emg-figure: error: argument {options[0]}: {message}\n"
     assert not out.exists()
@@ -135,7 +125,7 @@ def test_duration_bound_is_ten_minutes():
     assert MAX_EMG_FIGURE_DURATION == 600.0
 
 
-def test_duration_below_one_sample_is_refused(tmp_path, capsys, no_synthesis):
-    code, _, err = run(["emg-figure", "--duration", "0.001", "-o", str(tmp_path / "f.png")], capsys)
+def test_duration_below_one_sample_is_refused(tmp_path, run_cli, no_synthesis):
+    code, _, err = run_cli(["emg-figure", "--duration", "0.001", "-o", str(tmp_path / "f.png")])
     assert code == 2 and err.count("\n") == 1
     assert "--duration must be at least one sample (5 ms), got 0.001" in err
