@@ -6,7 +6,9 @@ from pydrake.math import RollPitchYaw, RotationMatrix
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
+from scipy.linalg import expm
 
+from hemg_drake.teleop.delay_loop import simulate_delayed_spring_loop
 from hemg_drake.teleop.feedback import ForceFeedback
 from hemg_drake.teleop.mapping import WorkspaceMapping
 from hemg_drake.teleop.master import HapticMaster
@@ -233,54 +235,36 @@ def test_passivity_controller_removes_only_the_energy_the_channel_never_took(map
     assert system.energy(context) == pytest.approx(0.0, abs=1e-12)
 
 
-def _delayed_spring_loop(n, passivity, duration=2.0):
-    """Stylus held by a hand (300 N/m, 5 N s/m), the slave following it through an n-sample
-    delay into a 500 N/m spring, the spring's force fed back through another n samples."""
-    from pydrake.systems.primitives import Adder, MatrixGain
-
-    from hemg_drake.teleop.mapping import WorkspaceMap
-
-    mapping = WorkspaceMapping(scale=2.0)
-    builder = DiagramBuilder()
-    master = builder.AddSystem(HapticMaster(p_MS_initial=[0.005, 0.0, 0.0]))
-    channel = builder.AddSystem(WorkspaceMap(mapping=mapping, delay_steps=n))
-    feedback = builder.AddSystem(
-        ForceFeedback(mapping=mapping, delay_steps=n, passivity=passivity, peak_force=1e3)
-    )
-    for name in ("p_MS", "v_MS"):
-        builder.Connect(master.GetOutputPort(name), channel.GetInputPort(name))
-    spring = builder.AddSystem(MatrixGain(-500.0 * np.eye(3)))
-    rest = builder.AddSystem(ConstantVectorSource(500.0 * mapping.master_to_slave(np.zeros(3))))
-    total = builder.AddSystem(Adder(2, 3))
-    builder.Connect(channel.GetOutputPort("p_WE_desired"), spring.get_input_port())
-    builder.Connect(spring.get_output_port(), total.get_input_port(0))
-    builder.Connect(rest.get_output_port(), total.get_input_port(1))
-    builder.Connect(total.get_output_port(), feedback.GetInputPort("f_WE"))
-    if passivity != "none":
-        builder.Connect(master.GetOutputPort("v_MS"), feedback.GetInputPort("v_MS"))
-    builder.Connect(feedback.GetOutputPort("motor_force"), master.GetInputPort("motor_force"))
-    hand = builder.AddSystem(MatrixGain(np.hstack([-300.0 * np.eye(3), -5.0 * np.eye(3)])))
-    builder.Connect(master.GetOutputPort("state"), hand.get_input_port())
-    builder.Connect(hand.get_output_port(), master.GetInputPort("hand_force"))
-    simulator = Simulator(builder.Build())
-    context = simulator.get_mutable_context()
-    x, energy = [], []
-    for t in np.arange(0.01, duration + 1e-9, 0.01):
-        simulator.AdvanceTo(t)
-        x.append(master.GetOutputPort("p_MS").Eval(master.GetMyContextFromRoot(context))[0])
-        if feedback.stateful:
-            energy.append(feedback.energy(feedback.GetMyContextFromRoot(context)))
-    return np.abs(np.array(x)), np.array(energy)
+def test_the_undelayed_spring_loop_is_the_sampled_spring_damper():
+    # Written here from the loop's figures: per axis, the 45 g tip with 0.1 N s/m backdrive
+    # damping, stepped exactly over each 1 ms sample (zero-order hold) under the force of
+    # its state at the sample's start, -(300 + 500) x - 5 v: the hand's 300 N/m and 5 N s/m,
+    # and the 500 N/m spring unscaled (the map doubles the motion, the feedback halves the
+    # force).
+    mass, backdrive, period = 0.045, 0.1, 1e-3
+    A = np.array([[0.0, 1.0, 0.0], [0.0, -backdrive / mass, 1.0 / mass], [0.0, 0.0, 0.0]])
+    transition = expm(A * period)
+    step = transition[:2, :2] + transition[:2, 2:] @ np.array([[-800.0, -5.0]])
+    x, energy = simulate_delayed_spring_loop(0, "none", duration=0.2)
+    assert energy.size == 0  # no delay, no passivity controller: no state
+    states = [np.array([0.005, 0.0])]
+    for _ in range(250):
+        states.append(step @ states[-1])
+    # AdvanceTo(t) has applied the updates at k T < t (t from np.arange, as sampled).
+    times = np.arange(0.01, 0.2 + 1e-9, 0.01)
+    updates = [int(np.sum(np.arange(250) * period < t)) for t in times]
+    expected = [abs(states[n][0]) for n in updates]
+    np.testing.assert_allclose(x, expected, rtol=0.0, atol=1e-15)
 
 
 def test_delayed_force_feedback_oscillates_and_the_passive_loop_settles():
     # Without delay the loop settles (the hand's damping wins); 20 ms each way, it keeps
     # oscillating by centimetres; the passivity controller makes it settle again.
-    settled, _ = _delayed_spring_loop(0, "none")
+    settled, _ = simulate_delayed_spring_loop(0, "none", duration=2.0)
     assert settled[-50:].max() < 1e-4
-    plain, _ = _delayed_spring_loop(20, "none")
+    plain, _ = simulate_delayed_spring_loop(20, "none", duration=2.0)
     assert plain[-50:].max() > 0.01
-    passive, energy = _delayed_spring_loop(20, "tdpa")
+    passive, energy = simulate_delayed_spring_loop(20, "tdpa", duration=2.0)
     assert passive[-50:].max() < 1e-4
     assert energy.min() > -1e-9  # the channel never gave out more than it took
 
