@@ -112,35 +112,68 @@ def _solve3_into(x, A, b):
     x[0] = (y0 - l10 * x[1] - l20 * x[2]) / l00
 
 
+# The small products of the axis step, as loops: numba's ``@`` calls BLAS, whose per-call
+# overhead (about 0.2 us) is several times these sums. Each accumulates from 0 in index
+# order with fused multiply-adds ("contract"), which is what OpenBLAS's dgemm does here:
+# the matrix products are the same to the bit as the ``@`` they replace.
+@numba.njit(cache=True, fastmath={"contract"})
+def _abt_into(C, A, B):
+    """C = A B^T."""
+    for i in range(C.shape[0]):
+        for j in range(C.shape[1]):
+            total = 0.0
+            for k in range(A.shape[1]):
+                total += A[i, k] * B[j, k]
+            C[i, j] = total
+
+
+@numba.njit(cache=True, fastmath={"contract"})
+def _ab_into(C, A, B):
+    """C = A B."""
+    for i in range(C.shape[0]):
+        for j in range(C.shape[1]):
+            total = 0.0
+            for k in range(A.shape[1]):
+                total += A[i, k] * B[k, j]
+            C[i, j] = total
+
+
+@numba.njit(cache=True, fastmath={"contract"})
+def _ax_into(y, A, x):
+    """y = A x."""
+    for i in range(A.shape[0]):
+        total = 0.0
+        for k in range(A.shape[1]):
+            total += A[i, k] * x[k]
+        y[i] = total
+
+
+@numba.njit(cache=True, fastmath={"contract"})
+def _atx_into(y, A, x):
+    """y = A^T x."""
+    for j in range(A.shape[1]):
+        total = 0.0
+        for k in range(A.shape[0]):
+            total += A[k, j] * x[k]
+        y[j] = total
+
+
+# Layout of axis_step_into's ``task`` array: the Clik's constants, packed once at
+# construction (one array argument costs the compiled call a tenth of what 15 separate
+# ones do).
+TASK_GAIN, TASK_DLS, TASK_DAMPING, TASK_AXIS_GAIN, TASK_AXIS_DAMPING, TASK_NULL_DAMPING = range(6)
+TASK_PERIOD = 6
+TASK_P_EOE_E, TASK_AXIS_E, TASK_AXIS_W = slice(7, 10), slice(10, 13), slice(13, 16)
+TASK_SIZE = 16
+
+
 @numba.njit(cache=True)
-def axis_step_into(
-    q_next,
-    v_next,
-    q_d,
-    J,
-    columns,
-    p_WEo,
-    R_WE,
-    p_EoE_E,
-    p_desired,
-    gain,
-    dls,
-    damping,
-    axis_E,
-    axis_W_desired,
-    axis_gain,
-    axis_damping,
-    null_damping,
-    v_max,
-    q_lower,
-    q_upper,
-    period,
-):
+def axis_step_into(out, q_d, J, X_WE, p_desired, columns, task, limits):
     """The CLIK step with the tool-axis task in the position task's null space (``Clik``).
 
     ``J`` is the plant's (6, nv) spatial Jacobian of point E in W (rows: angular, then
-    translational velocity), ``p_WEo``, ``R_WE`` frame E's pose in W. With ``Jv``, ``Jw`` the
-    arm's columns of the translational and angular rows, a = R_WE axis_E, d = axis_W_desired::
+    translational velocity), ``X_WE`` (4, 4) frame E's pose in W. With ``Jv``, ``Jw`` the
+    arm's columns of the translational and angular rows, a = R_WE axis_E, d = axis_W::
 
         qdot_p = gain Jv^T e   or   gain Jv^T (Jv Jv^T + damping^2 I)^-1 e   (dls)
         N      = I - Jv^T (Jv Jv^T + null_damping^2 I)^-1 Jv
@@ -149,7 +182,29 @@ def axis_step_into(
         qdot   = qdot_p + A^T (A A^T + axis_damping^2 I)^-1 (axis_gain e_a - P Jw qdot_p)
 
     then the limited step. See ``Clik`` for the law's reasons.
+
+    Parameters
+    ----------
+    out : array, shape (2, n), written: q_next, v_next (rad, rad/s).
+    q_d : array, shape (n,), the reference before the step.
+    J : array, shape (6, nv); X_WE : array, shape (4, 4); p_desired : array, shape (3,).
+    columns : int array, shape (n,), the arm's velocities among the plant's.
+    task : array, shape (TASK_SIZE,), the constants at the ``TASK_*`` indices: gain,
+        dls (1.0 or 0.0), damping, axis_gain, axis_damping, null_damping, period,
+        p_EoE_E, axis_E, axis_W (unit).
+    limits : array, shape (3, n), v_max, q_lower, q_upper.
+
+    Returns
+    -------
+    bool, False (and ``out`` untouched) if p_desired holds a NaN or inf.
     """
+    for i in range(3):
+        if not math.isfinite(p_desired[i]):
+            return False
+    gain, damping = task[TASK_GAIN], task[TASK_DAMPING]
+    axis_gain, axis_damping = task[TASK_AXIS_GAIN], task[TASK_AXIS_DAMPING]
+    null_damping = task[TASK_NULL_DAMPING]
+    p_EoE_E, axis_E, axis_W_desired = task[TASK_P_EOE_E], task[TASK_AXIS_E], task[TASK_AXIS_W]
     n = q_d.shape[0]
     Jw = np.empty((3, n))
     Jv = np.empty((3, n))
@@ -162,13 +217,14 @@ def axis_step_into(
     a = np.empty(3)
     for i in range(3):
         e[i] = p_desired[i] - (
-            p_WEo[i] + R_WE[i, 0] * p_EoE_E[0] + R_WE[i, 1] * p_EoE_E[1] + R_WE[i, 2] * p_EoE_E[2]
+            X_WE[i, 3] + X_WE[i, 0] * p_EoE_E[0] + X_WE[i, 1] * p_EoE_E[1] + X_WE[i, 2] * p_EoE_E[2]
         )
-        a[i] = R_WE[i, 0] * axis_E[0] + R_WE[i, 1] * axis_E[1] + R_WE[i, 2] * axis_E[2]
+        a[i] = X_WE[i, 0] * axis_E[0] + X_WE[i, 1] * axis_E[1] + X_WE[i, 2] * axis_E[2]
     # The position law, eq. 21.
-    G = Jv @ Jv.T
+    G = np.empty((3, 3))
+    _abt_into(G, Jv, Jv)
     y = np.empty(3)
-    if dls:
+    if task[TASK_DLS] != 0.0:
         Gd = G.copy()
         for i in range(3):
             Gd[i, i] += damping * damping
@@ -177,14 +233,14 @@ def axis_step_into(
         y[:] = e
     qdot = gain * (Jv.T @ y)
     # Jw N = Jw - (Jw Jv^T) (Jv Jv^T + null_damping^2 I)^-1 Jv, one 3x3 solve per column.
-    Gn = G.copy()
     for i in range(3):
-        Gn[i, i] += null_damping * null_damping
-    K = Jw @ Jv.T
+        G[i, i] += null_damping * null_damping
+    K = np.empty((3, 3))
+    _abt_into(K, Jw, Jv)
     JwN = Jw.copy()
     z = np.empty(3)
     for j in range(n):
-        _solve3_into(z, Gn, Jv[:, j])
+        _solve3_into(z, G, Jv[:, j])
         for i in range(3):
             JwN[i, j] -= K[i, 0] * z[0] + K[i, 1] * z[1] + K[i, 2] * z[2]
     # P keeps the angular rates that move the axis (its roll about itself is left free).
@@ -192,7 +248,8 @@ def axis_step_into(
     for i in range(3):
         for k in range(3):
             P[i, k] -= a[i] * a[k]
-    A = P @ JwN
+    A = np.empty((3, n))
+    _ab_into(A, P, JwN)
     # Axis error: the rotation vector that turns a onto d.
     c0 = a[1] * axis_W_desired[2] - a[2] * axis_W_desired[1]
     c1 = a[2] * axis_W_desired[0] - a[0] * axis_W_desired[2]
@@ -203,9 +260,13 @@ def axis_step_into(
     r = np.empty(3)
     r[0], r[1], r[2] = axis_gain * scale * c0, axis_gain * scale * c1, axis_gain * scale * c2
     r -= P @ (Jw @ qdot)
-    H = A @ A.T
+    H = np.empty((3, 3))
+    _abt_into(H, A, A)
     for i in range(3):
         H[i, i] += axis_damping * axis_damping
     _solve3_into(z, H, r)
     qdot += A.T @ z
-    limited_step_into(q_next, v_next, q_d, qdot, v_max, q_lower, q_upper, period)
+    limited_step_into(
+        out[0], out[1], q_d, qdot, limits[0], limits[1], limits[2], task[TASK_PERIOD]
+    )
+    return True

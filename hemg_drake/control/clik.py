@@ -7,6 +7,7 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import LeafSystem
 
 from hemg_drake._validate import as_scalar, as_vector
+from hemg_drake.control import _kernels
 from hemg_drake.control._kernels import axis_step_into, limited_step_into, transpose_step_into
 
 CLIK_METHODS = ("transpose", "dls")
@@ -168,6 +169,14 @@ class Clik(LeafSystem):
         self._frame_E = frame_E
         self._world = plant.world_frame()
         self._method = method
+        # The arguments after the context of the plant's Jacobian calls (point E in W).
+        self._jacobian_arguments = (
+            JacobianWrtVariable.kV,
+            frame_E,
+            self._p_EoE_E,
+            self._world,
+            self._world,
+        )
 
         nq = plant.num_positions(model_instance)
         nv = plant.num_velocities(model_instance)
@@ -185,17 +194,22 @@ class Clik(LeafSystem):
         # For the compiled step: column indices, the limits in its argument order, buffers.
         self._columns = np.arange(plant.num_velocities())[self._v_columns]
         self._limits = (self._v_max, self._q_lower, self._q_upper, self._period)
-        self._q_next, self._v_next = np.zeros(self._n), np.zeros(self._n)
-        self._axis_arguments = (
-            self._gain,
-            method == "dls",
-            self._damping,
-            self._axis_E,
-            self._axis_W_desired,
-            self._orientation_gain,
-            AXIS_DAMPING,
-            NULL_SPACE_DAMPING,
-        )
+        # One (2, n) buffer for the axis step; its rows are the others' q_next and v_next.
+        self._next = np.zeros((2, self._n))
+        self._q_next, self._v_next = self._next
+        # The axis step's constants and limits, packed once (see _kernels.TASK_*).
+        self._task = np.zeros(_kernels.TASK_SIZE)
+        self._task[_kernels.TASK_GAIN] = self._gain
+        self._task[_kernels.TASK_DLS] = float(method == "dls")
+        self._task[_kernels.TASK_DAMPING] = self._damping
+        self._task[_kernels.TASK_AXIS_GAIN] = self._orientation_gain
+        self._task[_kernels.TASK_AXIS_DAMPING] = AXIS_DAMPING
+        self._task[_kernels.TASK_NULL_DAMPING] = NULL_SPACE_DAMPING
+        self._task[_kernels.TASK_PERIOD] = self._period
+        self._task[_kernels.TASK_P_EOE_E] = self._p_EoE_E
+        self._task[_kernels.TASK_AXIS_E] = self._axis_E
+        self._task[_kernels.TASK_AXIS_W] = self._axis_W_desired
+        self._limit_rows = np.array([self._v_max, self._q_lower, self._q_upper])
 
         self._p_desired = self.DeclareVectorInputPort("p_WE_desired", 3)
         self._state = self.DeclareVectorInputPort("state", 2 * self._n)
@@ -227,12 +241,7 @@ class Clik(LeafSystem):
     def _jacobian(self):
         """The plant's (3, nv) translational Jacobian of E in W, at the last p_WE() positions."""
         return self._plant.CalcJacobianTranslationalVelocity(
-            self._plant_context,
-            JacobianWrtVariable.kV,
-            self._frame_E,
-            self._p_EoE_E,
-            self._world,
-            self._world,
+            self._plant_context, *self._jacobian_arguments
         )
 
     def qdot(self, q, p_WE_desired):
@@ -251,37 +260,27 @@ class Clik(LeafSystem):
     def _update(self, context, discrete_state):
         q_d = context.get_discrete_state(self._q_d_index).value()
         p_desired = self._p_desired.Eval(context)
+        if self._orientation_gain > 0.0:
+            # One forward kinematics (SetPositions, then the pose) that the Jacobian reuses;
+            # the NaN check, both tasks and the limits in one compiled call.
+            plant_context = self._plant_context
+            self._plant.SetPositions(plant_context, self._model, q_d)
+            X_WE = self._frame_E.CalcPoseInWorld(plant_context).GetAsMatrix4()
+            J = self._plant.CalcJacobianSpatialVelocity(plant_context, *self._jacobian_arguments)
+            if axis_step_into(
+                self._next, q_d, J, X_WE, p_desired, self._columns, self._task, self._limit_rows
+            ):
+                self._set(discrete_state, self._q_next, self._v_next)
+            else:
+                self._set(discrete_state, q_d, self._zeros)  # hold: see below
+            return
         if not all(map(math.isfinite, p_desired.tolist())):
             # Hold the reference rather than integrate a NaN into it.
             self._set(discrete_state, q_d, self._zeros)
             return
         q_next, v_next = self._q_next, self._v_next
         # The sums of qdot() and of the limits below in compiled calls (tests compare them).
-        if self._orientation_gain > 0.0:
-            self._plant.SetPositions(self._plant_context, self._model, q_d)
-            X_WE = self._frame_E.CalcPoseInWorld(self._plant_context)
-            J = self._plant.CalcJacobianSpatialVelocity(
-                self._plant_context,
-                JacobianWrtVariable.kV,
-                self._frame_E,
-                self._p_EoE_E,
-                self._world,
-                self._world,
-            )
-            axis_step_into(
-                q_next,
-                v_next,
-                q_d,
-                J,
-                self._columns,
-                X_WE.translation(),
-                X_WE.rotation().matrix(),
-                self._p_EoE_E,
-                p_desired,
-                *self._axis_arguments,
-                *self._limits,
-            )
-        elif self._method == "transpose":
+        if self._method == "transpose":
             e = p_desired - self.p_WE(q_d)
             transpose_step_into(
                 q_next, v_next, q_d, self._jacobian(), self._columns, e, self._gain, *self._limits
