@@ -23,10 +23,10 @@ when the diagram was built with a recorder.
 import dataclasses as dc
 
 import numpy as np
-from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from hemg_drake._validate import as_scalar, as_seed
+from hemg_drake._validate import as_seed
+from hemg_drake.diagrams.built import StationDiagram, export_replay, make_simulator
 from hemg_drake.diagrams.log import add_logger, split_log
 from hemg_drake.diagrams.station import make_slave_station
 from hemg_drake.emg.calibration import EmgCalibration
@@ -37,14 +37,13 @@ from hemg_drake.teleop.feedback import ForceFeedback
 from hemg_drake.teleop.mapping import WorkspaceMap
 from hemg_drake.teleop.master import HapticMaster
 from hemg_drake.teleop.operator import SimulatedOperator
-from hemg_drake.viz.ink import add_ink_to_recording, in_contact
 
 # Logged signals after time, in the order of the logger's input vector.
 LOGGED_FIELDS = tuple(name for name in FIELD_WIDTHS if name != "time")
 
 
 @dc.dataclass(frozen=True, eq=False)
-class DemonstrationDiagram:
+class DemonstrationDiagram(StationDiagram):
     """A built demonstration diagram and handles into it.
 
     Attributes
@@ -64,8 +63,6 @@ class DemonstrationDiagram:
     recorder : ReplayRecorder or None
     """
 
-    diagram: object
-    station: object
     scenario: object
     seed: int
     plan: object
@@ -73,14 +70,6 @@ class DemonstrationDiagram:
     logger: object
     emg_logger: object
     recorder: object = None
-
-    @property
-    def plant(self):
-        return self.station.plant
-
-    @property
-    def scene(self):
-        return self.station.scene
 
 
 def operator_plan(scenario, seed):
@@ -300,12 +289,7 @@ def run_demonstration(built, *, duration=None, replay_path=None):
     -------
     Demonstration
     """
-    scenario = built.scenario
-    duration = scenario.duration if duration is None else as_scalar("duration", duration)
-    if replay_path is not None and built.recorder is None:
-        raise ValueError("replay_path needs a diagram built with a recorder")
-    simulator = Simulator(built.diagram)
-    ApplySimulatorConfig(scenario.simulator, simulator)
+    simulator, duration = make_simulator(built, duration, replay_path)
     simulator.Initialize()
     if built.recorder is not None:
         built.recorder.start()
@@ -315,16 +299,7 @@ def run_demonstration(built, *, duration=None, replay_path=None):
         built.logger.FindLog(context), built.emg_logger.FindLog(context), built.seed
     )
     if replay_path is not None:
-        if scenario.task == "drawing" and built.scene is not None:
-            # The ink is drawn into the open recording, just above the sheet.
-            add_ink_to_recording(
-                built.recorder.meshcat,
-                demo.time,
-                demo.p_WE,
-                in_contact(demo.f_WE),
-                height=built.scene.paper_height + 5e-4,
-            )
-        built.recorder.stop_and_export(replay_path)
+        export_replay(built, replay_path, demo.time, demo.p_WE, demo.f_WE)
     return demo
 
 

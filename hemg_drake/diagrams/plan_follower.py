@@ -14,25 +14,17 @@ from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from hemg_drake._validate import as_scalar
+from hemg_drake.diagrams.built import StationDiagram
 from hemg_drake.diagrams.station import make_slave_station
 
 
 @dc.dataclass(frozen=True, eq=False)
-class PlanFollower:
+class PlanFollower(StationDiagram):
     """A built plan-following diagram: ``diagram`` (subsystems ``plan``, ``gain``,
-    ``station``), the ``station`` (SlaveStation) and the ``plan`` it follows (TaskPlan)."""
+    ``station``), the ``station`` (SlaveStation; ``plant`` and ``scene`` are its) and the
+    ``plan`` it follows (TaskPlan)."""
 
-    diagram: object
-    station: object
     plan: object
-
-    @property
-    def plant(self):
-        return self.station.plant
-
-    @property
-    def scene(self):
-        return self.station.scene
 
 
 def build_plan_follower(scenario, *, gain, plan=None, sample_period=0.005, recorder=None):

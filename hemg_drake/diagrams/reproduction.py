@@ -35,15 +35,15 @@ Every setting is the scenario's (``reproduction`` section).
 import dataclasses as dc
 
 import numpy as np
-from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
+from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, Saturation
 
-from hemg_drake._validate import as_scalar, as_vector
+from hemg_drake._validate import as_vector
+from hemg_drake.diagrams.built import StationDiagram, export_replay, make_simulator
 from hemg_drake.diagrams.log import add_logger, split_log
 from hemg_drake.diagrams.station import make_slave_station
 from hemg_drake.learning.systems import HsmmGmrReproducer, HsmmLqrReproducer, TrackingForce
-from hemg_drake.viz.ink import add_ink_to_recording, in_contact
 
 # Size of the model's position x (a point in space) and of its stiffness k.
 POSITION_SIZE = 3
@@ -86,7 +86,7 @@ class ReproductionLog:
 
 
 @dc.dataclass(frozen=True, eq=False)
-class ReproductionDiagram:
+class ReproductionDiagram(StationDiagram):
     """A built reproduction diagram and handles into it.
 
     Attributes
@@ -104,22 +104,12 @@ class ReproductionDiagram:
     recorder : ReplayRecorder or None
     """
 
-    diagram: object
-    station: object
     scenario: object
     model: object
     logger: object
     start: np.ndarray
     goal: np.ndarray
     recorder: object = None
-
-    @property
-    def plant(self):
-        return self.station.plant
-
-    @property
-    def scene(self):
-        return self.station.scene
 
     def log(self, context):
         """The :class:`ReproductionLog` recorded so far in the diagram's ``context``."""
@@ -150,19 +140,11 @@ def make_reproducer(scenario, model, start):
     """The reproducer of the scenario's ``reproduction.tracker``: ``HsmmGmrReproducer``
     (eqs. 12-18) or ``HsmmLqrReproducer`` (the LQR tracker), at the log period."""
     settings = scenario.reproduction
+    common = dict(model=model, start=start, dt=scenario.log_period, weighting=settings.weighting)
     if settings.tracker == "gmr":
-        return HsmmGmrReproducer(
-            model=model,
-            start=start,
-            dt=scenario.log_period,
-            weighting=settings.weighting,
-            restoring_gain=settings.restoring_gain,
-        )
+        return HsmmGmrReproducer(**common, restoring_gain=settings.restoring_gain)
     return HsmmLqrReproducer(
-        model=model,
-        start=start,
-        dt=scenario.log_period,
-        weighting=settings.weighting,
+        **common,
         horizon=settings.horizon,
         control_cost=settings.control_cost,
         max_lead=settings.max_lead,
@@ -351,11 +333,7 @@ def run_reproduction(built, *, duration=None, replay_path=None, settle=True):
     ReproductionResult
     """
     scenario = built.scenario
-    duration = scenario.duration if duration is None else as_scalar("duration", duration)
-    if replay_path is not None and built.recorder is None:
-        raise ValueError("replay_path needs a diagram built with a recorder")
-    simulator = Simulator(built.diagram)
-    ApplySimulatorConfig(scenario.simulator, simulator)
+    simulator, duration = make_simulator(built, duration, replay_path)
     context = simulator.get_mutable_context()
     station = built.station
     plant_context = station.plant_context(context)
@@ -374,14 +352,7 @@ def run_reproduction(built, *, duration=None, replay_path=None, settle=True):
     simulator.AdvanceTo(duration + 1e-9)
     log = built.log(context)
     if replay_path is not None:
-        if built.scene is not None and scenario.task == "drawing":
-            # Just above the sheet: the tip's own heights are inside the compliant paper.
-            height = built.scene.paper_height + 5e-4
-            touching = in_contact(log.f_WE)
-            add_ink_to_recording(
-                built.recorder.meshcat, log.time, log.p_WE, touching, height=height
-            )
-        built.recorder.stop_and_export(replay_path)
+        export_replay(built, replay_path, log.time, log.p_WE, log.f_WE)
     if not (built.scene is not None and scenario.task == "cotter_pin"):
         return ReproductionResult(log=log, q0=q0)
     return ReproductionResult(

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
+from hemg_drake.diagrams import built as built_diagrams
 from hemg_drake.diagrams import reproduction
 from hemg_drake.diagrams.reproduction import (
     build_reproduction_diagram,
@@ -152,7 +153,9 @@ def test_building_does_not_simulate(scenario, model, monkeypatch):
             simulators.append(self)
             super().__init__(*args, **kwargs)
 
+    # The settling simulator is made in reproduction, the run's in diagrams.built.
     monkeypatch.setattr(reproduction, "Simulator", CountedSimulator)
+    monkeypatch.setattr(built_diagrams, "Simulator", CountedSimulator)
     start = START + [0.03, 0.0, 0.0]  # beside the ring: settling would pull the tool to it
     began = time.perf_counter()
     built = build_reproduction_diagram(scenario, model, start=start)
