@@ -79,6 +79,7 @@ def _table_ii(demos, log, dt):
             "position_rmse_m": [f["position_rmse"] for f in floor],
             "velocity_rmse_m_per_s": [f["velocity_rmse"] for f in floor],
             "spatial_position_rmse_m": [f["spatial_position_rmse"] for f in floor],
+            "spatial_velocity_rmse_m_per_s": [f["spatial_velocity_rmse"] for f in floor],
             "timing_error_s": [f["timing_error_s"] for f in floor],
         },
         "paper": PAPER_TABLE_II,

@@ -233,7 +233,8 @@ def leave_one_out(demos, dt, position_columns=slice(0, 3), velocity_columns=slic
     Returns
     -------
     list of dict, one per demonstration: ``position_rmse``, ``velocity_rmse``
-    (time-normalised), ``spatial_position_rmse`` (after DTW) and ``timing_error_s``.
+    (time-normalised), ``spatial_position_rmse`` and ``spatial_velocity_rmse`` (after DTW)
+    and ``timing_error_s``.
     """
     if len(demos) < 2:
         raise ValueError(f"leave_one_out needs at least 2 demonstrations, got {len(demos)}")
@@ -247,6 +248,7 @@ def leave_one_out(demos, dt, position_columns=slice(0, 3), velocity_columns=slic
             "position_rmse": plain["position_rmse"],
             "velocity_rmse": plain["velocity_rmse"],
             "spatial_position_rmse": aligned["position_rmse"],
+            "spatial_velocity_rmse": aligned["velocity_rmse"],
             "timing_error_s": timing_error(aligned["path"], dt),
         })  # fmt: skip
     return results

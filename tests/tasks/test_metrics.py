@@ -142,14 +142,17 @@ def test_leave_one_out_measures_each_demonstration_against_the_others_mean():
     t = np.linspace(0.0, 1.0, 50)
     base = np.column_stack([t, 0 * t, 0 * t, np.ones_like(t), 0 * t, 0 * t, 0 * t])
     offsets = (0.0, 0.002, 0.004)
-    demos = [base + [0.0, dy, 0, 0, 0, 0, 0] for dy in offsets]
+    speeds = (0.0, 0.01, 0.03)  # a sideways velocity channel, apart from the positions
+    demos = [base + [0.0, dy, 0, 0, dv, 0, 0] for dy, dv in zip(offsets, speeds)]
     floor = metrics.leave_one_out(demos, 0.02)
     # Same timing: the others' mean lies at the mean of their offsets, straight across.
     for c, record in enumerate(floor):
         others = np.mean([dy for k, dy in enumerate(offsets) if k != c])
+        others_v = np.mean([dv for k, dv in enumerate(speeds) if k != c])
         assert record["position_rmse"] == pytest.approx(abs(offsets[c] - others), abs=1e-12)
         assert record["spatial_position_rmse"] == pytest.approx(abs(offsets[c] - others), abs=1e-12)
         assert record["timing_error_s"] == 0.0
-        assert record["velocity_rmse"] == pytest.approx(0.0, abs=1e-12)
+        assert record["velocity_rmse"] == pytest.approx(abs(speeds[c] - others_v), abs=1e-12)
+        assert record["spatial_velocity_rmse"] == pytest.approx(abs(speeds[c] - others_v), abs=1e-12)
     with pytest.raises(ValueError, match="at least 2"):
         metrics.leave_one_out(demos[:1], 0.02)
