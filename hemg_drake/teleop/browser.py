@@ -33,7 +33,13 @@ from pydrake.systems.framework import LeafSystem
 
 from hemg_drake._validate import as_scalar, as_vector
 from hemg_drake.fileio import load_npz, save_npz_atomic
-from hemg_drake.teleop.master import TOUCH_X_WORKSPACE, saturate_norm
+from hemg_drake.teleop.master import TOUCH_X_WORKSPACE
+from hemg_drake.teleop.operator import (
+    HAND_DAMPING,
+    HAND_STIFFNESS,
+    MAX_HAND_FORCE,
+    hand_impedance_force,
+)
 
 # Slider names on the page and their key bindings (javascript KeyboardEvent.code values);
 # M's axes are OpenHaptics': x to the operator's right, y up, z towards the operator.
@@ -144,9 +150,9 @@ class BrowserMaster(LeafSystem):
         source,
         p_MS_initial,
         workspace_size=TOUCH_X_WORKSPACE,
-        hand_stiffness=300.0,
-        hand_damping=5.0,
-        max_hand_force=15.0,
+        hand_stiffness=HAND_STIFFNESS,
+        hand_damping=HAND_DAMPING,
+        max_hand_force=MAX_HAND_FORCE,
         speed=0.1,
         stick_dead_zone=0.15,
         period=0.01,
@@ -251,9 +257,10 @@ class BrowserMaster(LeafSystem):
 
     def hand_force_floats(self, p_T, v_T, p_MS, v_MS):
         """The virtual hand's force (N, in M, list of 3 floats)."""
-        k, d = self.hand_stiffness, self.hand_damping
-        force = [k * (pt - p) + d * (vt - v) for pt, p, vt, v in zip(p_T, p_MS, v_T, v_MS)]
-        return saturate_norm(force, self.max_hand_force)
+        return hand_impedance_force(
+            p_T, v_T, p_MS, v_MS, stiffness=self.hand_stiffness, damping=self.hand_damping,
+            max_force=self.max_hand_force,
+        )  # fmt: skip
 
     # -- Drake callbacks ------------------------------------------------------------------
     def _update(self, context, discrete_state):

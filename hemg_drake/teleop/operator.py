@@ -10,6 +10,34 @@ from hemg_drake._validate import all_finite, as_scalar
 from hemg_drake.teleop.mapping import WorkspaceMapping
 from hemg_drake.teleop.master import saturate_norm
 
+# The hand's default impedance and force limit (OperatorModel's parameters explain them);
+# the browser's virtual hand takes the same.
+HAND_STIFFNESS = 300.0  # N/m
+HAND_DAMPING = 5.0  # N s/m
+MAX_HAND_FORCE = 15.0  # N
+
+
+def hand_impedance_force(p_target, v_target, p_MS, v_MS, *, stiffness, damping, max_force):
+    """The hand's force on the stylus, an impedance towards a target (eq. 19's F_h):
+    F_h = sat(K_h (p_target - p_MS) + D_h (v_target - v_MS), max_force), saturated in norm.
+
+    Parameters
+    ----------
+    p_target, v_target : 3 floats each, m and m/s, where the hand heads for, in M.
+    p_MS, v_MS : 3 floats each, m and m/s, the stylus tip in M.
+    stiffness, damping : float, K_h (N/m) and D_h (N s/m).
+    max_force : float, N.
+
+    Returns
+    -------
+    list of 3 floats, N, in M. Plain floats: this runs at the master's 1 kHz.
+    """
+    force = [
+        stiffness * (pt - p) + damping * (vt - v)
+        for pt, p, vt, v in zip(p_target, p_MS, v_target, v_MS)
+    ]
+    return saturate_norm(force, max_force)
+
 
 class OperatorModel:
     """The operator's hand and muscle laws: the numpy twin of :class:`SimulatedOperator`.
@@ -51,9 +79,9 @@ class OperatorModel:
         *,
         plan,
         mapping,
-        hand_stiffness=300.0,
-        hand_damping=5.0,
-        max_hand_force=15.0,
+        hand_stiffness=HAND_STIFFNESS,
+        hand_damping=HAND_DAMPING,
+        max_hand_force=MAX_HAND_FORCE,
         rest_activation=0.05,
         free_activation=0.2,
         forceful_activation=0.7,
@@ -99,11 +127,10 @@ class OperatorModel:
     def hand_force_floats(self, t, p_MS, v_MS):
         """:meth:`hand_force` with ``p_MS``, ``v_MS`` and the result as lists of 3 floats."""
         p_target, v_target = self._plan_M.position_velocity_floats(t)
-        k, d = self.hand_stiffness, self.hand_damping
-        force = [
-            k * (pt - p) + d * (vt - v) for pt, p, vt, v in zip(p_target, p_MS, v_target, v_MS)
-        ]
-        return saturate_norm(force, self.max_hand_force)
+        return hand_impedance_force(
+            p_target, v_target, p_MS, v_MS, stiffness=self.hand_stiffness,
+            damping=self.hand_damping, max_force=self.max_hand_force,
+        )  # fmt: skip
 
     def activation_target(self, t, feedback_force):
         """Activation a* the muscles head for at time t (s) feeling ``feedback_force`` (N)."""
