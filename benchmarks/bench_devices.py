@@ -16,7 +16,6 @@ import sys
 import tempfile
 import time
 import uuid
-from multiprocessing.shared_memory import SharedMemory
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +25,7 @@ from pydrake.systems.primitives import ConstantVectorSource
 
 from hemg_drake.emg.chain import add_emg_gain_chain
 from hemg_drake.emg.libemg import LibEmgSharedMemory
+from hemg_drake.emg.libemg_writer import StreamerMemory
 from hemg_drake.emg.sources import LiveEmgSource
 
 CHANNELS = 8
@@ -36,30 +36,19 @@ def _streamer(tag, rows, lock, period, seconds, ready):
     from multiprocessing import resource_tracker
 
     resource_tracker.register = resource_tracker.unregister = lambda name, rtype: None
-    emg_block = SharedMemory(tag, create=True, size=8 * rows * CHANNELS)
-    count_block = SharedMemory(f"{tag}_count", create=True, size=4)
-    emg = np.ndarray((rows, CHANNELS), np.float64, buffer=emg_block.buf)
-    count = np.ndarray((1, 1), np.int32, buffer=count_block.buf)
-    emg.fill(0)
-    count.fill(0)
+    memory = StreamerMemory(tag, rows, CHANNELS)
     rng = np.random.default_rng(0)
     ready.set()
     start = time.monotonic()
     j = 0
     while time.monotonic() - start < seconds:
         packet = rng.integers(-128, 128, (2, CHANNELS)).astype(float)
-        with lock:
-            emg[:] = np.vstack((packet[::-1], emg))[:rows]
-        with lock:
-            count[:] = count + 2
+        memory.write(packet[::-1], lock, lock)
         j += 2
         # Sleep to the packet's due time on the streamer's own clock.
         time.sleep(max(0.0, start + j * period - time.monotonic()))
     time.sleep(0.5)
-    del emg, count
-    for block in (emg_block, count_block):
-        block.close()
-        block.unlink()
+    memory.close()
 
 
 def bench_read():

@@ -5,7 +5,6 @@ import multiprocessing
 import time
 import uuid
 from multiprocessing import resource_tracker
-from multiprocessing.shared_memory import SharedMemory
 
 import numpy as np
 import pytest
@@ -14,6 +13,7 @@ from pydrake.systems.primitives import LogVectorOutput
 
 from hemg_drake.emg.chain import add_emg_gain_chain
 from hemg_drake.emg.libemg import LibEmgSharedMemory
+from hemg_drake.emg.libemg_writer import StreamerMemory
 from hemg_drake.emg.sources import (
     LIVE_COUNTERS,
     MYO_PERIOD,
@@ -144,40 +144,27 @@ def _value(j):
 
 
 def _streamer(tag, rows, locks, batches, period, go, written, release):
-    """What a LibEMG streamer does (libemg/_streamers, shared_memory_manager.py): create
-    ``tag`` (float64, rows x 8, zeros) and ``tag_count`` (int32, 1 x 1); per packet, shift
-    the newest-first buffer under the buffer's lock, then add to the count under the
-    counter's lock. ``batches`` lists (first sample, number of samples) per packet."""
+    """A LibEMG streamer (:class:`~hemg_drake.emg.libemg_writer.StreamerMemory`: ``tag``
+    and ``tag_count``, per packet a shift under the buffer's lock, then a count under the
+    counter's) writing per phase of ``batches`` its (first sample, number of samples)
+    packets."""
     # A real streamer runs under its own resource tracker; this forked child shares the
     # test's, so it leaves the tracker alone and unlinks its memory itself below.
     resource_tracker.register = resource_tracker.unregister = lambda name, rtype: None
-    emg_lock, count_lock = locks
-    emg_block = SharedMemory(tag, create=True, size=8 * rows * CHANNELS)
-    count_block = SharedMemory(f"{tag}_count", create=True, size=4)
-    emg = np.ndarray((rows, CHANNELS), np.float64, buffer=emg_block.buf)
-    count = np.ndarray((1, 1), np.int32, buffer=count_block.buf)
-    emg.fill(0)
-    count.fill(0)
+    memory = StreamerMemory(tag, rows, CHANNELS)
     try:
         for phase in batches:
             go.wait(10)
             go.clear()
             for first, n in phase:
                 packet = np.array([_value(j) for j in range(first + n - 1, first - 1, -1)])
-                with emg_lock:
-                    emg[:] = np.vstack((packet, emg))[:rows, :]
-                with count_lock:
-                    count[:] = count + n
+                memory.write(packet, *locks)
                 if period:
                     time.sleep(period)
             written.set()
         release.wait(10)
     finally:
-        del emg, count
-        emg_block.close()
-        count_block.close()
-        emg_block.unlink()
-        count_block.unlink()
+        memory.close()
 
 
 class Streamer:
