@@ -218,7 +218,9 @@ class Clik(LeafSystem):
         self._v_d_index = self.DeclareDiscreteState(self._n)
         self.DeclareInitializationDiscreteUpdateEvent(self._initialize)
         self.DeclarePeriodicDiscreteUpdateEvent(
-            period_sec=self._period, offset_sec=0.0, update=self._update
+            period_sec=self._period,
+            offset_sec=0.0,
+            update=self._update_axis if self._orientation_gain > 0.0 else self._update,
         )
         self.DeclareStateOutputPort("q_desired", self._q_d_index)
         self.DeclareStateOutputPort("v_desired", self._v_d_index)
@@ -260,20 +262,6 @@ class Clik(LeafSystem):
     def _update(self, context, discrete_state):
         q_d = context.get_discrete_state(self._q_d_index).value()
         p_desired = self._p_desired.Eval(context)
-        if self._orientation_gain > 0.0:
-            # One forward kinematics (SetPositions, then the pose) that the Jacobian reuses;
-            # the NaN check, both tasks and the limits in one compiled call.
-            plant_context = self._plant_context
-            self._plant.SetPositions(plant_context, self._model, q_d)
-            X_WE = self._frame_E.CalcPoseInWorld(plant_context).GetAsMatrix4()
-            J = self._plant.CalcJacobianSpatialVelocity(plant_context, *self._jacobian_arguments)
-            if axis_step_into(
-                self._next, q_d, J, X_WE, p_desired, self._columns, self._task, self._limit_rows
-            ):
-                self._set(discrete_state, self._q_next, self._v_next)
-            else:
-                self._set(discrete_state, q_d, self._zeros)  # hold: see below
-            return
         if not all(map(math.isfinite, p_desired.tolist())):
             # Hold the reference rather than integrate a NaN into it.
             self._set(discrete_state, q_d, self._zeros)
@@ -288,6 +276,25 @@ class Clik(LeafSystem):
         else:
             limited_step_into(q_next, v_next, q_d, self.qdot(q_d, p_desired), *self._limits)
         self._set(discrete_state, q_next, v_next)
+
+    def _update_axis(self, context, discrete_state):
+        """The update with the tool-axis task: one forward kinematics (SetPositions, then the
+        pose) that the Jacobian reuses, then the NaN check, both tasks and the limits in one
+        compiled call. Written out rather than shared with _update: at 1 kHz each Python call
+        and lookup counts."""
+        q_d = context.get_discrete_state(self._q_d_index).value()
+        p_desired = self._p_desired.Eval(context)
+        plant, plant_context = self._plant, self._plant_context
+        plant.SetPositions(plant_context, self._model, q_d)
+        X_WE = self._frame_E.CalcPoseInWorld(plant_context).GetAsMatrix4()
+        J = plant.CalcJacobianSpatialVelocity(plant_context, *self._jacobian_arguments)
+        if axis_step_into(
+            self._next, q_d, J, X_WE, p_desired, self._columns, self._task, self._limit_rows
+        ):
+            discrete_state.set_value(self._q_d_index, self._q_next)
+            discrete_state.set_value(self._v_d_index, self._v_next)
+        else:  # a NaN target: hold the reference, as _update does
+            self._set(discrete_state, q_d, self._zeros)
 
 
 def unit_direction(name, value):
