@@ -154,7 +154,7 @@ def _demonstrate(scenario, folder, replays, progress, placed):
     from hemg_drake.placements import has_placements, task_frames
     from hemg_drake.diagrams.demonstration import operator_plan, record_demonstration
     from hemg_drake.learning.demos import save_dataset
-    from hemg_drake.viz.figures import plot_demonstrations, plot_emg_envelopes, save_figure
+    from hemg_drake.viz.run_figures import write_demonstration_figures
 
     demos, replay_files = [], []
     for c, (seed, here) in enumerate(zip(scenario.seeds(), placed, strict=True), start=1):
@@ -185,9 +185,7 @@ def _demonstrate(scenario, folder, replays, progress, placed):
     demos = [dc.replace(d, frame_A=A, frame_b=b) for d, (A, b) in zip(demos, frames, strict=True)]
     metadata = dict(scenario=scenario.to_yaml(), task=scenario.task, log_period=scenario.log_period)
     save_dataset(folder.dataset, demos, metadata)
-    figures = [folder / "demonstrations.png", folder / "fig6_emg.png"]
-    save_figure(plot_demonstrations(demos, task=scenario.task), figures[0])
-    save_figure(plot_emg_envelopes(demos[0].emg, per_channel=scenario.emg.per_channel), figures[1])
+    figures = write_demonstration_figures(demos, scenario, folder.path)
     written = [folder.dataset, *replay_files, *figures]
     folder.finish("demonstrate", written)
     return written
@@ -213,7 +211,7 @@ def learn(run_dir, *, overrides=(), n_iter=None, progress=print):
     HSMM, the fitted model.
     """
     from hemg_drake.placements import last_frames
-    from hemg_drake.viz.figures import plot_state_activations, save_figure
+    from hemg_drake.viz.run_figures import write_state_activations_figure
 
     folder = RunFolder(run_dir)
     folder.check("demonstrate", folder.dataset, run_hint=_demonstrate_hint(folder))
@@ -235,15 +233,11 @@ def learn(run_dir, *, overrides=(), n_iter=None, progress=print):
         first = model
         if hasattr(model, "at"):  # a TP-HSMM: its HSMM where demonstration 1 was
             first = model.at(*last_frames(frames[0], model.n_frames_))
-        figure = plot_state_activations(
-            demos[0].time, first.forward_variable(data[0]), task=scenario.task, along=1
-        )
+        h = first.forward_variable(data[0])
         model.save(folder.model)
-        save_figure(figure, folder / "state_activations.png")
-        folder.finish(
-            "learn", [folder.model, folder / "state_activations.png"], inputs=[folder.dataset]
-        )
-    progress(f"wrote {folder.model}, {folder / 'state_activations.png'}")
+        figure = write_state_activations_figure(demos[0].time, h, scenario.task, folder.path)
+        folder.finish("learn", [folder.model, figure], inputs=[folder.dataset])
+    progress(f"wrote {folder.model}, {figure}")
     return model
 
 
@@ -330,6 +324,7 @@ def reproduce(
 def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progress):
     from hemg_drake.diagrams.reproduction import build_reproduction_diagram, run_reproduction
     from hemg_drake.evaluation import format_metrics, task_metrics
+    from hemg_drake.viz.run_figures import write_reproduction_figures
 
     duration = float(np.mean([demo.time[-1] for demo in demos]))
     began = time.perf_counter()
@@ -357,7 +352,7 @@ def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progr
     )
     written = [out / "reproduction.npz", out / "metrics.json"]
     save_npz_atomic(written[0], **result.log.arrays())
-    written += _write_figures(scenario.task, demos, result.log, out)
+    written += write_reproduction_figures(scenario.task, demos, result.log, out.path)
     write_text_atomic(written[1], json.dumps(metrics, indent=2) + "\n")
     if replay_path is not None:
         written.append(replay_path)
@@ -367,43 +362,20 @@ def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progr
     return metrics
 
 
-def _write_figures(task, demos, log, folder):
-    from hemg_drake.evaluation import strokes
-    from hemg_drake.viz import figures
-
-    if task == "cotter_pin":
-        path = folder / "fig8_reproduction.png"
-        figures.save_figure(figures.plot_pin_reproduction(demos, log), path)
-        return [path]
-    drawn = strokes(log.time, log.p_WE, log.f_WE)
-    demonstrated = [s for d in demos for s in strokes(d.time, d.p_WE, d.f_WE)]
-    paths = [folder / "fig10_reproduction.png", folder / "fig11_strokes.png"]
-    figures.save_figure(figures.plot_drawing_reproduction(demos, log), paths[0])
-    figures.save_figure(figures.plot_strokes(drawn, demonstrated=demonstrated), paths[1])
-    return paths
-
-
 def write_diagrams(scenario, model, run_dir, *, progress=print):
     """The demonstration and reproduction diagrams as SVG (Graphviz, every port), or as
     ``.dot`` text with a one-line hint when Graphviz is missing."""
     from hemg_drake.diagrams.demonstration import build_demonstration_diagram
     from hemg_drake.diagrams.reproduction import build_reproduction_diagram
-    from hemg_drake.viz.diagram_svg import write_diagram_picture
+    from hemg_drake.viz.run_figures import write_diagram_pictures
 
-    folder = Path(run_dir)
     diagrams = {
         "demonstration_diagram": build_demonstration_diagram(scenario, seed=scenario.seed).diagram,
         "reproduction_diagram": build_reproduction_diagram(
             scenario, placed_model(model, scenario)
         ).diagram,
     }
-    written = []
-    for name, diagram in diagrams.items():
-        path, message = write_diagram_picture(diagram, folder / name, max_depth=2)
-        written.append(path)
-        if message:
-            progress(message)
-    return written
+    return write_diagram_pictures(diagrams, run_dir, progress=progress)
 
 
 # run_demo(placements=True): each task demonstrated at placements drawn from a modest range
@@ -432,7 +404,7 @@ def placement_demo(scenario, run_dir, *, replays=True, progress=print):
     dict, run name ("TASK (new placement)") -> metrics.
     """
     from hemg_drake.diagrams.reproduction import ReproductionLog
-    from hemg_drake.viz.figures import plot_placements, save_figure
+    from hemg_drake.viz.run_figures import write_placements_figure
 
     ranges, (position, yaw) = PLACEMENT_DEMOS[scenario.task]
     folder = Path(run_dir)
@@ -444,8 +416,8 @@ def placement_demo(scenario, run_dir, *, replays=True, progress=print):
     demos, recorded = load_demonstrations(folder / "dataset.npz")
     with np.load(folder / "reproduction.npz") as arrays:
         log = ReproductionLog(**{name: arrays[name] for name in arrays.files})
-    figure = plot_placements(demos, log, task=scenario.task, X_WT=recorded.replaced(new).X_WT())
-    save_figure(figure, folder / "placements.png")
+    X_WT = recorded.replaced(new).X_WT()
+    write_placements_figure(demos, log, scenario.task, X_WT, folder / "placements.png")
     progress(f"wrote {folder / 'placements.png'}")
     return {f"{scenario.task} (new placement)": metrics}
 
