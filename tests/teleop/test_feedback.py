@@ -40,21 +40,34 @@ def test_force_mode_rotates_scales_and_saturates(mapping):
     np.testing.assert_allclose(saturated / 7.9, direction / np.linalg.norm(direction))
 
 
-def test_force_mode_pushes_the_stylus_the_way_the_slave_is_pushed(mapping):
+def _free_stylus_under(feedback, slave, duration):
+    """Where a free stylus (no hand) is after ``duration`` s with ``feedback`` driving its
+    motors from the constant slave values ``slave`` (port name -> 3 floats) and, in mode
+    "position_error", from the stylus itself."""
     builder = DiagramBuilder()
     master = builder.AddSystem(HapticMaster())
-    feedback = builder.AddSystem(ForceFeedback(mapping=mapping))
-    f_WE = np.array([0.0, 0.0, -3.0])  # the environment pushes the slave down
-    source = builder.AddSystem(ConstantVectorSource(f_WE))
-    builder.Connect(source.get_output_port(), feedback.GetInputPort("f_WE"))
+    builder.AddSystem(feedback)
+    for name, value in slave.items():
+        builder.Connect(
+            builder.AddSystem(ConstantVectorSource(value)).get_output_port(),
+            feedback.GetInputPort(name),
+        )
+    if feedback.mode == "position_error":
+        for name in ("p_MS", "v_MS"):
+            builder.Connect(master.GetOutputPort(name), feedback.GetInputPort(name))
     builder.Connect(feedback.GetOutputPort("motor_force"), master.GetInputPort("motor_force"))
     builder.Connect(
         builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(),
         master.GetInputPort("hand_force"),
     )
     simulator = Simulator(builder.Build())
-    simulator.AdvanceTo(0.02)
-    p_MS = master.GetOutputPort("p_MS").Eval(master.GetMyContextFromRoot(simulator.get_context()))
+    simulator.AdvanceTo(duration)
+    return master.GetOutputPort("p_MS").Eval(master.GetMyContextFromRoot(simulator.get_context()))
+
+
+def test_force_mode_pushes_the_stylus_the_way_the_slave_is_pushed(mapping):
+    f_WE = np.array([0.0, 0.0, -3.0])  # the environment pushes the slave down
+    p_MS = _free_stylus_under(ForceFeedback(mapping=mapping), {"f_WE": f_WE}, 0.02)
     # The stylus moves so that its mapped image moves down in W, in the direction of f_WE.
     moved_W = mapping.velocity_to_slave(p_MS)
     assert np.dot(moved_W, f_WE) / (np.linalg.norm(moved_W) * 3.0) > 0.999
@@ -103,25 +116,9 @@ def test_position_error_mode_is_the_table_one_pd(mapping):
 
 def test_position_error_mode_pulls_the_stylus_onto_a_still_slave(mapping):
     p_WE = mapping.master_to_slave(np.array([0.02, -0.01, 0.015]))
-    builder = DiagramBuilder()
-    master = builder.AddSystem(HapticMaster())
-    feedback = builder.AddSystem(ForceFeedback(mapping=mapping, mode="position_error"))
-    for name, value in (("p_WE", p_WE), ("v_WE", np.zeros(3))):
-        builder.Connect(
-            builder.AddSystem(ConstantVectorSource(value)).get_output_port(),
-            feedback.GetInputPort(name),
-        )
-    for name in ("p_MS", "v_MS"):
-        builder.Connect(master.GetOutputPort(name), feedback.GetInputPort(name))
-    builder.Connect(feedback.GetOutputPort("motor_force"), master.GetInputPort("motor_force"))
-    builder.Connect(
-        builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(),
-        master.GetInputPort("hand_force"),
-    )
-    simulator = Simulator(builder.Build())
+    feedback = ForceFeedback(mapping=mapping, mode="position_error")
     # Table I's gains on the 45 g tip: overdamped, slow pole at about K/(K_d + b) = 1 /s.
-    simulator.AdvanceTo(5.0)
-    p_MS = master.GetOutputPort("p_MS").Eval(master.GetMyContextFromRoot(simulator.get_context()))
+    p_MS = _free_stylus_under(feedback, {"p_WE": p_WE, "v_WE": np.zeros(3)}, 5.0)
     error = np.linalg.norm(p_MS - mapping.slave_to_master(p_WE))
     assert error < 0.01 * np.linalg.norm(mapping.slave_to_master(p_WE))
 
