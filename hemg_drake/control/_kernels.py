@@ -96,6 +96,24 @@ def transpose_step_into(
 
 
 @numba.njit(cache=True)
+def transpose_point_step_into(out, q_d, J, p_WE, p_desired, columns, gain, limits, period):
+    """``transpose_step_into`` with e = p_desired - p_WE, into ``out`` (2, n): q_next, v_next.
+
+    ``p_WE`` (3, 1) is the tool point (``CalcPointsPositions``), ``limits`` (3, n) v_max,
+    q_lower, q_upper. Returns False (and ``out`` untouched) if p_desired holds a NaN or inf.
+    """
+    e = np.empty(3)
+    for i in range(3):
+        if not math.isfinite(p_desired[i]):
+            return False
+        e[i] = p_desired[i] - p_WE[i, 0]
+    transpose_step_into(
+        out[0], out[1], q_d, J, columns, e, gain, limits[0], limits[1], limits[2], period
+    )
+    return True
+
+
+@numba.njit(cache=True)
 def _solve3_into(x, A, b):
     """x = A^-1 b for a symmetric positive-definite 3x3 A, by Cholesky (A is not changed)."""
     l00 = math.sqrt(A[0, 0])

@@ -8,7 +8,11 @@ from pydrake.systems.framework import LeafSystem
 
 from hemg_drake._validate import as_scalar, as_vector
 from hemg_drake.control import _kernels
-from hemg_drake.control._kernels import axis_step_into, limited_step_into, transpose_step_into
+from hemg_drake.control._kernels import (
+    axis_step_into,
+    limited_step_into,
+    transpose_point_step_into,
+)
 
 CLIK_METHODS = ("transpose", "dls")
 # Damping mu of the tool-axis task's solve (dimensionless, as J_w). The task's two singular
@@ -191,13 +195,13 @@ class Clik(LeafSystem):
         self._q_upper = upper - limit_margin
         self._v_max = plant.GetVelocityUpperLimits()[self._v_columns]
         self._zeros = np.zeros(self._n)
-        # For the compiled step: column indices, the limits in its argument order, buffers.
+        # For the compiled steps, made once: column indices, the limits in their argument
+        # orders, and one (2, n) output buffer whose rows are q_next and v_next.
         self._columns = np.arange(plant.num_velocities())[self._v_columns]
         self._limits = (self._v_max, self._q_lower, self._q_upper, self._period)
-        # One (2, n) buffer for the axis step; its rows are the others' q_next and v_next.
         self._next = np.zeros((2, self._n))
         self._q_next, self._v_next = self._next
-        # The axis step's constants and limits, packed once (see _kernels.TASK_*).
+        # The axis step's constants, packed in one array (see _kernels.TASK_*).
         self._task = np.zeros(_kernels.TASK_SIZE)
         self._task[_kernels.TASK_GAIN] = self._gain
         self._task[_kernels.TASK_DLS] = float(method == "dls")
@@ -210,6 +214,7 @@ class Clik(LeafSystem):
         self._task[_kernels.TASK_AXIS_E] = self._axis_E
         self._task[_kernels.TASK_AXIS_W] = self._axis_W_desired
         self._limit_rows = np.array([self._v_max, self._q_lower, self._q_upper])
+        self._transpose_arguments = (self._columns, self._gain, self._limit_rows, self._period)
 
         self._p_desired = self.DeclareVectorInputPort("p_WE_desired", 3)
         self._state = self.DeclareVectorInputPort("state", 2 * self._n)
@@ -262,20 +267,29 @@ class Clik(LeafSystem):
     def _update(self, context, discrete_state):
         q_d = context.get_discrete_state(self._q_d_index).value()
         p_desired = self._p_desired.Eval(context)
-        if not all(map(math.isfinite, p_desired.tolist())):
-            # Hold the reference rather than integrate a NaN into it.
-            self._set(discrete_state, q_d, self._zeros)
-            return
-        q_next, v_next = self._q_next, self._v_next
-        # The sums of qdot() and of the limits below in compiled calls (tests compare them).
         if self._method == "transpose":
-            e = p_desired - self.p_WE(q_d)
-            transpose_step_into(
-                q_next, v_next, q_d, self._jacobian(), self._columns, e, self._gain, *self._limits
+            # The sums of qdot() and of the limits, and the NaN check, in one compiled call
+            # (tests compare them); the Jacobian reuses the kinematics of the point's position.
+            plant, plant_context = self._plant, self._plant_context
+            plant.SetPositions(plant_context, self._model, q_d)
+            p_WE = plant.CalcPointsPositions(
+                plant_context, self._frame_E, self._p_EoE_E, self._world
             )
-        else:
-            limited_step_into(q_next, v_next, q_d, self.qdot(q_d, p_desired), *self._limits)
-        self._set(discrete_state, q_next, v_next)
+            J = plant.CalcJacobianTranslationalVelocity(plant_context, *self._jacobian_arguments)
+            if transpose_point_step_into(
+                self._next, q_d, J, p_WE, p_desired, *self._transpose_arguments
+            ):
+                discrete_state.set_value(self._q_d_index, self._q_next)
+                discrete_state.set_value(self._v_d_index, self._v_next)
+                return
+        elif all(map(math.isfinite, p_desired.tolist())):
+            limited_step_into(
+                self._q_next, self._v_next, q_d, self.qdot(q_d, p_desired), *self._limits
+            )
+            self._set(discrete_state, self._q_next, self._v_next)
+            return
+        # Hold the reference rather than integrate a NaN into it.
+        self._set(discrete_state, q_d, self._zeros)
 
     def _update_axis(self, context, discrete_state):
         """The update with the tool-axis task: one forward kinematics (SetPositions, then the

@@ -101,9 +101,12 @@ def test_transpose_step_is_eq_21():
     np.testing.assert_allclose(v_d, (q2 - q1) / 1e-3, atol=1e-9)
 
 
-def test_nan_target_holds_the_reference():
+@pytest.mark.parametrize(
+    "kwargs", [{}, {"method": "dls", "gain": 50.0}, {"orientation_gain": 10.0}]
+)
+def test_nan_target_holds_the_reference(kwargs):
     q0 = np.array([0.0, -0.55, 0.0, 0.75, 0.0, 1.26, 0.0])
-    q_d, v_d, _, _ = run_clik(np.array([np.nan, 0.0, 0.0]), q0, 0.05)
+    q_d, v_d, _, _ = run_clik(np.array([np.nan, 0.0, 0.0]), q0, 0.05, **kwargs)
     np.testing.assert_allclose(q_d, q0)
     np.testing.assert_allclose(v_d, 0.0)
 
