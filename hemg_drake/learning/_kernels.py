@@ -5,6 +5,15 @@ numpy expression per time step costs more in call overhead than the work
 itself, so these loops are JIT-compiled (``cache=True``: compiled once per
 machine). Indices: t time, i and j states, d duration in steps (1 ..
 n_durations, stored at column d - 1).
+
+Their cost is the duration sums: per (time, state), a log-sum-exp over the w durations of
+the state's support, of which only a few terms (1-7 on the benchmark data) are within
+_NEGLIGIBLE nats of the largest, since the segments' emission products fall by hundreds of
+nats per step. So these sums look at chunks of segment boundaries: a chunk whose largest
+log value cannot reach the best term so far is skipped without looking at its terms, and
+the two ends of the window, where the largest term is on such steep stretches, are looked
+at first (:func:`_window`). Everything stays in log space: a state e^-1000 below the
+others keeps its exact log value.
 """
 
 import numba
@@ -13,25 +22,9 @@ import numpy as np
 _NEG_INF = -np.inf
 # Terms more than this many nats below the largest are skipped in a log-sum-exp:
 # together (at most n_durations of them) they change it by less than 1e-19
-# relative, below double precision, and skipping their exp() saves most of
-# the time, since durations far from a state's mean are that unlikely.
+# relative, below double precision, and skipping them saves most of the time,
+# since durations far from a state's mean are that unlikely.
 _NEGLIGIBLE = 50.0
-
-
-@numba.njit(cache=True)
-def _logsumexp(values, n):
-    """log(sum(exp(values[:n]))), -inf if every value is -inf."""
-    top = _NEG_INF
-    for k in range(n):
-        if values[k] > top:
-            top = values[k]
-    if top == _NEG_INF:
-        return _NEG_INF
-    total = 0.0
-    for k in range(n):
-        if values[k] > top - _NEGLIGIBLE:
-            total += np.exp(values[k] - top)
-    return top + np.log(total)
 
 
 @numba.njit(cache=True)
@@ -64,16 +57,94 @@ def _cumulative(log_emission):
     return total
 
 
-@numba.njit(cache=True)
-def _logsumexp_top(values, n, top):
-    """log(sum(exp(values[:n]))) given their maximum ``top``."""
-    if top == _NEG_INF:
-        return _NEG_INF
+@numba.njit(cache=True, inline="always")
+def _log_row(log_row, log_values, weights):
+    """log sum_j exp(log_row[j] + log_values[j]) as top and sum / e^top (0 if all -inf).
+
+    Terms more than _NEGLIGIBLE below the largest are left out; weights[j] is left
+    exp(term_j - top) (0 for those).
+    """
+    top = _NEG_INF
+    for j in range(len(log_values)):
+        weights[j] = log_row[j] + log_values[j]
+        if weights[j] > top:
+            top = weights[j]
+    total = 0.0
+    for j in range(len(log_values)):
+        weights[j] = np.exp(weights[j] - top) if weights[j] > top - _NEGLIGIBLE else 0.0
+        total += weights[j]
+    return top, total
+
+
+# Positions per chunk: the duration loops skip a whole chunk of segment boundaries whose
+# largest log value is too low to matter, instead of looking at each.
+_CHUNK = 8
+
+
+@numba.njit(cache=True, inline="always")
+def _push(chunk_top, row, position, value):
+    """Keep chunk_top[row, c] the largest value pushed at a position of chunk c."""
+    c = position // _CHUNK
+    if value > chunk_top[row, c]:
+        chunk_top[row, c] = value
+
+
+@numba.njit(cache=True, inline="always")
+def _window(values, chunk_top, weights, offset, low, high, bound, descending, kept, where):
+    """sum_{p = low .. high} exp(values[p] + weights[offset + p]) as top and sum / e^top.
+
+    Terms more than _NEGLIGIBLE below the largest are left out (as in :func:`_log_row`);
+    a chunk of positions whose ``chunk_top`` plus ``bound`` (the largest weight) is that
+    far below the best term so far is not looked at. The chunks at the window's two ends
+    are visited first (on steep stretches, which are most, the largest term is at one of
+    them), then the others from the newest on (``descending``: the newest is the highest
+    position). exp(term - top) of the terms kept is left in ``kept[:n]``, their positions in
+    ``where[:n]``.
+
+    Returns
+    -------
+    top : float
+        The largest term (-inf if there is none; then total and n are 0).
+    total : float
+        sum of exp(term - top), in [1, n].
+    n : int
+    """
+    n = 0
+    top = _NEG_INF
+    newest, oldest = low // _CHUNK, high // _CHUNK
+    step = 1
+    if descending:
+        newest, oldest, step = oldest, newest, -1
+    for k in range(abs(oldest - newest) + 1):
+        c = newest if k == 0 else (oldest if k == 1 else newest + (k - 1) * step)
+        if chunk_top[c] == _NEG_INF or chunk_top[c] + bound < top - _NEGLIGIBLE:
+            continue
+        for p in range(max(low, c * _CHUNK), min(high, c * _CHUNK + _CHUNK - 1) + 1):
+            value = values[p] + weights[offset + p]
+            if value > top - _NEGLIGIBLE:
+                kept[n] = value
+                where[n] = p
+                n += 1
+                if value > top:
+                    top = value
     total = 0.0
     for k in range(n):
-        if values[k] > top - _NEGLIGIBLE:
-            total += np.exp(values[k] - top)
-    return top + np.log(total)
+        kept[k] = np.exp(kept[k] - top) if kept[k] > top - _NEGLIGIBLE else 0.0
+        total += kept[k]
+    return top, total, n
+
+
+@numba.njit(cache=True)
+def _durations(log_duration, n_steps):
+    """Support, log p_i(d) reversed along d, the largest log p_i(d), empty chunk maxima."""
+    n_states = log_duration.shape[0]
+    first, last = _support(log_duration)
+    bound = np.full(n_states, _NEG_INF)
+    for i in range(n_states):
+        if last[i] >= first[i]:
+            bound[i] = log_duration[i, first[i] : last[i] + 1].max()
+    chunk_top = np.full((n_states, n_steps // _CHUNK + 1), _NEG_INF)  # see _push
+    return first, last, np.ascontiguousarray(log_duration[:, ::-1]), bound, chunk_top
 
 
 @numba.njit(cache=True)
@@ -100,38 +171,42 @@ def forward(log_emission, log_startprob, log_transmat, log_duration):
     """
     n_steps, n_states = log_emission.shape
     n_durations = log_duration.shape[1]
-    first, last = _support(log_duration)
+    first, last, reversed_duration, bound, chunk_top = _durations(log_duration, n_steps)
     total = _cumulative(log_emission)
+    log_transmat_T = np.ascontiguousarray(log_transmat.T)
     log_alpha = np.empty((n_steps, n_states))
-    alpha_in = np.empty((n_states, n_steps))  # log_alpha_in, state-major (see _cumulative)
-    terms = np.empty(max(n_durations, n_states))
+    log_alpha_in = np.empty((n_steps, n_states))
+    # U[i, b] = log alpha_in - the emissions before b: a segment's term is
+    # U[i, b] + log p_i(d) + total[i, t + 1] (state-major, for the duration loops).
+    boundary = np.empty((n_states, n_steps))
+    weights = np.empty(n_states)
+    kept = np.empty(n_durations)
+    where = np.empty(n_durations, dtype=np.int64)
     for t in range(n_steps):
         for i in range(n_states):
             if t == 0:
-                alpha_in[i, t] = log_startprob[i]
+                log_alpha_in[0, i] = log_startprob[i]
             else:
-                for j in range(n_states):
-                    terms[j] = log_alpha[t - 1, j] + log_transmat[j, i]
-                alpha_in[i, t] = _logsumexp(terms, n_states)
+                top, weight = _log_row(log_transmat_T[i], log_alpha[t - 1], weights)
+                log_alpha_in[t, i] = top + np.log(weight) if weight > 0.0 else _NEG_INF
+            boundary[i, t] = log_alpha_in[t, i] - total[i, t]
+            _push(chunk_top, i, t, boundary[i, t])
         for i in range(n_states):
-            # Durations d = first + 1 .. min(last + 1, t + 1); segment xi_{t-d+1..t}.
-            n_terms = 0
-            top = _NEG_INF
-            end = total[i, t + 1]
-            for d in range(first[i] + 1, min(last[i] + 1, t + 1) + 1):
-                begin = t - d + 1
-                value = alpha_in[i, begin] + log_duration[i, d - 1] + end - total[i, begin]
-                terms[n_terms] = value
-                top = max(top, value)
-                n_terms += 1
-            log_alpha[t, i] = _logsumexp_top(terms, n_terms, top)
-    log_alpha_in = np.ascontiguousarray(alpha_in.T)
+            # Durations d = first + 1 .. min(last + 1, t + 1): segment xi_{b..t}, b = t - d + 1.
+            low, high = max(0, t - last[i]), t - first[i]
+            log_alpha[t, i] = _NEG_INF
+            if high >= low:
+                top, weight, _ = _window(boundary[i], chunk_top[i], reversed_duration[i],
+                                         n_durations - 1 - t, low, high, bound[i], True, kept,
+                                         where)  # fmt: skip
+                if weight > 0.0:
+                    log_alpha[t, i] = total[i, t + 1] + top + np.log(weight)
     return log_alpha, log_alpha_in
 
 
 @numba.njit(cache=True)
 def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, log_likelihood):
-    """Backward variables and the expected transition and duration counts of one sequence.
+    """Backward variables and the expected counts of one sequence.
 
     Parameters
     ----------
@@ -152,54 +227,62 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
         Posterior expected number of transitions i -> j at [i, j].
     duration_counts : array, shape (N, n_durations)
         Posterior expected number of segments of state i lasting d steps.
+    starts, ends : arrays, shape (T, N)
+        p(a segment of state i starts at t | all), p(one ends at t | all).
     """
     n_steps, n_states = log_emission.shape
     n_durations = log_duration.shape[1]
-    first, last = _support(log_duration)
+    first, last, _, bound, chunk_top = _durations(log_duration, n_steps)
     total = _cumulative(log_emission)
-    beta = np.empty((n_states, n_steps))  # log_beta, state-major (see _cumulative)
+    log_beta = np.empty((n_steps, n_states))
     log_beta_in = np.empty((n_steps, n_states))
+    starts = np.zeros((n_steps, n_states))
+    ends = np.zeros((n_steps, n_states))
     transition_counts = np.zeros((n_states, n_states))
     duration_counts = np.zeros((n_states, n_durations))
-    terms = np.empty(max(n_durations, n_states))
+    # V[i, e] = the emissions up to e + log beta_e: a segment's term is
+    # V[i, e] + log p_i(d) - total[i, s] (state-major, for the duration loops).
+    end = np.empty((n_states, n_steps))
+    weights = np.empty(n_states)
+    kept = np.empty(n_durations)
+    where = np.empty(n_durations, dtype=np.int64)
     for s in range(n_steps - 1, -1, -1):
         for i in range(n_states):
             if s == n_steps - 1:
-                beta[i, s] = 0.0
-                continue
-            for j in range(n_states):
-                terms[j] = log_transmat[i, j] + log_beta_in[s + 1, j]
-            beta[i, s] = _logsumexp(terms, n_states)
-            if beta[i, s] == _NEG_INF:
-                continue
-            # p(segment of i ends at s, one of j starts at s + 1 | all).
-            scale = log_alpha[s, i] - log_likelihood
-            for j in range(n_states):
-                if terms[j] > beta[i, s] - _NEGLIGIBLE:
-                    transition_counts[i, j] += np.exp(terms[j] + scale)
+                log_beta[s, i] = 0.0
+                if log_alpha[s, i] > _NEG_INF:
+                    ends[s, i] = np.exp(log_alpha[s, i] - log_likelihood)
+            else:
+                top, weight = _log_row(log_transmat[i], log_beta_in[s + 1], weights)
+                log_beta[s, i] = top + np.log(weight) if weight > 0.0 else _NEG_INF
+                if weight > 0.0 and log_alpha[s, i] > _NEG_INF:
+                    # p(segment of i ends at s | all), and the transitions i -> j it makes.
+                    scale = np.exp(top + log_alpha[s, i] - log_likelihood)
+                    ends[s, i] = weight * scale
+                    for j in range(n_states):
+                        transition_counts[i, j] += weights[j] * scale
+            end[i, s] = total[i, s + 1] + log_beta[s, i]
+            _push(chunk_top, i, s, end[i, s])
         for i in range(n_states):
-            # Durations d = first + 1 .. min(last + 1, T - s); segment xi_{s..s+d-1}.
-            low = first[i] + 1
-            high = min(last[i] + 1, n_steps - s)
-            top = _NEG_INF
-            start = total[i, s]
-            for d in range(low, high + 1):
-                value = log_duration[i, d - 1] + total[i, s + d] - start + beta[i, s + d - 1]
-                terms[d - low] = value
-                top = max(top, value)
-            if top == _NEG_INF:
+            # Durations d = first + 1 .. min(last + 1, T - s): segment xi_{s..e}, e = s + d - 1.
+            low, high = s + first[i], min(s + last[i], n_steps - 1)
+            if high < low:
                 log_beta_in[s, i] = _NEG_INF
                 continue
-            weights = 0.0
-            scale = np.exp(top + log_alpha_in[s, i] - log_likelihood)
-            for d in range(low, high + 1):
-                if terms[d - low] > top - _NEGLIGIBLE:
-                    weight = np.exp(terms[d - low] - top)
-                    weights += weight
-                    duration_counts[i, d - 1] += weight * scale
-            log_beta_in[s, i] = top + np.log(weights)
-    log_beta = np.ascontiguousarray(beta.T)
-    return log_beta, log_beta_in, transition_counts, duration_counts
+            top, weight, n_kept = _window(end[i], chunk_top[i], log_duration[i], -s, low, high,
+                                          bound[i], False, kept, where)  # fmt: skip
+            if weight == 0.0:
+                log_beta_in[s, i] = _NEG_INF
+                continue
+            log_beta_in[s, i] = top + np.log(weight) - total[i, s]
+            if log_alpha_in[s, i] == _NEG_INF:
+                continue
+            # p(segment of i from s to e | all), added up by duration, and its start.
+            scale = np.exp(top - total[i, s] + log_alpha_in[s, i] - log_likelihood)
+            for k in range(n_kept):
+                duration_counts[i, where[k] - s] += kept[k] * scale
+            starts[s, i] = weight * scale
+    return log_beta, log_beta_in, transition_counts, duration_counts, starts, ends
 
 
 @numba.njit(cache=True)
@@ -309,19 +392,19 @@ def viterbi(log_emission, log_startprob, log_transmat, log_duration):
 
 
 @numba.njit(cache=True)
-def occupancy(log_alpha, log_alpha_in, log_beta, log_beta_in, log_likelihood):
-    """p(state i active at t | all), shape (T, N), from the forward and backward variables.
+def occupancy(starts, ends):
+    """p(state i active at t | all), shape (T, N), from the segment start and end posteriors.
 
     Segments of i started at or before t minus those ended before t, clipped to [0, 1]
     against round-off.
     """
-    n_steps, n_states = log_alpha.shape
+    n_steps, n_states = starts.shape
     gamma = np.empty((n_steps, n_states))
     for i in range(n_states):
         active = 0.0
         for t in range(n_steps):
-            active += np.exp(log_alpha_in[t, i] + log_beta_in[t, i] - log_likelihood)
+            active += starts[t, i]
             if t > 0:
-                active -= np.exp(log_alpha[t - 1, i] + log_beta[t - 1, i] - log_likelihood)
+                active -= ends[t - 1, i]
             gamma[t, i] = min(max(active, 0.0), 1.0)
     return gamma

@@ -524,13 +524,12 @@ class HSMM:
         log_likelihood = np.logaddexp.reduce(log_alpha[-1])
         if not np.isfinite(log_likelihood):
             return log_likelihood, None
-        log_beta, log_beta_in, transitions, duration_counts = _kernels.backward(
+        _, _, transitions, duration_counts, starts, ends = _kernels.backward(
             log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, log_likelihood
         )
-        gamma = _kernels.occupancy(log_alpha, log_alpha_in, log_beta, log_beta_in, log_likelihood)
         return log_likelihood, {
-            "gamma": gamma,
-            "starts": np.exp(log_alpha_in[0] + log_beta_in[0] - log_likelihood),
+            "gamma": _kernels.occupancy(starts, ends),
+            "starts": starts[0],
             "transitions": transitions,
             "durations": duration_counts,
         }
