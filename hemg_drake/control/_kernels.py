@@ -130,24 +130,14 @@ def _solve3_into(x, A, b):
     x[0] = (y0 - l10 * x[1] - l20 * x[2]) / l00
 
 
-# The small products of the axis step, as loops: numba's ``@`` calls BLAS, whose per-call
-# overhead (about 0.2 us) is several times these sums. Each accumulates from 0 in index
-# order with fused multiply-adds ("contract"), which is what OpenBLAS's dgemm does here:
-# the matrix products are the same to the bit as the ``@`` they replace.
+# The axis step's matrix-matrix products as loops: numba's ``@`` calls BLAS, whose per-call
+# overhead (about 0.2 us) is several times these sums. Each sum runs from 0 in index order
+# with fused multiply-adds ("contract"), as OpenBLAS's dgemm does at these sizes: the same
+# bits as the ``@`` they replace. (No loop order matched its dgemv: matrix-vector products
+# stay ``@``.)
 @numba.njit(cache=True, fastmath={"contract"})
-def _abt_into(C, A, B):
-    """C = A B^T."""
-    for i in range(C.shape[0]):
-        for j in range(C.shape[1]):
-            total = 0.0
-            for k in range(A.shape[1]):
-                total += A[i, k] * B[j, k]
-            C[i, j] = total
-
-
-@numba.njit(cache=True, fastmath={"contract"})
-def _ab_into(C, A, B):
-    """C = A B."""
+def _matmul_into(C, A, B):
+    """C = A B (B may be a transposed view)."""
     for i in range(C.shape[0]):
         for j in range(C.shape[1]):
             total = 0.0
@@ -156,29 +146,8 @@ def _ab_into(C, A, B):
             C[i, j] = total
 
 
-@numba.njit(cache=True, fastmath={"contract"})
-def _ax_into(y, A, x):
-    """y = A x."""
-    for i in range(A.shape[0]):
-        total = 0.0
-        for k in range(A.shape[1]):
-            total += A[i, k] * x[k]
-        y[i] = total
-
-
-@numba.njit(cache=True, fastmath={"contract"})
-def _atx_into(y, A, x):
-    """y = A^T x."""
-    for j in range(A.shape[1]):
-        total = 0.0
-        for k in range(A.shape[0]):
-            total += A[k, j] * x[k]
-        y[j] = total
-
-
 # Layout of axis_step_into's ``task`` array: the Clik's constants, packed once at
-# construction (one array argument costs the compiled call a tenth of what 15 separate
-# ones do).
+# construction (each argument of a compiled call costs about 0.04 us to unbox).
 TASK_GAIN, TASK_DLS, TASK_DAMPING, TASK_AXIS_GAIN, TASK_AXIS_DAMPING, TASK_NULL_DAMPING = range(6)
 TASK_PERIOD = 6
 TASK_P_EOE_E, TASK_AXIS_E, TASK_AXIS_W = slice(7, 10), slice(10, 13), slice(13, 16)
@@ -240,7 +209,7 @@ def axis_step_into(out, q_d, J, X_WE, p_desired, columns, task, limits):
         a[i] = X_WE[i, 0] * axis_E[0] + X_WE[i, 1] * axis_E[1] + X_WE[i, 2] * axis_E[2]
     # The position law, eq. 21.
     G = np.empty((3, 3))
-    _abt_into(G, Jv, Jv)
+    _matmul_into(G, Jv, Jv.T)
     y = np.empty(3)
     if task[TASK_DLS] != 0.0:
         Gd = G.copy()
@@ -254,7 +223,7 @@ def axis_step_into(out, q_d, J, X_WE, p_desired, columns, task, limits):
     for i in range(3):
         G[i, i] += null_damping * null_damping
     K = np.empty((3, 3))
-    _abt_into(K, Jw, Jv)
+    _matmul_into(K, Jw, Jv.T)
     JwN = Jw.copy()
     z = np.empty(3)
     for j in range(n):
@@ -267,7 +236,7 @@ def axis_step_into(out, q_d, J, X_WE, p_desired, columns, task, limits):
         for k in range(3):
             P[i, k] -= a[i] * a[k]
     A = np.empty((3, n))
-    _ab_into(A, P, JwN)
+    _matmul_into(A, P, JwN)
     # Axis error: the rotation vector that turns a onto d.
     c0 = a[1] * axis_W_desired[2] - a[2] * axis_W_desired[1]
     c1 = a[2] * axis_W_desired[0] - a[0] * axis_W_desired[2]
@@ -279,7 +248,7 @@ def axis_step_into(out, q_d, J, X_WE, p_desired, columns, task, limits):
     r[0], r[1], r[2] = axis_gain * scale * c0, axis_gain * scale * c1, axis_gain * scale * c2
     r -= P @ (Jw @ qdot)
     H = np.empty((3, 3))
-    _abt_into(H, A, A)
+    _matmul_into(H, A, A.T)
     for i in range(3):
         H[i, i] += axis_damping * axis_damping
     _solve3_into(z, H, r)

@@ -93,7 +93,7 @@ class Clik(LeafSystem):
     ``a = -d`` exactly (then ``e_a = 0``). Measured while drawing the
     default plan on a sheet within reach (centre (0.60, -0.70, 0.09)) at
     ``orientation_gain`` 10 1/s: the pen within 0.6 deg of vertical whenever
-    it touches, against 12.5 deg with the position law alone.
+    it touches, against 25 deg with the position law alone.
 
     Discrete stability of the transpose law needs
     ``period * gain * sigma_max(J J^T) < 2``; for the Baxter arm
