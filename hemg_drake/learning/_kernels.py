@@ -135,16 +135,25 @@ def _window(values, chunk_top, weights, offset, low, high, bound, descending, ke
 
 
 @numba.njit(cache=True)
-def _durations(log_duration, n_steps):
-    """Support, log p_i(d) reversed along d, the largest log p_i(d), empty chunk maxima."""
-    n_states = log_duration.shape[0]
+def _workspace(log_emission, log_duration):
+    """What both passes need: each state's support and largest log p_i(d), the running
+    sums of the emissions (:func:`_cumulative`), empty chunk maxima (:func:`_push`) with
+    the state-major array of the duration sums' values they bound, and scratch for
+    :func:`_log_row` and :func:`_window`."""
+    n_steps, n_states = log_emission.shape
+    n_durations = log_duration.shape[1]
     first, last = _support(log_duration)
     bound = np.full(n_states, _NEG_INF)
     for i in range(n_states):
         if last[i] >= first[i]:
             bound[i] = log_duration[i, first[i] : last[i] + 1].max()
-    chunk_top = np.full((n_states, n_steps // _CHUNK + 1), _NEG_INF)  # see _push
-    return first, last, np.ascontiguousarray(log_duration[:, ::-1]), bound, chunk_top
+    chunk_top = np.full((n_states, n_steps // _CHUNK + 1), _NEG_INF)
+    values = np.empty((n_states, n_steps))
+    weights = np.empty(n_states)
+    kept = np.empty(n_durations)
+    where = np.empty(n_durations, dtype=np.int64)
+    return (first, last, bound, _cumulative(log_emission), chunk_top, values, weights, kept,
+            where)  # fmt: skip
 
 
 @numba.njit(cache=True)
@@ -171,17 +180,15 @@ def forward(log_emission, log_startprob, log_transmat, log_duration):
     """
     n_steps, n_states = log_emission.shape
     n_durations = log_duration.shape[1]
-    first, last, reversed_duration, bound, chunk_top = _durations(log_duration, n_steps)
-    total = _cumulative(log_emission)
+    # boundary[i, b] = log alpha_in - the emissions before b: a segment's term is
+    # boundary[i, b] + log p_i(d) + total[i, t + 1].
+    first, last, bound, total, chunk_top, boundary, weights, kept, where = _workspace(
+        log_emission, log_duration
+    )
+    reversed_duration = np.ascontiguousarray(log_duration[:, ::-1])  # [i, n_durations - d]
     log_transmat_T = np.ascontiguousarray(log_transmat.T)
     log_alpha = np.empty((n_steps, n_states))
     log_alpha_in = np.empty((n_steps, n_states))
-    # U[i, b] = log alpha_in - the emissions before b: a segment's term is
-    # U[i, b] + log p_i(d) + total[i, t + 1] (state-major, for the duration loops).
-    boundary = np.empty((n_states, n_steps))
-    weights = np.empty(n_states)
-    kept = np.empty(n_durations)
-    where = np.empty(n_durations, dtype=np.int64)
     for t in range(n_steps):
         for i in range(n_states):
             if t == 0:
@@ -232,20 +239,17 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
     """
     n_steps, n_states = log_emission.shape
     n_durations = log_duration.shape[1]
-    first, last, _, bound, chunk_top = _durations(log_duration, n_steps)
-    total = _cumulative(log_emission)
+    # end[i, e] = the emissions up to e + log beta_e: a segment's term is
+    # end[i, e] + log p_i(d) - total[i, s].
+    first, last, bound, total, chunk_top, end, weights, kept, where = _workspace(
+        log_emission, log_duration
+    )
     log_beta = np.empty((n_steps, n_states))
     log_beta_in = np.empty((n_steps, n_states))
     starts = np.zeros((n_steps, n_states))
     ends = np.zeros((n_steps, n_states))
     transition_counts = np.zeros((n_states, n_states))
     duration_counts = np.zeros((n_states, n_durations))
-    # V[i, e] = the emissions up to e + log beta_e: a segment's term is
-    # V[i, e] + log p_i(d) - total[i, s] (state-major, for the duration loops).
-    end = np.empty((n_states, n_steps))
-    weights = np.empty(n_states)
-    kept = np.empty(n_durations)
-    where = np.empty(n_durations, dtype=np.int64)
     for s in range(n_steps - 1, -1, -1):
         for i in range(n_states):
             if s == n_steps - 1:

@@ -599,6 +599,10 @@ class HSMM:
         self._check_fitted()
         return check_demos([demo], n_dims=self.means_.shape[1])[0]
 
+    def _demo_posteriors(self, demo):
+        """:meth:`_posteriors` of one demonstration (checked)."""
+        return self._posteriors(self._log_emission(demo, True), self._log_parameters())
+
     def log_likelihood(self, demo):
         """log p(demo | lambda), the sequence ending with a complete segment.
 
@@ -610,9 +614,7 @@ class HSMM:
         -------
         float (-inf if the model cannot produce the demo)
         """
-        demo = self._check_demo(demo)
-        log_emission = gaussian_log_pdf(demo, self.means_, self.covariances_)
-        return float(self._posteriors(log_emission, self._log_parameters())[0])
+        return float(self._demo_posteriors(demo)[0])
 
     def predict_states(self, demo):
         """Most likely state at each step (argmax of the smoothed posterior).
@@ -625,9 +627,7 @@ class HSMM:
         -------
         array of int, shape (T,)
         """
-        demo = self._check_demo(demo)
-        log_emission = gaussian_log_pdf(demo, self.means_, self.covariances_)
-        log_likelihood, post = self._posteriors(log_emission, self._log_parameters())
+        _, post = self._demo_posteriors(demo)
         if post is None:
             raise ValueError("the model cannot produce this demo (log-likelihood is -inf)")
         return np.argmax(post["gamma"], axis=1)
@@ -857,15 +857,7 @@ class HSMM:
     def save(self, path):
         """Write the fitted model to ``path`` (NPZ with a format version), atomically."""
         self._check_fitted()
-        settings = self.get_params()
-        save_npz_atomic(
-            path,
-            format_version=np.array(FORMAT_VERSION),
-            settings=np.array(json.dumps(settings)),
-            max_duration_=np.array(self.max_duration_),
-            log_likelihood_history_=np.array(self.log_likelihood_history_, dtype=float),
-            **{name: getattr(self, name) for name in _FITTED},
-        )
+        save_fitted(path, self, FORMAT_VERSION, self.get_params())
 
     @classmethod
     def load(cls, path):
@@ -932,6 +924,20 @@ class HSMM:
             raise ValueError(f"{path}: damaged HSMM model file, data_range_ minimum > maximum")
         if np.any(self.duration_stds_ <= 0) or self.max_duration_ < 1:
             raise ValueError(f"{path}: damaged HSMM model file, bad duration parameters")
+
+
+def save_fitted(path, model, format_version, settings, **extra):
+    """Write a fitted HSMM's arrays, d_max and history with a format version and the
+    ``settings`` that rebuild it (JSON), plus ``extra`` arrays, atomically (NPZ)."""
+    save_npz_atomic(
+        path,
+        format_version=np.array(format_version),
+        settings=np.array(json.dumps(settings)),
+        max_duration_=np.array(model.max_duration_),
+        log_likelihood_history_=np.array(model.log_likelihood_history_, dtype=float),
+        **extra,
+        **{name: getattr(model, name) for name in _FITTED},
+    )
 
 
 _DEFAULTS = {

@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hemg_drake.fileio import load_npz, save_npz_atomic
+from hemg_drake.fileio import load_npz
 from hemg_drake.learning import hsmm as _hsmm
 from hemg_drake.learning.hsmm import HSMM, check_demos
 
@@ -283,15 +283,7 @@ class TaskParameterisedHSMM:
             n_states=self.n_states, parameters=self.parameters, n_frames=self.n_frames_,
             n_position=self.n_position_, n_stiffness=self.n_stiffness_,
         )  # fmt: skip
-        save_npz_atomic(
-            path,
-            format_version=np.array(FORMAT_VERSION),
-            kind=np.array(KIND),
-            settings=np.array(json.dumps(settings)),
-            max_duration_=np.array(source.max_duration_),
-            log_likelihood_history_=np.array(source.log_likelihood_history_, dtype=float),
-            **{name: getattr(source, name) for name in _hsmm._FITTED},
-        )
+        _hsmm.save_fitted(path, source, FORMAT_VERSION, settings, kind=np.array(KIND))
 
     @classmethod
     def load(cls, path):
