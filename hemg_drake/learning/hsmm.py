@@ -604,15 +604,9 @@ class HSMM:
         return self._posteriors(self._log_emission(demo, True), self._log_parameters())
 
     def log_likelihood(self, demo):
-        """log p(demo | lambda), the sequence ending with a complete segment.
+        """log p(demo | lambda) of one ``demo`` of shape (T, D), as a float.
 
-        Parameters
-        ----------
-        demo : array, shape (T, D)
-
-        Returns
-        -------
-        float (-inf if the model cannot produce the demo)
+        The sequence ends with a complete segment; -inf if the model cannot produce it.
         """
         return float(self._demo_posteriors(demo)[0])
 

@@ -98,6 +98,19 @@ def _check_position(x, n_position, name):
     return x
 
 
+def _output_gmr(model):
+    """GMR of [xdot, k] given x over the model's states (eqs. 14-17), and the training
+    data's stiffness range (k* is clipped to it)."""
+    gmr = Gmr(
+        priors=model.occupancy_,
+        means=model.means_,
+        covariances=model.covariances_,
+        input_dims=model.position_dims_,
+        output_dims=np.concatenate([model.velocity_dims_, model.stiffness_dims_]),
+    )
+    return gmr, model.data_range_[:, model.stiffness_dims_]
+
+
 class HsmmGmrPolicy:
     """One reproduction step of a fitted HSMM, shared by :func:`reproduce` and the LeafSystem.
 
@@ -135,14 +148,7 @@ class HsmmGmrPolicy:
         self.n_position = len(model.position_dims_)
         self.n_stiffness = len(model.stiffness_dims_)
         self.n_states = model.n_states
-        self.gmr = Gmr(
-            priors=model.occupancy_,
-            means=model.means_,
-            covariances=model.covariances_,
-            input_dims=model.position_dims_,
-            output_dims=np.concatenate([model.velocity_dims_, model.stiffness_dims_]),
-        )
-        self.stiffness_range = model.data_range_[:, model.stiffness_dims_]
+        self.gmr, self.stiffness_range = _output_gmr(model)
         # Cross-track projectors I - w_i u_i u_i^T, u_i the direction of state i's mean
         # velocity; w_i = s_i^2 / (s_i^2 + STILL s_max^2) with s_i its speed: a state that
         # barely moves (a hold) has no path direction and attracts in every direction.
@@ -288,14 +294,7 @@ class HsmmLqrPolicy:
         self.informations = np.einsum("nij,nj->ni", self.precisions, model.means_[:, dims])
         self.A, self.B = lqr.double_integrator(p, self.dt)
         self.R = self.control_cost * np.eye(p)
-        self.gmr = Gmr(
-            priors=model.occupancy_,
-            means=model.means_,
-            covariances=model.covariances_,
-            input_dims=model.position_dims_,
-            output_dims=np.concatenate([model.velocity_dims_, model.stiffness_dims_]),
-        )
-        self.stiffness_range = model.data_range_[:, model.stiffness_dims_]
+        self.gmr, self.stiffness_range = _output_gmr(model)
         self._zeros = np.zeros(self.n_states)
         if weighting == "temporal":
             self._max_duration = model.max_duration_
@@ -495,7 +494,7 @@ def reproduce(
                 "restoring_gain is for tracker='gmr' only (the LQR returns to the path by "
                 f"the states' position precision): give 0, got {restoring_gain!r}"
             )
-        return _reproduce_lqr(
+        return _run(
             HsmmLqrPolicy(
                 model,
                 weighting=weighting,
@@ -508,25 +507,12 @@ def reproduce(
             n_steps,
         )
     policy = HsmmGmrPolicy(model, weighting=weighting, dt=dt, restoring_gain=restoring_gain)
-    x = policy.check_position(start, "start")
-    positions = np.empty((n_steps, policy.n_position))
-    velocities = np.empty_like(positions)
-    stiffness = np.empty((n_steps, policy.n_stiffness))
-    weights = np.empty((n_steps, policy.n_states))
-    predicted = policy.forward.initial()
-    for t in range(n_steps):
-        positions[t] = x
-        weights[t], velocities[t], stiffness[t], x, predicted = policy.step(x, x, predicted)
-    return Reproduction(
-        t=dt * np.arange(n_steps),
-        x=positions,
-        xdot=velocities,
-        k=stiffness if policy.n_stiffness else None,
-        h=weights,
-    )
+    return _run(policy, start, n_steps)
 
 
-def _reproduce_lqr(policy, start, n_steps):
+def _run(policy, start, n_steps):
+    """Close the loop of ``policy`` on its own reference for ``n_steps`` (x_k = x*_k)."""
+    lqr_policy = isinstance(policy, HsmmLqrPolicy)
     x = policy.check_position(start, "start")
     xdot = np.zeros_like(x)
     positions = np.empty((n_steps, policy.n_position))
@@ -535,8 +521,12 @@ def _reproduce_lqr(policy, start, n_steps):
     weights = np.empty((n_steps, policy.n_states))
     predicted = policy.forward.initial()
     for t in range(n_steps):
-        positions[t], velocities[t] = x, xdot
-        weights[t], stiffness[t], x, xdot, predicted = policy.step(t, x, xdot, predicted)
+        positions[t] = x
+        if lqr_policy:  # the plan's state [x*, xdot*] steps on; k* at x*
+            velocities[t] = xdot
+            weights[t], stiffness[t], x, xdot, predicted = policy.step(t, x, xdot, predicted)
+        else:  # GMR's xdot* at x*, integrated (eq. 18)
+            weights[t], velocities[t], stiffness[t], x, predicted = policy.step(x, x, predicted)
     return Reproduction(
         t=policy.dt * np.arange(n_steps),
         x=positions,

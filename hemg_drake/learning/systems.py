@@ -157,12 +157,8 @@ class HsmmLqrReproducer(_Reproducer):
 
     Parameters
     ----------
-    model : HSMM
-        Fitted; its layout gives P (position size) and K (stiffness size).
-    start : array, shape (P,)
-        x*_0 in m.
-    dt : float
-        Period in s (Table I: 0.01).
+    model, start, dt
+        As for :class:`HsmmGmrReproducer`.
     weighting : {"temporal", "forward"}
         The state sequence: by the timing alone, or the forward variable observing p_WE.
     horizon : int
