@@ -227,9 +227,13 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
     Returns
     -------
     log_beta : array, shape (T, N)
-        log p(xi_t+1..T-1 | a segment of state i ends at t).
+        log p(xi_t+1..T-1 | a segment of state i ends at t), where log_alpha is finite;
+        -inf where it is -inf: no path gets there, so no posterior needs it, and leaving
+        it out is exact for the others (a path through a state's segment reaches both its
+        ends), which saves most of the work on a converged model.
     log_beta_in : array, shape (T, N)
-        log p(xi_t..T-1 | a segment of state i starts at t).
+        log p(xi_t..T-1 | a segment of state i starts at t), where log_alpha_in is
+        finite (-inf elsewhere, likewise).
     transition_counts : array, shape (N, N)
         Posterior expected number of transitions i -> j at [i, j].
     duration_counts : array, shape (N, n_durations)
@@ -256,10 +260,12 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
                 log_beta[s, i] = 0.0
                 if log_alpha[s, i] > _NEG_INF:
                     ends[s, i] = np.exp(log_alpha[s, i] - log_likelihood)
+            elif log_alpha[s, i] == _NEG_INF:
+                log_beta[s, i] = _NEG_INF  # not reached: left out (see Returns)
             else:
                 top, weight = _log_row(log_transmat[i], log_beta_in[s + 1], weights)
                 log_beta[s, i] = top + np.log(weight) if weight > 0.0 else _NEG_INF
-                if weight > 0.0 and log_alpha[s, i] > _NEG_INF:
+                if weight > 0.0:
                     # p(segment of i ends at s | all), and the transitions i -> j it makes.
                     scale = np.exp(top + log_alpha[s, i] - log_likelihood)
                     ends[s, i] = weight * scale
@@ -270,17 +276,14 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
         for i in range(n_states):
             # Durations d = first + 1 .. min(last + 1, T - s): segment xi_{s..e}, e = s + d - 1.
             low, high = s + first[i], min(s + last[i], n_steps - 1)
-            if high < low:
-                log_beta_in[s, i] = _NEG_INF
+            log_beta_in[s, i] = _NEG_INF
+            if high < low or log_alpha_in[s, i] == _NEG_INF:  # (not reached: left out)
                 continue
             top, weight, n_kept = _window(end[i], chunk_top[i], log_duration[i], -s, low, high,
                                           bound[i], False, kept, where)  # fmt: skip
             if weight == 0.0:
-                log_beta_in[s, i] = _NEG_INF
                 continue
             log_beta_in[s, i] = top + np.log(weight) - total[i, s]
-            if log_alpha_in[s, i] == _NEG_INF:
-                continue
             # p(segment of i from s to e | all), added up by duration, and its start.
             scale = np.exp(top - total[i, s] + log_alpha_in[s, i] - log_likelihood)
             for k in range(n_kept):
