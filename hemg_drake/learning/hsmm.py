@@ -376,7 +376,10 @@ class HSMM:
         samples = np.concatenate(demos)
         self.data_range_ = np.stack([samples.min(axis=0), samples.max(axis=0)])
         scale = samples.std(axis=0)
-        scale[scale == 0] = 1.0
+        # A constant dimension's std is 0 or rounding noise (a held coordinate, the gradient
+        # of one): a floor relative to that is no floor, so a dimension whose spread is
+        # below 1e-9 of the data's largest magnitude is floored in its own units.
+        scale[scale <= 1e-9 * np.abs(samples).max()] = 1.0
         self._initialise(demos, samples, scale)
         self.log_likelihood_history_ = []
         self.converged_ = False
