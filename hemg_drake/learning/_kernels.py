@@ -292,6 +292,48 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
     return log_beta, log_beta_in, transition_counts, duration_counts, starts, ends
 
 
+# Samples per block of :func:`mahalanobis`: a block's centred samples stay in the L1 cache.
+_BLOCK = 256
+
+
+@numba.njit(cache=True, fastmath={"reassoc", "contract"})
+def mahalanobis(x_T, means, inverse_cholesky):
+    """Squared Mahalanobis distances |L_i^-1 (x_t - mu_i)|^2, shape (T, N).
+
+    Parameters
+    ----------
+    x_T : array, shape (D, T)
+        The samples, transposed (so that the loops over samples are SIMD).
+    means : array, shape (N, D)
+    inverse_cholesky : array, shape (N, D, D)
+        L_i^-1, lower triangular (only that triangle is read).
+    """
+    n_dims, n_steps = x_T.shape
+    n_states = means.shape[0]
+    out = np.empty((n_steps, n_states))
+    centred = np.empty((n_dims, _BLOCK))
+    white = np.empty(_BLOCK)
+    total = np.empty(_BLOCK)
+    for start in range(0, n_steps, _BLOCK):
+        size = min(_BLOCK, n_steps - start)
+        for i in range(n_states):
+            for j in range(n_dims):
+                for t in range(size):
+                    centred[j, t] = x_T[j, start + t] - means[i, j]
+            total[:size] = 0.0
+            for k in range(n_dims):
+                white[:size] = 0.0
+                for j in range(k + 1):
+                    factor = inverse_cholesky[i, k, j]
+                    for t in range(size):
+                        white[t] += factor * centred[j, t]
+                for t in range(size):
+                    total[t] += white[t] * white[t]
+            for t in range(size):
+                out[start + t, i] = total[t]
+    return out
+
+
 @numba.njit(cache=True)
 def residual_step(predicted, log_emission, transmat_T, durations):
     """One step of the residual-duration forward recursion (normalised).

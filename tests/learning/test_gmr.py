@@ -66,12 +66,13 @@ def test_batch_equals_single_queries_and_weights_can_be_given():
         np.testing.assert_allclose(mean, weights[k] @ model.component_means(queries[k]), rtol=1e-12)
 
 
-def test_gaussian_log_pdf_matches_scipy():
+@pytest.mark.parametrize("n_samples", [7, 700])  # one query's path; EM's (compiled, blocks)
+def test_gaussian_log_pdf_matches_scipy(n_samples):
     from scipy.stats import multivariate_normal
 
     rng = np.random.default_rng(6)
     mixture = random_mixture(rng, 3, 4)
-    x = rng.standard_normal((7, 4))
+    x = rng.standard_normal((n_samples, 4))
     expected = np.stack(
         [
             multivariate_normal(m, c).logpdf(x)
