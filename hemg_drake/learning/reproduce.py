@@ -87,9 +87,9 @@ DEFAULT_MAX_LEAD = 0.02
 # A state moving slower than STILL ** 0.5 times the fastest state counts as half still.
 STILL = 0.05
 # Eq. 16 integrated by eq. 18 grows a deviation inside state i as exp(lambda t), lambda the
-# largest real part of the eigenvalues of S_i^xdot,x (S_i^xx)^-1. Measured on 90 cotter-pin
-# reproductions (docs/studies.md, learning study): every one that diverged (10-98 mm after
-# DTW) had a state above 14 1/s, every one below 3.5 1/s stayed within 2.3 mm.
+# largest real part of the eigenvalues of S_i^xdot,x (S_i^xx)^-1. Measured on 70 cotter-pin
+# reproductions (docs/reproduction.md): all 8 that diverged (15-98 mm after DTW) had a state
+# at 14-30 1/s; none of the 59 below 3.5 1/s went beyond 8.1 mm.
 UNSTABLE_RATE = 10.0
 
 
