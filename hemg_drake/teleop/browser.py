@@ -23,6 +23,10 @@ import contextlib
 import dataclasses as dc
 import logging
 import math
+import os
+import shutil
+import signal
+import subprocess
 import time
 
 import numpy as np
@@ -885,7 +889,6 @@ class HeadlessPage:
 
     def __init__(self, url, *, size=(1280, 800), timeout=60.0):
         import select
-        import subprocess
         import tempfile
 
         import websocket
@@ -905,9 +908,11 @@ class HeadlessPage:
             f"--user-data-dir={self._profile.name}", f"--window-size={size[0]},{size[1]}",
             "--remote-debugging-port=0", "--remote-allow-origins=*", url,
         ]  # fmt: skip
+        # Its own process group: Chromium's helpers (GPU, crashpad) outlive the main process
+        # and keep writing into the profile, so close() ends the whole group.
         self.process = subprocess.Popen(
             command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-            text=True,
+            text=True, start_new_session=True,
         )  # fmt: skip
         deadline = time.monotonic() + timeout
         browser_url = None
@@ -970,16 +975,27 @@ class HeadlessPage:
     def close(self):
         with contextlib.suppress(Exception):
             self._ws.close()
-        if self.process.poll() is None:
-            self.process.terminate()
-            try:
-                self.process.wait(timeout=10)
-            except Exception:
-                self.process.kill()
-                self.process.wait()
+        self._signal_group(signal.SIGTERM)
+        try:
+            self.process.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait()
+        self._signal_group(signal.SIGKILL)  # helpers left behind
         with contextlib.suppress(Exception):
             self.process.stderr.close()
-        self._profile.cleanup()
+        # A helper may still be flushing as it dies: retry, then leave what stays to the OS.
+        for _ in range(20):
+            shutil.rmtree(self._profile.name, ignore_errors=True)
+            if not os.path.exists(self._profile.name):
+                break
+            time.sleep(0.05)
+        with contextlib.suppress(OSError):
+            self._profile.cleanup()
+
+    def _signal_group(self, signum):
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(self.process.pid, signum)
 
     def __enter__(self):
         return self
