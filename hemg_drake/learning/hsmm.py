@@ -181,6 +181,9 @@ class HSMM:
         Synthetic demonstrations that differ only by white noise (tests/learning) prefer
         the smallest floors (18.07 at 1e-6, 14.16 at 1e-2): lower it for such data.
         (``benchmarks/bench_lasa.py --held-out --full``; docs/learning.md.)
+        A dimension that does not vary (spread below 1e-12 of the data's largest
+        magnitude: a held coordinate, its gradient) is floored at reg_covar in its own
+        units instead.
     min_duration_std : float, optional
         Floor on sigma_i^D, in steps. Default: 2 % of the initial segments' mean
         duration, at least 1 step (1.1 steps at 55-step segments, 11 at 555), so the floor
@@ -378,8 +381,8 @@ class HSMM:
         scale = samples.std(axis=0)
         # A constant dimension's std is 0 or rounding noise (a held coordinate, the gradient
         # of one): a floor relative to that is no floor, so a dimension whose spread is
-        # below 1e-9 of the data's largest magnitude is floored in its own units.
-        scale[scale <= 1e-9 * np.abs(samples).max()] = 1.0
+        # below 1e-12 of the data's largest magnitude is floored in its own units.
+        scale[scale <= 1e-12 * np.abs(samples).max()] = 1.0
         self._initialise(demos, samples, scale)
         self.log_likelihood_history_ = []
         self.converged_ = False
