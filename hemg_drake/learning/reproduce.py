@@ -88,8 +88,8 @@ DEFAULT_MAX_LEAD = 0.02
 STILL = 0.05
 # Eq. 16 integrated by eq. 18 grows a deviation inside state i as exp(lambda t), lambda the
 # largest real part of the eigenvalues of S_i^xdot,x (S_i^xx)^-1. Measured on 70 cotter-pin
-# reproductions (docs/reproduction.md): all 8 that diverged (15-98 mm after DTW) had a state
-# at 14-30 1/s; none of the 59 below 3.5 1/s went beyond 8.1 mm.
+# reproductions, temporal weighting (docs/reproduction.md): all 8 that diverged (15-98 mm
+# after DTW) had a state at 14-30 1/s; none of the 59 below 3.5 1/s went beyond 8.1 mm.
 UNSTABLE_RATE = 10.0
 
 

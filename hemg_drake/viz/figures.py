@@ -5,6 +5,7 @@ work under any backend; ``save_figure`` writes one atomically.
 """
 
 import io
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -394,7 +395,9 @@ def plot_gmr_field(model, demos=(), *, plane=(0, 2), grid=15, equal_aspect=True)
 
     from hemg_drake.learning.reproduce import HsmmGmrPolicy
 
-    policy = HsmmGmrPolicy(model, weighting="spatial")
+    with warnings.catch_warnings():  # drawing the field is not a reproduction: no advice
+        warnings.simplefilter("ignore", UserWarning)
+        policy = HsmmGmrPolicy(model, weighting="spatial")
     if policy.n_position != 3:
         raise ValueError(f"plot_gmr_field needs a model of 3-D positions, got {policy.n_position}")
     a, b = plane

@@ -53,3 +53,23 @@ def test_the_lqr_tracker_does_not_warn():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         HsmmLqrPolicy(unstable, weighting="temporal")
+
+
+def test_the_fastest_axis_of_the_fastest_state_is_reported():
+    # Two states set by hand: state 1's regression is diag(20, -5, 1) 1/s in a rotated
+    # frame, so only its largest eigenvalue, not its mean or its diagonal, gives 20.
+    model = HSMM(2, init="time", reg_covar=1e-6, n_iter=2, seed=0).fit(exponential_demos(-1.0))
+    rotation = np.linalg.qr(np.random.default_rng(3).normal(size=(3, 3)))[0]
+    gain = rotation @ np.diag([20.0, -5.0, 1.0]) @ rotation.T
+    S_xx = np.diag([4e-4, 1e-4, 9e-4])
+    S = np.eye(7) * 1.0
+    S[:3, :3] = S_xx
+    S[3:6, :3] = gain @ S_xx  # S^{xdot x} = A S^{xx}
+    S[:3, 3:6] = S[3:6, :3].T
+    S[3:6, 3:6] = gain @ S_xx @ gain.T + 1e-3 * np.eye(3)
+    model.covariances_[1] = S
+    rates = regression_growth_rates(model)
+    assert rates[1] == pytest.approx(20.0, rel=1e-9)
+    assert rates[0] < 0  # the fitted decaying state
+    with pytest.warns(UserWarning, match=r"state 1's velocity regression .* \+20\.0 1/s"):
+        check_gmr_stability(model)
