@@ -377,8 +377,9 @@ def build_parser():
     )  # fmt: skip
     reproduce.add_argument(
         "--restoring-gain", type=_finite_float("--restoring-gain"), metavar="KAPPA",
-        help="pull back to the demonstrated path at this rate (1/s; 0: none; default: the "
-        "scenario's reproduction.restoring_gain)",
+        help="tracker gmr only: pull back to the demonstrated path at this rate (1/s; 0: "
+        "none; default: the scenario's reproduction.restoring_gain; the lqr tracker returns "
+        "to the path by re-planning and ignores it)",
     )  # fmt: skip
     reproduce.add_argument(
         "--tracker", choices=["gmr", "lqr"],
