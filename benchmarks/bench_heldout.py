@@ -12,7 +12,7 @@ leave-one-out figure, measured the same way) and the goals of issue 15 beside it
 - time-normalised position RMSE no worse than the demonstrations' own median leave-one-out;
 - drawing: three strokes, each within 5 mm of the demonstrated shape.
 
-    .venv/bin/python benchmarks/bench_heldout.py [--seeds 201 301 401 501 601] [--tasks ...]
+    .venv/bin/python benchmarks/bench_heldout.py [--seeds 201 301 ... 1101] [--tasks ...]
 """
 
 import argparse
@@ -26,7 +26,7 @@ import numpy as np
 from hemg_drake.pipeline import demonstrate, learn, reproduce
 from hemg_drake.scenario import load_scenario, shipped_scenario
 
-SEEDS = (201, 301, 401, 501, 601)
+SEEDS = (201, 301, 401, 501, 601, 701, 801, 901, 1001, 1101)
 TRACKERS = ("gmr", "lqr")
 
 
@@ -102,7 +102,7 @@ def main():
     everything = {}
     with tempfile.TemporaryDirectory() as folder:
         for task in args.tasks:
-            print(f"\n{task}, held-out seeds {args.seeds}")
+            print(f"\n{task}, held-out seeds {', '.join(map(str, args.seeds))}")
             print(HEADERS[task])
             print("|" + "---|" * (HEADERS[task].count("|") - 1))
             for seed in args.seeds:
