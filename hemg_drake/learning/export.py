@@ -24,8 +24,11 @@ A hemg_drake demonstration maps onto it at its log period (N = T samples):
   so train with rollouts disabled).
 
 Beside robomimic's keys, which its loaders ignore, each demo keeps what a round trip
-needs: attr ``seed``, ``time`` (N,), and ``emg/{time, emg, muscle_activation}`` at the
-MYO's 200 Hz; ``data`` keeps the dataset's metadata as JSON in attr ``hemg_drake_metadata``.
+needs: attr ``seed``, ``time`` (N,), ``emg/{time, emg, muscle_activation}`` at the
+MYO's 200 Hz and, for a demonstration recorded at a placement, its task frames
+``task_frames/A`` (F, 3, 3) and ``task_frames/b`` (F, 3) (the robot's base and the scene
+frame T in W, what the TP-HSMM learns with); ``data`` keeps the dataset's metadata as JSON
+in attr ``hemg_drake_metadata``.
 :func:`load_robomimic` reads the file back into :class:`Demonstration` objects.
 """
 
@@ -117,6 +120,9 @@ def export_robomimic(path, demos, metadata=None):
             _write(group, "time", demo.time)
             for key, field in EMG_KEYS.items():
                 _write(group, f"emg/{key}", getattr(demo, field))
+            if demo.frame_A is not None:
+                _write(group, "task_frames/A", demo.frame_A)
+                _write(group, "task_frames/b", demo.frame_b)
             group.attrs["num_samples"] = n
             group.attrs["seed"] = demo.seed
             total += n
@@ -188,6 +194,9 @@ def load_robomimic(path):
             fields["p_WE_desired"] = actions[:, :3]
             for key, field in EMG_KEYS.items():
                 fields[field] = _read(path, group, f"emg/{key}")
+            if "task_frames" in group:
+                fields["frame_A"] = _read(path, group, "task_frames/A")
+                fields["frame_b"] = _read(path, group, "task_frames/b")
             if len(fields["time"]) != n:
                 raise ValueError(
                     f"{path}: {group.name} has {len(fields['time'])} samples, "

@@ -1,5 +1,6 @@
 """robomimic export: a round trip, the layout as robomimic reads it, and the CLI."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -51,6 +52,26 @@ def test_round_trip_gives_the_same_arrays(tmp_path, demos):
         for field in ("time", "p_WE", "v_WE", "p_MS", "p_WE_desired", "envelope", "activation",
                       "gain", "f_WE", "emg_time", "emg", "muscle_activation"):  # fmt: skip
             np.testing.assert_array_equal(getattr(back, field), getattr(original, field))
+
+
+def test_task_frames_of_placed_demonstrations_make_the_round_trip(tmp_path, demos):
+    rng = np.random.default_rng(7)
+    rotation = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    placed = [
+        dataclasses.replace(demo, frame_A=np.stack([np.eye(3), rotation]),
+                            frame_b=np.array([[0.0, 0.0, 0.0], rng.normal(size=3)]))
+        for demo in demos[:2]
+    ] + demos[2:]  # fmt: skip
+    path = tmp_path / "placed.hdf5"
+    export_robomimic(path, placed, METADATA)
+    loaded, _ = load_robomimic(path)
+    for original, back in zip(placed[:2], loaded[:2]):
+        np.testing.assert_array_equal(back.frame_A, original.frame_A)
+        np.testing.assert_array_equal(back.frame_b, original.frame_b)
+    assert loaded[2].frame_A is None and loaded[2].frame_b is None  # one placement: none
+    with h5py.File(path, "r") as f:
+        assert f["data/demo_1/task_frames/A"].shape == (2, 3, 3)
+        assert "task_frames" not in f["data/demo_2"]
 
 
 def test_file_has_robomimics_layout_read_with_plain_h5py(tmp_path, demos):
