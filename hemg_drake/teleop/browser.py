@@ -796,6 +796,7 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     """
     from hemg_drake.learning.demos import save_dataset
     from hemg_drake.pipeline import replay_recorder
+    from hemg_drake.placements import demonstration_scenario, has_placements, task_frames
     from hemg_drake.run_folder import RunFolder
     from hemg_drake.viz.figures import plot_demonstrations, plot_emg_envelopes, save_figure
 
@@ -821,11 +822,19 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
             f"End take or {END_KEY} ends it"
             + (f" (or {duration:g} s)" if duration is not None else "")
         )
+    # With scene.placements each take happens at its own seed's placement, as a simulated
+    # demonstration does (the same draw, so a re-driven log lands where it was recorded).
+    here = demonstration_scenario(scenario, seed)
+    if has_placements(scenario):
+        progress(
+            f"take {c}: scene at {np.round(task_frames(here)[1][1], 3).tolist()} m, "
+            f"yaw {here.scene.yaw_deg:.1f} deg"
+        )
     replay = folder / f"replay_{c}.html" if replays else None
     title = f"{scenario.task.replace('_', ' ')}: teleoperated take {c}"
-    recorder = replay_recorder(scenario, title) if replays else None
+    recorder = replay_recorder(here, title) if replays else None
     take = run_take(
-        scenario, seed=seed, source=source, meshcat=meshcat, duration=duration,
+        here, seed=seed, source=source, meshcat=meshcat, duration=duration,
         realtime=realtime and replay_inputs is None, recorder=recorder, replay_path=replay,
         progress=progress, on_step=on_step,
     )  # fmt: skip
@@ -846,11 +855,10 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     try:
         save_inputs(inputs_path, take.inputs)
         demo = take.demonstration
-        if demos and getattr(demos[0], "frame_A", None) is not None:
-            # The dataset carries each demonstration's task frames: give the take its own.
-            from hemg_drake.placements import task_frames
-
-            frame_A, frame_b = task_frames(scenario)
+        if not demos or demos[0].frame_A is not None:
+            # Each demonstration carries the task frames where it was shown (an older
+            # dataset without them keeps none).
+            frame_A, frame_b = task_frames(here)
             demo = dc.replace(demo, frame_A=frame_A, frame_b=frame_b)
         demos = [*demos, demo]
         operators = metadata.get("operators", ["simulated"] * (len(demos) - 1))

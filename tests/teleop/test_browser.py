@@ -404,3 +404,27 @@ def test_a_keyboard_take_draws_the_first_stroke_on_the_sheet(meshcat):
     length = np.linalg.norm(drawn[0][-1, :2] - drawn[0][0, :2])
     assert length == pytest.approx(np.linalg.norm(line[-1] - line[0]), abs=0.015)
     assert stroke_errors(drawn[0][:, :2], [line])["shape"] < 0.005
+
+
+def test_takes_with_placements_happen_each_at_its_own_seeds_placement(meshcat, tmp_path):
+    from hemg_drake.learning.demos import load_dataset
+    from hemg_drake.placements import demonstration_scenario, task_frames
+
+    placed = load_scenario(shipped_scenario("cotter_pin"), overrides=[
+        "scene.placements.position_range=[[0.62,-0.86,0.11],[0.67,-0.81,0.13]]",
+        "scene.placements.yaw_range_deg=[-20,20]",
+    ])  # fmt: skip
+    for _ in range(2):
+        teleop(placed, tmp_path, meshcat=meshcat, duration=0.1, replays=False, realtime=False,
+               progress=lambda line: None)  # fmt: skip
+    demos, _ = load_dataset(tmp_path / "dataset.npz")
+    origins = []
+    for c, demo in enumerate(demos):
+        # Take c has seed scenario.seed + c: its frames are that seed's drawn placement, and
+        # the arm starts at that placement's ring (the grasp), not at the shipped one.
+        A, b = task_frames(demonstration_scenario(placed, placed.seed + c))
+        np.testing.assert_array_equal(demo.frame_A, A)
+        np.testing.assert_array_equal(demo.frame_b, b)
+        np.testing.assert_allclose(demo.p_WE[0], b[1], atol=0.005)
+        origins.append(b[1])
+    assert np.linalg.norm(origins[0] - origins[1]) > 0.003  # two placements, not one
