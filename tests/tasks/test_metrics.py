@@ -156,3 +156,25 @@ def test_leave_one_out_measures_each_demonstration_against_the_others_mean():
         assert record["spatial_velocity_rmse"] == pytest.approx(abs(speeds[c] - others_v), abs=1e-12)
     with pytest.raises(ValueError, match="at least 2"):
         metrics.leave_one_out(demos[:1], 0.02)
+
+
+def test_leave_one_out_after_dtw_matches_velocities_where_the_positions_match():
+    # A moves along x one step per sample; B waits at the start for n samples, then moves
+    # the same way. Their velocity channels are functions of position: 1 + x and 1 - x.
+    # DTW matches equal positions: A[0] with B[0..n], then A[i] with B[n + i], so along the
+    # path the velocity errors are 0 (n + 1 times) and 2 i (i = 1 .. n - 1), over 2 n pairs.
+    n = 12
+    x_a = np.arange(n, dtype=float)
+    x_b = np.concatenate([np.zeros(n), np.arange(n, dtype=float)])
+
+    def demo(x, v):
+        zeros = np.zeros_like(x)
+        return np.column_stack([x, zeros, zeros, v, zeros, zeros, zeros])
+
+    a, b = demo(x_a, 1.0 + x_a), demo(x_b, 1.0 - x_b)
+    expected = np.sqrt(np.sum((2.0 * np.arange(1, n)) ** 2) / (2 * n))
+    for record in metrics.leave_one_out([a, b], 0.01):
+        assert record["spatial_position_rmse"] == 0.0
+        assert record["spatial_velocity_rmse"] == pytest.approx(expected, rel=1e-12)
+        # Time-normalised, B's wait is compared with A's motion: another figure.
+        assert abs(record["velocity_rmse"] - expected) > 0.5
