@@ -120,13 +120,13 @@ def _window(values, chunk_top, weights, offset, low, high, bound, descending, ke
         if chunk_top[c] == _NEG_INF or chunk_top[c] + bound < top - _NEGLIGIBLE:
             continue
         for p in range(max(low, c * _CHUNK), min(high, c * _CHUNK + _CHUNK - 1) + 1):
+            # Without branches (whether a term is kept is unpredictable): always written,
+            # kept by counting it.
             value = values[p] + weights[offset + p]
-            if value > top - _NEGLIGIBLE:
-                kept[n] = value
-                where[n] = p
-                n += 1
-                if value > top:
-                    top = value
+            kept[n] = value
+            where[n] = p
+            n += value > top - _NEGLIGIBLE
+            top = max(top, value)
     total = 0.0
     for k in range(n):
         kept[k] = np.exp(kept[k] - top) if kept[k] > top - _NEGLIGIBLE else 0.0
