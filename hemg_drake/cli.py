@@ -327,7 +327,7 @@ def build_parser():
     demo.add_argument(
         "--no-placements", action="store_true",
         help="skip the demonstrations at several placements and the reproduction at a new one "
-        "(TASK/placements/, about 45 s)",
+        "(TASK/placements/, about 25 s of the demo's 50 s)",
     )  # fmt: skip
     add_set(demo)
     demo.set_defaults(func=_demo)
