@@ -439,11 +439,13 @@ def build_parser():
     )  # fmt: skip
     teleop.add_argument(
         "--duration", type=_finite_float("--duration", positive=True),
-        help="end the take after this many simulated seconds",
+        help="end the take after this many simulated seconds (default: none; End take, "
+        "Escape or a closed page ends it)",
     )  # fmt: skip
     teleop.add_argument(
         "--replay-inputs", metavar="LOG.npz",
-        help="re-drive a take headless from its inputs log (inputs_<c>.npz)",
+        help="re-drive a take headless from its inputs log (inputs_<c>.npz) (default: a "
+        "live take in the browser)",
     )  # fmt: skip
     teleop.add_argument(
         "--takes", type=_positive_int("--takes"), default=1,
