@@ -457,3 +457,70 @@ def occupancy(starts, ends):
                 active -= ends[t - 1, i]
             gamma[t, i] = min(max(active, 0.0), 1.0)
     return gamma
+
+
+_LOG_2 = np.log(2.0)
+
+
+@numba.njit(cache=True, inline="always")
+def _logaddexp(x, y):
+    """log(e^x + e^y), the way numpy's logaddexp computes it (so the same to the bit)."""
+    if x == y:
+        return x + _LOG_2
+    difference = x - y
+    if difference > 0:
+        return x + np.log1p(np.exp(-difference))
+    if difference <= 0:
+        return y + np.log1p(np.exp(difference))
+    return difference  # NaN
+
+
+@numba.njit(cache=True)
+def expectation(log_emission, bounds, log_startprob, log_transmat, log_duration):
+    """The E-step over all sequences in one call: :func:`forward`, :func:`backward` and
+    :func:`occupancy` of each, their counts added up in the sequences' order.
+
+    Parameters
+    ----------
+    log_emission : array, shape (T, N)
+        All sequences' emissions, concatenated.
+    bounds : array of int, shape (C + 1,)
+        Sequence c is rows bounds[c] : bounds[c + 1].
+    log_startprob, log_transmat, log_duration : arrays
+        As for :func:`forward`.
+
+    Returns
+    -------
+    log_likelihood : float
+        sum_c log p(sequence c); not finite as soon as one sequence cannot be produced
+        (the later ones are then not computed, and the other outputs are incomplete).
+    gamma : array, shape (T, N)
+        p(state i active at t | its sequence).
+    starts : array, shape (N,)
+        sum over sequences of p(their first segment is of state i).
+    transitions : array, shape (N, N)
+    durations : array, shape (N, n_durations)
+    """
+    n_states = log_emission.shape[1]
+    log_likelihood = 0.0
+    gamma = np.zeros(log_emission.shape)
+    starts = np.zeros(n_states)
+    transitions = np.zeros((n_states, n_states))
+    durations = np.zeros(log_duration.shape)
+    for c in range(len(bounds) - 1):
+        emission = log_emission[bounds[c] : bounds[c + 1]]
+        log_alpha, log_alpha_in = forward(emission, log_startprob, log_transmat, log_duration)
+        sequence = _NEG_INF  # logaddexp.reduce(log_alpha[-1])
+        for i in range(n_states):
+            sequence = _logaddexp(sequence, log_alpha[-1, i])
+        log_likelihood += sequence
+        if not np.isfinite(sequence):
+            break
+        _, _, counts, duration_counts, segment_starts, ends = backward(
+            emission, log_transmat, log_duration, log_alpha, log_alpha_in, sequence
+        )
+        gamma[bounds[c] : bounds[c + 1]] = occupancy(segment_starts, ends)
+        starts += segment_starts[0]
+        transitions += counts
+        durations += duration_counts
+    return log_likelihood, gamma, starts, transitions, durations

@@ -540,33 +540,28 @@ class HSMM:
             "durations": duration_counts,
         }
 
-    def _emissions(self, demos):
-        """(T_c, N) emission log-likelihoods of each demo, computed in one batch."""
-        samples = demos[0] if len(demos) == 1 else np.concatenate(demos)
-        log_emission = gaussian_log_pdf(samples, self.means_, self.covariances_)
-        return np.split(log_emission, np.cumsum([len(d) for d in demos])[:-1])
-
     def _expectation(self, demos, outer=None):
-        """E-step over all demos; ``outer``: their samples' x x^T as rows (T, D^2), if known."""
+        """E-step over all demos; ``outer``: their samples' x x^T as rows (T, D^2), if known.
+
+        One compiled call runs every demonstration's forward-backward pass
+        (:func:`_kernels.expectation`): per demonstration in Python, the calls and their
+        bookkeeping cost about as much as the emissions on LASA-sized sets.
+        """
         n = self.n_states
-        stats = {
-            "log_likelihood": 0.0,
-            "starts": np.zeros(n),
-            "transitions": np.zeros((n, n)),
-            "durations": np.zeros((n, self.max_duration_)),
-        }
-        log_parameters = self._log_parameters()
-        gammas = []
-        for log_emission in self._emissions(demos):
-            log_likelihood, post = self._posteriors(log_emission, log_parameters)
-            stats["log_likelihood"] += log_likelihood
-            if post is None:
-                return stats
-            gammas.append(post["gamma"])
-            for key in ("starts", "transitions", "durations"):
-                stats[key] += post[key]
         samples = demos[0] if len(demos) == 1 else np.concatenate(demos)
-        gamma = gammas[0] if len(gammas) == 1 else np.concatenate(gammas)
+        bounds = np.concatenate([[0], np.cumsum([len(d) for d in demos])])
+        log_emission = gaussian_log_pdf(samples, self.means_, self.covariances_)
+        log_likelihood, gamma, starts, transitions, durations = _kernels.expectation(
+            log_emission, bounds, *self._log_parameters()
+        )
+        stats = {
+            "log_likelihood": log_likelihood,
+            "starts": starts,
+            "transitions": transitions,
+            "durations": durations,
+        }
+        if not np.isfinite(log_likelihood):
+            return stats
         n_dims = samples.shape[1]
         if outer is None:
             outer = (samples[:, :, None] * samples[:, None, :]).reshape(len(samples), -1)
