@@ -121,3 +121,43 @@ def test_kernels_equal_every_term_summed_on_random_models():
         assert got[0] == pytest.approx(expected[0], rel=1e-12)
         for value, truth in zip(got[1:], expected[1:]):
             np.testing.assert_allclose(value, truth, rtol=1e-9, atol=1e-10)
+
+
+def test_expectation_over_concatenated_sequences_equals_each_summed():
+    # Three sequences of different lengths in one call: the log-likelihoods and counts are
+    # the every-term reference's of each, added up; gamma is each one's, in place.
+    rng = np.random.default_rng(11)
+    n_states, n_durations = 4, 40
+    transmat = rng.uniform(0.05, 1.0, (n_states, n_states))
+    np.fill_diagonal(transmat, 0.0)
+    transmat /= transmat.sum(axis=1, keepdims=True)
+    log_duration = log_durations(
+        rng.uniform(5.0, 20.0, n_states), rng.uniform(1.0, 5.0, n_states), n_durations
+    )
+    with np.errstate(divide="ignore"):
+        log_transmat = np.log(transmat)
+    log_startprob = np.log(rng.dirichlet(np.ones(n_states)))
+    emissions = [rng.normal(0.0, 30.0, (n_steps, n_states)) for n_steps in (50, 120, 81)]
+    bounds = np.array([0, 50, 170, 251])
+    log_likelihood, gamma, starts, transitions, durations = _kernels.expectation(
+        np.concatenate(emissions), bounds, log_startprob, log_transmat, log_duration
+    )
+    expected = [reference(e, log_startprob, log_transmat, log_duration) for e in emissions]
+    assert log_likelihood == pytest.approx(sum(r[0] for r in expected), rel=1e-12)
+    np.testing.assert_allclose(gamma, np.concatenate([r[1] for r in expected]), atol=1e-10)
+    np.testing.assert_allclose(transitions, sum(r[2] for r in expected), rtol=1e-9, atol=1e-10)
+    np.testing.assert_allclose(durations, sum(r[3] for r in expected), rtol=1e-9, atol=1e-10)
+    # Each sequence's first-segment posterior is its occupancy at its first step.
+    np.testing.assert_allclose(starts, sum(r[1][0] for r in expected), atol=1e-10)
+
+
+def test_expectation_stops_at_an_impossible_sequence():
+    log_duration = np.full((2, 3), -np.inf)
+    log_duration[:, 2] = 0.0  # every segment lasts exactly 3 steps
+    log_transmat = np.log(np.array([[0.5, 0.5], [0.5, 0.5]]))
+    log_startprob = np.log(np.full(2, 0.5))
+    # 6 steps then 4: the second cannot end with a complete segment.
+    log_likelihood, *_ = _kernels.expectation(
+        np.zeros((10, 2)), np.array([0, 6, 10]), log_startprob, log_transmat, log_duration
+    )
+    assert log_likelihood == -np.inf
