@@ -57,6 +57,27 @@ def _cumulative(log_emission):
     return total
 
 
+# exp() on (-_NEGLIGIBLE, 0], the range of every term a log-sum-exp keeps: a table of
+# e^(-k/64) times a degree-6 Taylor polynomial of the rest (|r| <= 1/128, truncation below
+# 1e-18), inlined. Within 2 ulp of np.exp (tests/learning/test_hsmm_kernels.py) at a
+# third of its cost in these loops, where the kept terms' exp() were 40 % of the time.
+_EXP_STEPS = 64
+_EXP_TABLE = np.exp(-np.arange(int(_NEGLIGIBLE) * _EXP_STEPS + 2) / _EXP_STEPS)
+
+
+@numba.njit(cache=True, inline="always")
+def _exp_kept(x):
+    """e^x for x in (-_NEGLIGIBLE, 0] (exactly 1 at 0)."""
+    k = int(-x * _EXP_STEPS + 0.5)
+    r = x + k / _EXP_STEPS
+    polynomial = 1.0 / 120.0 + r * (1.0 / 720.0)
+    polynomial = 1.0 / 24.0 + r * polynomial
+    polynomial = 1.0 / 6.0 + r * polynomial
+    polynomial = 0.5 + r * polynomial
+    polynomial = 1.0 + r * polynomial
+    return _EXP_TABLE[k] * (1.0 + r * polynomial)
+
+
 @numba.njit(cache=True, inline="always")
 def _log_row(log_row, log_values, weights):
     """log sum_j exp(log_row[j] + log_values[j]) as top and sum / e^top (0 if all -inf).
@@ -71,7 +92,7 @@ def _log_row(log_row, log_values, weights):
             top = weights[j]
     total = 0.0
     for j in range(len(log_values)):
-        weights[j] = np.exp(weights[j] - top) if weights[j] > top - _NEGLIGIBLE else 0.0
+        weights[j] = _exp_kept(weights[j] - top) if weights[j] > top - _NEGLIGIBLE else 0.0
         total += weights[j]
     return top, total
 
@@ -129,7 +150,7 @@ def _window(values, chunk_top, weights, offset, low, high, bound, descending, ke
             top = max(top, value)
     total = 0.0
     for k in range(n):
-        kept[k] = np.exp(kept[k] - top) if kept[k] > top - _NEGLIGIBLE else 0.0
+        kept[k] = _exp_kept(kept[k] - top) if kept[k] > top - _NEGLIGIBLE else 0.0
         total += kept[k]
     return top, total, n
 

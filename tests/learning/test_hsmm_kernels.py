@@ -161,3 +161,23 @@ def test_expectation_stops_at_an_impossible_sequence():
         np.zeros((10, 2)), np.array([0, 6, 10]), log_startprob, log_transmat, log_duration
     )
     assert log_likelihood == -np.inf
+
+
+def test_kept_terms_exp_within_two_ulp_of_numpy():
+    import numba
+
+    @numba.njit
+    def evaluate(x):
+        out = np.empty_like(x)
+        for k in range(len(x)):
+            out[k] = _kernels._exp_kept(x[k])
+        return out
+
+    rng = np.random.default_rng(3)
+    x = np.concatenate([
+        -rng.uniform(0.0, _kernels._NEGLIGIBLE, 200_000),
+        [0.0, -1e-300, -1.0 / 128, -1.0 / 64, -np.nextafter(_kernels._NEGLIGIBLE, 0.0)],
+    ])  # fmt: skip
+    got, truth = evaluate(x), np.exp(x)
+    assert np.max(np.abs(got - truth) / np.spacing(truth)) <= 2.0
+    assert got[-5] == 1.0  # the largest term's weight is exactly 1
