@@ -290,8 +290,9 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
                     # p(segment of i ends at s | all), and the transitions i -> j it makes.
                     scale = np.exp(top + log_alpha[s, i] - log_likelihood)
                     ends[s, i] = weight * scale
-                    for j in range(n_states):
-                        transition_counts[i, j] += weights[j] * scale
+                    if scale > 0.0:  # (most states' posterior underflows: adding 0 is a no-op)
+                        for j in range(n_states):
+                            transition_counts[i, j] += weights[j] * scale
             end[i, s] = total[i, s + 1] + log_beta[s, i]
             _push(chunk_top, i, s, end[i, s])
         for i in range(n_states):
@@ -307,8 +308,9 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
             log_beta_in[s, i] = top + np.log(weight) - total[i, s]
             # p(segment of i from s to e | all), added up by duration, and its start.
             scale = np.exp(top - total[i, s] + log_alpha_in[s, i] - log_likelihood)
-            for k in range(n_kept):
-                duration_counts[i, where[k] - s] += kept[k] * scale
+            if scale > 0.0:
+                for k in range(n_kept):
+                    duration_counts[i, where[k] - s] += kept[k] * scale
             starts[s, i] = weight * scale
     return log_beta, log_beta_in, transition_counts, duration_counts, starts, ends
 
