@@ -59,8 +59,9 @@ def _cumulative(log_emission):
 
 # exp() on (-_NEGLIGIBLE, 0], the range of every term a log-sum-exp keeps: a table of
 # e^(-k/64) times a degree-6 Taylor polynomial of the rest (|r| <= 1/128, truncation below
-# 1e-18), inlined. Within 2 ulp of np.exp (tests/learning/test_hsmm_kernels.py) at a
-# third of its cost in these loops, where the kept terms' exp() were 40 % of the time.
+# 1e-18), inlined. Within 2 ulp of np.exp (tests/learning/test_hsmm_kernels.py) at about
+# half its cost in these loops, where the kept terms' exp() took 40 % of the duration
+# sums' time.
 _EXP_STEPS = 64
 _EXP_TABLE = np.exp(-np.arange(int(_NEGLIGIBLE) * _EXP_STEPS + 2) / _EXP_STEPS)
 
