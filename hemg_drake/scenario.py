@@ -54,6 +54,7 @@ from hemg_drake.teleop.feedback import ForceFeedback
 from hemg_drake.teleop.mapping import WorkspaceMap, WorkspaceMapping
 from hemg_drake.teleop.master import MasterDynamics
 from hemg_drake.teleop.operator import OperatorModel
+from hemg_drake.yaml_schema import check_types, first_line, schema_fields
 
 TASKS = ("cotter_pin", "drawing")
 # Where a demonstration's raw sEMG comes from (emg.source).
@@ -510,17 +511,17 @@ def parse_scenario(text, *, source="<scenario>", overrides=(), overrides_source=
         where = f"{overrides_source} {override}"
         try:
             _apply_override(raw, override, where)
-            _check_types(raw, Scenario, "")
+            check_types(raw, Scenario)
         except ValueError as error:
-            raise ValueError(f"{where}: {_first_line(error)}") from None
+            raise ValueError(f"{where}: {first_line(error)}") from None
     try:
-        _check_types(raw, Scenario, "")
+        check_types(raw, Scenario)
         data = yaml.safe_dump(raw, sort_keys=False)
         scenario = yaml_load_typed(schema=Scenario, data=data, defaults=Scenario())
         _check_values(scenario)
     except (RuntimeError, ValueError, AssertionError) as error:
-        origin = _blame(_first_line(error), source, overrides, overrides_source)
-        raise ValueError(f"{origin}: {_first_line(error)}") from None
+        origin = _blame(first_line(error), source, overrides, overrides_source)
+        raise ValueError(f"{origin}: {first_line(error)}") from None
     return scenario
 
 
@@ -541,7 +542,7 @@ def _parse_yaml(text, source):
     except yaml.YAMLError as error:
         mark = getattr(error, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(error, "problem", None) or _first_line(error)
+        problem = getattr(error, "problem", None) or first_line(error)
         raise ValueError(f"{source}: malformed YAML{where}: {problem}") from None
 
 
@@ -567,71 +568,6 @@ def _apply_override(raw, override, where):
     node[leaf] = value
 
 
-def _first_line(error):
-    return (str(error).strip().splitlines() or [type(error).__name__])[0]
-
-
-def _fields(schema):
-    """(name, type) of a dataclass's or a Drake config struct's fields."""
-    if dc.is_dataclass(schema):
-        hints = typing.get_type_hints(schema)
-        return {f.name: hints[f.name] for f in dc.fields(schema)}
-    return {f.name: f.type for f in schema.__fields__}
-
-
-_TYPE_NAMES = {float: "a number", int: "an integer", bool: "true or false", str: "a string"}
-
-
-# Numbers in scientific notation that YAML 1.1 (PyYAML, Drake's loader) reads as text:
-# 2e-3 (no dot) and 3.0e4 (no sign in the exponent). Read where a number is expected.
-_SCIENTIFIC = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+")
-
-
-def _check_types(value, schema, key):
-    """Check raw YAML data against ``schema``, naming the key path of the first mismatch.
-
-    Returns the value, with numbers written as ``2e-3`` or ``3.0e4`` read as numbers (lists
-    and mappings are updated in place).
-    """
-    where = f"key '{key}'" if key else "the top level"
-    origin, args = typing.get_origin(schema), typing.get_args(schema)
-    if origin is typing.Union:  # Optional[X]
-        if value is not None:
-            return _check_types(value, next(a for a in args if a is not type(None)), key)
-    elif origin is list:
-        if not isinstance(value, list):
-            raise ValueError(f"{where} must be a list, got {value!r}")
-        for i, item in enumerate(value):
-            value[i] = _check_types(item, args[0], f"{key}[{i}]")
-    elif schema in (float, int, bool, str):
-        if schema is float and isinstance(value, str) and _SCIENTIFIC.fullmatch(value.strip()):
-            value = float(value)
-        ok = {
-            float: isinstance(value, (int, float)) and not isinstance(value, bool),
-            int: isinstance(value, int) and not isinstance(value, bool),
-            bool: isinstance(value, bool),
-            str: isinstance(value, str),
-        }[schema]
-        if not ok:
-            raise ValueError(f"{where} must be {_TYPE_NAMES[schema]}, got {value!r}")
-    else:
-        if not isinstance(value, dict):
-            raise ValueError(
-                f"{where} must be a mapping of {schema.__name__}'s fields, got {value!r}"
-            )
-        fields = _fields(schema)
-        unknown = sorted(set(value) - set(fields))
-        if unknown:
-            prefix = f"{key}." if key else ""
-            raise ValueError(
-                f"unknown key(s) {[prefix + str(u) for u in unknown]}; "
-                f"{schema.__name__} has {sorted(fields)}"
-            )
-        for name, item in value.items():
-            value[name] = _check_types(item, fields[name], f"{key}.{name}" if key else name)
-    return value
-
-
 def _leaves(obj, key="", checks=None):
     """(key path, value, checks) of every value (number, string, list) in a loaded scenario."""
     if obj is None or isinstance(obj, (bool, str, int, float, list, np.ndarray)):
@@ -643,7 +579,7 @@ def _leaves(obj, key="", checks=None):
             raise ValueError(f"key '{key}': {error}") from None
     else:
         metadata = {f.name: f.metadata for f in dc.fields(obj)} if dc.is_dataclass(obj) else {}
-        for name in _fields(type(obj)):
+        for name in schema_fields(type(obj)):
             path = f"{key}.{name}" if key else name
             yield from _leaves(getattr(obj, name), path, metadata.get(name))
 

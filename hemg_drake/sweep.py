@@ -49,6 +49,7 @@ from pathlib import Path
 import yaml
 
 from hemg_drake.fileio import read_yaml_text, write_bytes_atomic, write_text_atomic
+from hemg_drake.yaml_schema import check_types, first_line
 
 STEPS = ("demonstrate", "learn", "reproduce", "heldout")
 DESIGNS = ("grid", "one_at_a_time")
@@ -117,10 +118,6 @@ class SweepSpec:
 # Reading a sweep file
 
 
-def _first_line(error):
-    return (str(error).strip().splitlines() or [type(error).__name__])[0]
-
-
 def _yaml_text(value):
     """A YAML value as one line of YAML (an override's value)."""
     if isinstance(value, str):
@@ -152,48 +149,6 @@ def _case_name(key):
     return str(key)
 
 
-_TYPE_NAMES = {float: "a number", int: "an integer", bool: "true or false", str: "a string"}
-
-
-def _check_types(value, schema, key):
-    """Check raw YAML data against ``schema``, naming the key path of the first mismatch."""
-    import typing
-
-    where = f"key '{key}'" if key else "the top level"
-    origin, args = typing.get_origin(schema), typing.get_args(schema)
-    if origin is list:
-        if not isinstance(value, list):
-            raise ValueError(f"{where} must be a list, got {value!r}")
-        for i, item in enumerate(value):
-            _check_types(item, args[0], f"{key}[{i}]")
-    elif origin is dict:
-        if not isinstance(value, dict):
-            raise ValueError(f"{where} must be a mapping, got {value!r}")
-        for name, item in value.items():
-            _check_types(item, args[1], f"{key}.{name}")
-    elif schema in _TYPE_NAMES:
-        ok = isinstance(value, schema) and not (schema is not bool and isinstance(value, bool))
-        if schema is float:
-            ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-        if not ok:
-            raise ValueError(f"{where} must be {_TYPE_NAMES[schema]}, got {value!r}")
-    else:
-        if not isinstance(value, dict):
-            raise ValueError(
-                f"{where} must be a mapping of {schema.__name__}'s fields, got {value!r}"
-            )
-        hints = typing.get_type_hints(schema)
-        unknown = sorted(set(value) - set(hints))
-        if unknown:
-            prefix = f"{key}." if key else ""
-            raise ValueError(
-                f"unknown key(s) {[prefix + str(u) for u in unknown]}; "
-                f"{schema.__name__} has {sorted(hints)}"
-            )
-        for name, item in value.items():
-            _check_types(item, hints[name], f"{key}.{name}" if key else name)
-
-
 def parse_sweep(text, *, source="<sweep>"):
     """A :class:`SweepSpec` from YAML text, checked; ``source`` names it in errors.
 
@@ -212,13 +167,13 @@ def parse_sweep(text, *, source="<sweep>"):
         raise ValueError(f"{source}: the sweep file is empty; give at least its 'scenario'")
     try:
         raw = _normalise(raw, source)
-        _check_types(raw, SweepSpec, "")
+        check_types(raw, SweepSpec)
         spec = yaml_load_typed(
             schema=SweepSpec, data=yaml.safe_dump(raw, sort_keys=False), defaults=SweepSpec()
         )
         _check_spec(spec)
     except (RuntimeError, ValueError) as error:
-        message = _first_line(error)
+        message = first_line(error)
         if message.startswith(f"{source}:"):
             raise ValueError(message) from None
         raise ValueError(f"{source}: {message}") from None
@@ -305,7 +260,7 @@ def load_sweep(path):
     try:
         load_scenario(scenario_path, overrides=spec.set)
     except ValueError as error:
-        raise ValueError(f"{path}: key 'set': {_first_line(error)}") from None
+        raise ValueError(f"{path}: key 'set': {first_line(error)}") from None
     return spec, scenario_path.read_text(encoding="utf-8"), str(scenario_path)
 
 
@@ -579,7 +534,7 @@ def run_trial(task):
     try:
         record["metrics"] = _trial_metrics(task, tmp / "run")
     except Exception as error:  # noqa: BLE001 - a failed trial is a result, not a crash
-        record.update(status="failed", error=f"{type(error).__name__}: {_first_line(error)}")
+        record.update(status="failed", error=f"{type(error).__name__}: {first_line(error)}")
     record["elapsed_s"] = time.perf_counter() - began
     write_text_atomic(tmp / TRIAL_FILE, json.dumps(record, indent=2, default=_json_default) + "\n")
     if final.exists():
@@ -703,7 +658,7 @@ def _run_local(tasks, workers, on_record):
 def _crashed(task, error):
     return dict(id=task["id"], labels=task["labels"], seed=task["seed"],
                 overrides=task["overrides"], status="failed", metrics={}, elapsed_s=0.0,
-                error=f"worker died: {type(error).__name__}: {_first_line(error)}")  # fmt: skip
+                error=f"worker died: {type(error).__name__}: {first_line(error)}")  # fmt: skip
 
 
 

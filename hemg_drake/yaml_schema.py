@@ -1,0 +1,84 @@
+"""Raw YAML checked against a typed schema, before Drake's typed loader reads it.
+
+``yaml_load_typed`` stops at the first mismatch with a C++ message that names neither the
+key nor the file. :func:`check_types` walks the raw data (``yaml.safe_load`` output) over a
+dataclass or Drake config struct and names the key path of the first problem, in one line;
+scenarios (:mod:`hemg_drake.scenario`) and sweep files (:mod:`hemg_drake.sweep`) share it.
+"""
+
+import dataclasses as dc
+import re
+import typing
+
+
+def first_line(error):
+    """The first line of an exception's message (its type's name if it has none)."""
+    return (str(error).strip().splitlines() or [type(error).__name__])[0]
+
+
+def schema_fields(schema):
+    """(name, type) of a dataclass's or a Drake config struct's fields."""
+    if dc.is_dataclass(schema):
+        hints = typing.get_type_hints(schema)
+        return {f.name: hints[f.name] for f in dc.fields(schema)}
+    return {f.name: f.type for f in schema.__fields__}
+
+
+_TYPE_NAMES = {float: "a number", int: "an integer", bool: "true or false", str: "a string"}
+
+
+# Numbers in scientific notation that YAML 1.1 (PyYAML, Drake's loader) reads as text:
+# 2e-3 (no dot) and 3.0e4 (no sign in the exponent). Read where a number is expected.
+_SCIENTIFIC = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+")
+
+
+def check_types(value, schema, key=""):
+    """Check raw YAML data against ``schema``, naming the key path of the first mismatch.
+
+    ``schema``: a dataclass or Drake config struct, ``list[X]``, ``dict[str, X]``,
+    ``Optional[X]``, float, int, bool or str. Returns the value, with numbers written as
+    ``2e-3`` or ``3.0e4`` read as numbers (lists and mappings are updated in place).
+    Raises ValueError naming the key.
+    """
+    where = f"key '{key}'" if key else "the top level"
+    origin, args = typing.get_origin(schema), typing.get_args(schema)
+    if origin is typing.Union:  # Optional[X]
+        if value is not None:
+            return check_types(value, next(a for a in args if a is not type(None)), key)
+    elif origin is list:
+        if not isinstance(value, list):
+            raise ValueError(f"{where} must be a list, got {value!r}")
+        for i, item in enumerate(value):
+            value[i] = check_types(item, args[0], f"{key}[{i}]")
+    elif origin is dict:
+        if not isinstance(value, dict):
+            raise ValueError(f"{where} must be a mapping, got {value!r}")
+        for name, item in value.items():
+            value[name] = check_types(item, args[1], f"{key}.{name}")
+    elif schema in (float, int, bool, str):
+        if schema is float and isinstance(value, str) and _SCIENTIFIC.fullmatch(value.strip()):
+            value = float(value)
+        ok = {
+            float: isinstance(value, (int, float)) and not isinstance(value, bool),
+            int: isinstance(value, int) and not isinstance(value, bool),
+            bool: isinstance(value, bool),
+            str: isinstance(value, str),
+        }[schema]
+        if not ok:
+            raise ValueError(f"{where} must be {_TYPE_NAMES[schema]}, got {value!r}")
+    else:
+        if not isinstance(value, dict):
+            raise ValueError(
+                f"{where} must be a mapping of {schema.__name__}'s fields, got {value!r}"
+            )
+        fields = schema_fields(schema)
+        unknown = sorted(set(value) - set(fields))
+        if unknown:
+            prefix = f"{key}." if key else ""
+            raise ValueError(
+                f"unknown key(s) {[prefix + str(u) for u in unknown]}; "
+                f"{schema.__name__} has {sorted(fields)}"
+            )
+        for name, item in value.items():
+            value[name] = check_types(item, fields[name], f"{key}.{name}" if key else name)
+    return value
