@@ -117,17 +117,21 @@ def _demo(args):
     )  # fmt: skip
 
 
+def _with_flags(args, **keys):
+    """``--set`` overrides followed by one per flag given: flag name -> scenario key."""
+    overrides = list(args.set)
+    for flag, key in keys.items():
+        value = getattr(args, flag)
+        if value is not None:
+            overrides.append(f"{key}={value}")
+    return overrides
+
+
 def _demonstrate(args):
     from hemg_drake.pipeline import demonstrate
     from hemg_drake.scenario import load_scenario
 
-    overrides = list(args.set)
-    if args.demos is not None:
-        overrides.append(f"num_demonstrations={args.demos}")
-    if args.duration is not None:
-        overrides.append(f"duration={args.duration}")
-    if args.seed is not None:
-        overrides.append(f"seed={args.seed}")
+    overrides = _with_flags(args, demos="num_demonstrations", duration="duration", seed="seed")
     scenario = load_scenario(_scenario_path(args.scenario), overrides=overrides)
     check_output_folder(args.out)
     count = scenario.num_demonstrations
@@ -148,13 +152,10 @@ def _learn(args):
 def _reproduce(args):
     from hemg_drake.pipeline import reproduce
 
-    overrides = list(args.set)
-    if args.weighting is not None:
-        overrides.append(f"reproduction.weighting={args.weighting}")
-    if args.restoring_gain is not None:
-        overrides.append(f"reproduction.restoring_gain={args.restoring_gain}")
-    if args.tracker is not None:
-        overrides.append(f"reproduction.tracker={args.tracker}")
+    overrides = _with_flags(
+        args, weighting="reproduction.weighting", restoring_gain="reproduction.restoring_gain",
+        tracker="reproduction.tracker",
+    )  # fmt: skip
     if args.out is not None:
         check_output_folder(args.out)
     reproduce(
