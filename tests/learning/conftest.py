@@ -101,3 +101,31 @@ def path_task():
     mean = np.mean([resample(d, n_steps) for d in demos], axis=0)
     model = HSMM(8, n_iter=20, seed=0).fit(demos)
     return SimpleNamespace(demos=demos, mean=mean, model=model)
+
+
+def random_demonstration(seed, length):
+    """A Demonstration of seeded random but well-shaped data (sEMG at twice the rate)."""
+    from hemg_drake.learning.demos import Demonstration
+
+    rng = np.random.default_rng(seed)
+    return Demonstration(
+        seed=seed,
+        time=np.arange(length) * 0.01,
+        p_WE=rng.normal(size=(length, 3)),
+        v_WE=rng.normal(size=(length, 3)),
+        p_MS=rng.normal(size=(length, 3)),
+        envelope=rng.uniform(0, 50, length),
+        activation=rng.uniform(0, 1, length),
+        gain=rng.uniform(10, 200, length),
+        f_WE=rng.normal(size=(length, 3)),
+        p_WE_desired=rng.normal(size=(length, 3)),
+        emg_time=np.arange(2 * length) * 0.005,
+        emg=rng.integers(-128, 128, size=(2 * length, 8)).astype(float),
+        muscle_activation=rng.uniform(0, 1, 2 * length),
+    )
+
+
+@pytest.fixture
+def make_demo():
+    """random_demonstration(seed, length), for dataset and export tests."""
+    return random_demonstration

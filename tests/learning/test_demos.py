@@ -15,27 +15,8 @@ from hemg_drake.learning.demos import (
 )
 
 
-def make_demo(seed, length):
-    rng = np.random.default_rng(seed)
-    return Demonstration(
-        seed=seed,
-        time=np.arange(length) * 0.01,
-        p_WE=rng.normal(size=(length, 3)),
-        v_WE=rng.normal(size=(length, 3)),
-        p_MS=rng.normal(size=(length, 3)),
-        envelope=rng.uniform(0, 50, length),
-        activation=rng.uniform(0, 1, length),
-        gain=rng.uniform(10, 200, length),
-        f_WE=rng.normal(size=(length, 3)),
-        p_WE_desired=rng.normal(size=(length, 3)),
-        emg_time=np.arange(2 * length) * 0.005,
-        emg=rng.integers(-128, 128, size=(2 * length, 8)).astype(float),
-        muscle_activation=rng.uniform(0, 1, 2 * length),
-    )
-
-
 @pytest.fixture
-def demos():
+def demos(make_demo):
     return [make_demo(3, 40), make_demo(4, 55)]
 
 
@@ -64,7 +45,7 @@ def test_observations_are_position_velocity_stiffness(demos):
         observations(demos, ("p_WE", "stiffness"))
 
 
-def test_demonstration_rejects_bad_arrays():
+def test_demonstration_rejects_bad_arrays(make_demo):
     demo = make_demo(1, 10)
     fields = {name: getattr(demo, name) for name in demo.__dataclass_fields__}
     with pytest.raises(ValueError, match="'p_WE'.*shape \\(10, 3\\)"):

@@ -7,35 +7,15 @@ import numpy as np
 import pytest
 
 from hemg_drake.cli import main
-from hemg_drake.learning.demos import Demonstration, save_dataset
+from hemg_drake.learning.demos import save_dataset
 from hemg_drake.learning.export import export_robomimic, load_robomimic
 
 h5py = pytest.importorskip("h5py")
 
 
-def _demo(seed, n, n_emg):
-    """A demonstration of random (seeded) but well-shaped data."""
-    rng = np.random.default_rng(seed)
-    return Demonstration(
-        seed=seed,
-        time=np.arange(n) * 0.01,
-        p_WE=rng.normal(size=(n, 3)),
-        v_WE=rng.normal(size=(n, 3)),
-        p_MS=rng.normal(size=(n, 3)),
-        p_WE_desired=rng.normal(size=(n, 3)),
-        envelope=rng.uniform(0, 50, n),
-        activation=rng.uniform(0, 1, n),
-        gain=rng.uniform(10, 200, n),
-        f_WE=rng.normal(size=(n, 3)),
-        emg_time=np.arange(n_emg) / 200.0,
-        emg=rng.integers(-128, 128, (n_emg, 8)).astype(float),
-        muscle_activation=rng.uniform(0, 1, n_emg),
-    )
-
-
 @pytest.fixture
-def demos():
-    return [_demo(3, 40, 80), _demo(4, 55, 110), _demo(5, 12, 24)]
+def demos(make_demo):
+    return [make_demo(3, 40), make_demo(4, 55), make_demo(5, 12)]
 
 
 METADATA = {"task": "cotter_pin", "log_period": 0.01, "scenario": "task: cotter_pin\n"}
