@@ -52,6 +52,15 @@ def test_task_frames_of_placed_demonstrations_make_the_round_trip(tmp_path, demo
     with h5py.File(path, "r") as f:
         assert f["data/demo_1/task_frames/A"].shape == (2, 3, 3)
         assert "task_frames" not in f["data/demo_2"]
+    # A damaged file: one half of the frames gone, or frames of the wrong shape.
+    with h5py.File(path, "r+") as f:
+        del f["data/demo_0/task_frames/b"]
+    with pytest.raises(ValueError, match=r"demo_0/task_frames/b is missing"):
+        load_robomimic(path)
+    with h5py.File(path, "r+") as f:
+        f["data/demo_0/task_frames/b"] = np.zeros((3, 3))
+    with pytest.raises(ValueError, match=r"demo_0: .*frame_A', 'frame_b' must have shapes"):
+        load_robomimic(path)
 
 
 def test_file_has_robomimics_layout_read_with_plain_h5py(tmp_path, demos):
