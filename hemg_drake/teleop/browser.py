@@ -24,7 +24,6 @@ import dataclasses as dc
 import logging
 import math
 import os
-import shutil
 import signal
 import subprocess
 import time
@@ -44,6 +43,7 @@ from hemg_drake.teleop.operator import (
     MAX_HAND_FORCE,
     hand_impedance_force,
 )
+from hemg_drake.viz.screenshot import QUIET_FLAGS, WEBGL_FLAGS, find_chromium, remove_profile
 
 # Slider names on the page and their key bindings (javascript KeyboardEvent.code values);
 # M's axes are OpenHaptics': x to the operator's right, y up, z towards the operator.
@@ -901,19 +901,16 @@ class HeadlessPage:
 
         import websocket
 
-        from hemg_drake.viz.screenshot import find_chromium
 
         chromium = find_chromium()
         if chromium is None:
             raise FileNotFoundError(
                 "chromium not found on PATH: install it (apt-get install chromium)"
             )
-        self._profile = tempfile.TemporaryDirectory(prefix="hemg-teleop-chromium-")
+        self._profile = tempfile.mkdtemp(prefix="hemg-teleop-chromium-")
         command = [
-            chromium, "--headless=new", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-            "--no-sandbox", "--no-first-run", "--disable-background-networking",
-            "--disable-component-update", "--disable-sync", "--hide-scrollbars",
-            f"--user-data-dir={self._profile.name}", f"--window-size={size[0]},{size[1]}",
+            chromium, *WEBGL_FLAGS, *QUIET_FLAGS,
+            f"--user-data-dir={self._profile}", f"--window-size={size[0]},{size[1]}",
             "--remote-debugging-port=0", "--remote-allow-origins=*", url,
         ]  # fmt: skip
         # Its own process group: Chromium's helpers (GPU, crashpad) outlive the main process
@@ -992,14 +989,7 @@ class HeadlessPage:
         self._signal_group(signal.SIGKILL)  # helpers left behind
         with contextlib.suppress(Exception):
             self.process.stderr.close()
-        # A helper may still be flushing as it dies: retry, then leave what stays to the OS.
-        for _ in range(20):
-            shutil.rmtree(self._profile.name, ignore_errors=True)
-            if not os.path.exists(self._profile.name):
-                break
-            time.sleep(0.05)
-        with contextlib.suppress(OSError):
-            self._profile.cleanup()
+        remove_profile(self._profile)
 
     def _signal_group(self, signum):
         with contextlib.suppress(ProcessLookupError, PermissionError):

@@ -1,26 +1,38 @@
 """Render an HTML replay to a PNG with headless Chromium (Debian package ``chromium``)."""
 
+import os
 import shutil
 import subprocess
 import tempfile
+import time
 from pathlib import Path
 
 from hemg_drake.fileio import write_bytes_atomic
 
 # Meshcat needs WebGL; headless Chromium only has it through SwiftShader (software).
 # Without these flags the screenshot is a blank page.
-_WEBGL_FLAGS = ("--headless=new", "--use-angle=swiftshader", "--enable-unsafe-swiftshader")
-# A throw-away profile that talks to no one.
-_QUIET_FLAGS = (
+WEBGL_FLAGS = ("--headless=new", "--use-angle=swiftshader", "--enable-unsafe-swiftshader")
+# A throw-away profile that talks to no one (also the live teleop page's, HeadlessPage).
+QUIET_FLAGS = (
     "--no-sandbox",
     "--no-first-run",
     "--disable-background-networking",
     "--disable-component-update",
     "--disable-sync",
     "--hide-scrollbars",
-    # No name resolves: the page must render from the file alone.
-    "--host-resolver-rules=MAP * ~NOTFOUND",
 )
+# No name resolves: a replay must render from the file alone.
+_OFFLINE_FLAGS = ("--host-resolver-rules=MAP * ~NOTFOUND",)
+
+
+def remove_profile(path):
+    """Delete a Chromium profile folder; a helper process still flushing as it dies can
+    refill it for a moment, so retry, then leave what stays to the OS."""
+    for _ in range(20):
+        shutil.rmtree(path, ignore_errors=True)
+        if not os.path.exists(path):
+            return
+        time.sleep(0.05)
 
 
 def find_chromium():
@@ -63,13 +75,15 @@ def render_html_to_png(html_path, png_path, *, size=(800, 600), budget_ms=10000,
     chromium = find_chromium()
     if chromium is None:
         raise FileNotFoundError("chromium not found on PATH: install it (apt-get install chromium)")
-    with tempfile.TemporaryDirectory(prefix="hemg-chromium-") as profile:
+    profile = tempfile.mkdtemp(prefix="hemg-chromium-")
+    try:
         # Chromium writes the shot into the temporary profile; it is then copied atomically.
         shot = Path(profile) / "shot.png"
         command = [
             chromium,
-            *_WEBGL_FLAGS,
-            *_QUIET_FLAGS,
+            *WEBGL_FLAGS,
+            *QUIET_FLAGS,
+            *_OFFLINE_FLAGS,
             f"--user-data-dir={profile}/user-data",
             f"--window-size={width},{height}",
             f"--virtual-time-budget={int(budget_ms)}",
@@ -83,4 +97,6 @@ def render_html_to_png(html_path, png_path, *, size=(800, 600), budget_ms=10000,
                 f"chromium could not render {html_path} (exit {result.returncode}):\n{tail}"
             )
         write_bytes_atomic(png_path, shot.read_bytes())
+    finally:
+        remove_profile(profile)
     return png_path
