@@ -151,7 +151,7 @@ def demonstrate(scenario, run_dir, *, replays=True, progress=print):
 def _demonstrate(scenario, folder, replays, progress, placed):
     import dataclasses as dc
 
-    from hemg_drake.placements import has_placements, task_frames
+    from hemg_drake.placements import describe_placement, has_placements, task_frames
     from hemg_drake.diagrams.demonstration import operator_plan, record_demonstration
     from hemg_drake.learning.demos import save_dataset
     from hemg_drake.viz.run_figures import write_demonstration_figures
@@ -164,10 +164,7 @@ def _demonstrate(scenario, folder, replays, progress, placed):
         start = time.perf_counter()
         demos.append(record_demonstration(here, seed, recorder=recorder, replay_path=replay))
         if has_placements(scenario):
-            progress(
-                f"demonstration {c}: scene at {np.round(task_frames(here)[1][1], 3).tolist()} "
-                f"m, yaw {here.scene.yaw_deg:.1f} deg"
-            )
+            progress(f"demonstration {c}: {describe_placement(here)}")
         if replay is not None:
             replay_files.append(replay)
         plan_end = operator_plan(scenario, seed).end_time

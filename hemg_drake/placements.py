@@ -81,6 +81,12 @@ def unreachable_point(scenario):
     return None
 
 
+def describe_placement(scenario):
+    """'scene at [x, y, z] m, yaw Y deg': where a placed scenario's scene is, for progress."""
+    origin = np.round(task_frames(scenario)[1][1], 3).tolist()
+    return f"scene at {origin} m, yaw {scenario.scene.yaw_deg:.1f} deg"
+
+
 def demonstration_scenario(scenario, seed):
     """The scenario placed where demonstration ``seed`` happens (itself without placements).
 

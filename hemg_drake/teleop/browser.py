@@ -796,7 +796,12 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     """
     from hemg_drake.learning.demos import save_dataset
     from hemg_drake.pipeline import replay_recorder
-    from hemg_drake.placements import demonstration_scenario, has_placements, task_frames
+    from hemg_drake.placements import (
+        demonstration_scenario,
+        describe_placement,
+        has_placements,
+        task_frames,
+    )
     from hemg_drake.run_folder import RunFolder
     from hemg_drake.viz.figures import plot_demonstrations, plot_emg_envelopes, save_figure
 
@@ -826,10 +831,7 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     # demonstration does (the same draw, so a re-driven log lands where it was recorded).
     here = demonstration_scenario(scenario, seed)
     if has_placements(scenario):
-        progress(
-            f"take {c}: scene at {np.round(task_frames(here)[1][1], 3).tolist()} m, "
-            f"yaw {here.scene.yaw_deg:.1f} deg"
-        )
+        progress(f"take {c}: {describe_placement(here)}")
     replay = folder / f"replay_{c}.html" if replays else None
     title = f"{scenario.task.replace('_', ' ')}: teleoperated take {c}"
     recorder = replay_recorder(here, title) if replays else None

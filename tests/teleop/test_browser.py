@@ -414,9 +414,10 @@ def test_takes_with_placements_happen_each_at_its_own_seeds_placement(meshcat, t
         "scene.placements.position_range=[[0.62,-0.86,0.11],[0.67,-0.81,0.13]]",
         "scene.placements.yaw_range_deg=[-20,20]",
     ])  # fmt: skip
+    lines = []
     for _ in range(2):
         teleop(placed, tmp_path, meshcat=meshcat, duration=0.1, replays=False, realtime=False,
-               progress=lambda line: None)  # fmt: skip
+               progress=lines.append)  # fmt: skip
     demos, _ = load_dataset(tmp_path / "dataset.npz")
     origins = []
     for c, demo in enumerate(demos):
@@ -427,4 +428,8 @@ def test_takes_with_placements_happen_each_at_its_own_seeds_placement(meshcat, t
         np.testing.assert_array_equal(demo.frame_b, b)
         np.testing.assert_allclose(demo.p_WE[0], b[1], atol=0.005)
         origins.append(b[1])
+        here = demonstration_scenario(placed, placed.seed + c)
+        yaw = here.scene.yaw_deg
+        said = f"take {c + 1}: scene at {np.round(b[1], 3).tolist()} m, yaw {yaw:.1f}"
+        assert any(line.startswith(said) for line in lines), lines
     assert np.linalg.norm(origins[0] - origins[1]) > 0.003  # two placements, not one
