@@ -48,6 +48,7 @@ from pydrake.multibody.tree import LinearBushingRollPitchYaw
 from pydrake.systems.framework import LeafSystem
 
 from hemg_drake.robots.baxter import MODELS_DIR, make_parser
+from hemg_drake.tasks.config import CotterPinParams
 from hemg_drake.tasks.plan import TaskPlan
 from hemg_drake.tasks.sensors import BushingForceSensor
 from hemg_drake.tasks.placement import scene_pose
@@ -67,43 +68,6 @@ DEFAULT_POSITION = HOME_TOOL_POINT
 _STABILITY_MARGIN = 2.0
 
 
-@dc.dataclass
-class CotterPinParams:
-    """Physics of the cotter-pin scene (SI units); loadable from YAML (``scene.cotter_pin``).
-
-    The placement is not a parameter: the scene frame T (:func:`scene_pose`) puts the ring's
-    centre, with the pin fully in, at T's origin. Every field is checked by :meth:`check`
-    (also called by :func:`add_cotter_pin_scene`), which raises ValueError naming the field.
-    """
-
-    # Largest force (N) with which the detent holds the pin in.
-    hold_force: float = 50.0
-    # Withdrawal (m) over which the detent acts; beyond it only sliding friction remains.
-    detent_length: float = 0.003
-    # Stiffness (N/m) of the detent spring until it saturates at hold_force.
-    detent_stiffness: float = 3.0e4
-    # Viscous sliding friction of the pin (N s/m).
-    sliding_damping: float = 20.0
-    # Grasp bushing, translational stiffness (N/m) and damping (N s/m) on each axis.
-    grasp_stiffness: float = 5000.0
-    grasp_damping: float = 40.0
-
-    def __post_init__(self):
-        self.check()
-
-    def check(self):
-        """Raise ValueError naming the first bad field; return self."""
-        name = type(self).__name__
-        for field in ("hold_force", "detent_length", "detent_stiffness", "grasp_stiffness"):
-            as_scalar(f"{name}.{field}", getattr(self, field))
-        for field in ("sliding_damping", "grasp_damping"):
-            as_scalar(f"{name}.{field}", getattr(self, field), strict=False)
-        if self.detent_length >= pin_length():
-            raise ValueError(
-                f"{name}.detent_length must be shorter than the pin ({pin_length()} m), "
-                f"got {self.detent_length}"
-            )
-        return self
 
 
 @functools.cache
@@ -323,6 +287,11 @@ def add_cotter_pin_scene(plant, arm, *, params=None, X_WT=None):
         stiff for the plant's time step.
     """
     params = (CotterPinParams() if params is None else params).check()
+    if params.detent_length >= pin_length():
+        raise ValueError(
+            f"CotterPinParams.detent_length must be shorter than the pin ({pin_length()} m), "
+            f"got {params.detent_length}"
+        )
     X_WT = scene_pose(DEFAULT_POSITION) if X_WT is None else _check_pose(X_WT)
     if plant.is_finalized():
         raise ValueError("add_cotter_pin_scene must be called before plant.Finalize()")

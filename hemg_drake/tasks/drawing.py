@@ -40,6 +40,7 @@ from pydrake.geometry import AddContactMaterial, Cylinder, ProximityProperties, 
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import ContactModel, CoulombFriction
 
+from hemg_drake.tasks.config import DrawingParams
 from hemg_drake.robots.baxter import MODELS_DIR, make_parser
 from hemg_drake.tasks.plan import TaskPlan
 from hemg_drake.tasks.sensors import ContactForceSensor
@@ -55,44 +56,6 @@ SHEET_SIZE = (0.210, 0.297)
 _PEN_GREEN = (0.1, 0.6, 0.25, 1.0)
 
 
-@dc.dataclass
-class DrawingParams:
-    """The pen, its contact and the plan's heights (SI units); loadable from YAML
-    (``scene.drawing``).
-
-    The placement is not a parameter: the scene frame T puts the sheet's top-surface centre
-    at its origin. Every field is checked by :meth:`check` (also called by
-    :func:`add_drawing_scene` and :func:`default_drawing_plan`), which raises ValueError
-    naming the field.
-    """
-
-    # Radius of the pen's spherical tip (m).
-    pen_radius: float = 0.003
-    # Point-contact stiffness (N/m), Hunt-Crossley dissipation (s/m), friction of the tip.
-    pen_stiffness: float = 1.0e4
-    pen_dissipation: float = 10.0
-    pen_friction: float = 0.2
-    # Plan: depth of the planned tip below the paper while drawing (m), and height of the
-    # pen lifts above it (m).
-    press_depth: float = 0.003
-    hover_height: float = 0.03
-
-    def __post_init__(self):
-        self.check()
-
-    def check(self):
-        """Raise ValueError naming the first bad field; return self."""
-        name = type(self).__name__
-        for field in ("pen_radius", "pen_stiffness", "press_depth", "hover_height"):
-            as_scalar(f"{name}.{field}", getattr(self, field))
-        for field in ("pen_dissipation", "pen_friction"):
-            as_scalar(f"{name}.{field}", getattr(self, field), strict=False)
-        if self.press_depth >= self.hover_height:
-            raise ValueError(
-                f"{name}.press_depth ({self.press_depth}) must be less than hover_height "
-                f"({self.hover_height})"
-            )
-        return self
 
 
 @dc.dataclass(frozen=True, eq=False)

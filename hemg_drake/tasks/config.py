@@ -1,0 +1,131 @@
+"""Settings of the task scenes: where the scene stands, its physics, its placements, a plan.
+"""
+
+import dataclasses as dc
+import typing
+
+from hemg_drake._validate import as_scalar
+from hemg_drake.config_fields import checked
+
+
+@dc.dataclass
+class CotterPinParams:
+    """Physics of the cotter-pin scene (SI units); loadable from YAML (``scene.cotter_pin``).
+
+    The placement is not a parameter: the scene frame T (:func:`scene_pose`) puts the ring's
+    centre, with the pin fully in, at T's origin. Every field is checked by :meth:`check` (the detent against the pin's length, read from
+    its model, by :func:`~hemg_drake.tasks.cotter_pin.add_cotter_pin_scene`)
+    (also called by :func:`add_cotter_pin_scene`), which raises ValueError naming the field.
+    """
+
+    # Largest force (N) with which the detent holds the pin in.
+    hold_force: float = 50.0
+    # Withdrawal (m) over which the detent acts; beyond it only sliding friction remains.
+    detent_length: float = 0.003
+    # Stiffness (N/m) of the detent spring until it saturates at hold_force.
+    detent_stiffness: float = 3.0e4
+    # Viscous sliding friction of the pin (N s/m).
+    sliding_damping: float = 20.0
+    # Grasp bushing, translational stiffness (N/m) and damping (N s/m) on each axis.
+    grasp_stiffness: float = 5000.0
+    grasp_damping: float = 40.0
+
+    def __post_init__(self):
+        self.check()
+
+    def check(self):
+        """Raise ValueError naming the first bad field; return self."""
+        name = type(self).__name__
+        for field in ("hold_force", "detent_length", "detent_stiffness", "grasp_stiffness"):
+            as_scalar(f"{name}.{field}", getattr(self, field))
+        for field in ("sliding_damping", "grasp_damping"):
+            as_scalar(f"{name}.{field}", getattr(self, field), strict=False)
+        return self
+
+
+@dc.dataclass
+class DrawingParams:
+    """The pen, its contact and the plan's heights (SI units); loadable from YAML
+    (``scene.drawing``).
+
+    The placement is not a parameter: the scene frame T puts the sheet's top-surface centre
+    at its origin. Every field is checked by :meth:`check` (also called by
+    :func:`add_drawing_scene` and :func:`default_drawing_plan`), which raises ValueError
+    naming the field.
+    """
+
+    # Radius of the pen's spherical tip (m).
+    pen_radius: float = 0.003
+    # Point-contact stiffness (N/m), Hunt-Crossley dissipation (s/m), friction of the tip.
+    pen_stiffness: float = 1.0e4
+    pen_dissipation: float = 10.0
+    pen_friction: float = 0.2
+    # Plan: depth of the planned tip below the paper while drawing (m), and height of the
+    # pen lifts above it (m).
+    press_depth: float = 0.003
+    hover_height: float = 0.03
+
+    def __post_init__(self):
+        self.check()
+
+    def check(self):
+        """Raise ValueError naming the first bad field; return self."""
+        name = type(self).__name__
+        for field in ("pen_radius", "pen_stiffness", "press_depth", "hover_height"):
+            as_scalar(f"{name}.{field}", getattr(self, field))
+        for field in ("pen_dissipation", "pen_friction"):
+            as_scalar(f"{name}.{field}", getattr(self, field), strict=False)
+        if self.press_depth >= self.hover_height:
+            raise ValueError(
+                f"{name}.press_depth ({self.press_depth}) must be less than hover_height "
+                f"({self.hover_height})"
+            )
+        return self
+
+
+@dc.dataclass
+class PlacementsConfig:
+    """A scene placement per demonstration (``hemg_drake.placements``): each demonstration's
+    seed draws its scene pose uniformly from these ranges; empty: ``scene.position`` /
+    ``scene.yaw_deg`` for every demonstration."""
+
+    # Box of scene positions (m, in W): [[xmin, ymin, zmin], [xmax, ymax, zmax]].
+    position_range: list[list[float]] = checked([], signed=True)
+    # Range of scene yaws (deg): [smallest, largest].
+    yaw_range_deg: list[float] = checked([], signed=True, size=(0, 2))
+
+
+@dc.dataclass
+class SceneConfig:
+    """Where the task's object stands, and its physics (the scene frame T)."""
+
+    # Position of the scene frame T in the world (m): the cotter pin's ring centre with the
+    # pin in; the sheet's top-surface centre. Empty: the task's default (DEFAULT_POSITIONS).
+    # The operator's plan and the workspace map move with it.
+    position: list[float] = checked([], signed=True, size=(0, 3))
+    # Turn of the scene about world +z (deg): the fixture, the sheet and its strokes, the
+    # plan and the master's frame turn with it (the pin's pull axis stays world +z).
+    yaw_deg: float = checked(0.0, signed=True)
+    # The cotter pin's detent, friction and grasp (used when task is cotter_pin).
+    cotter_pin: CotterPinParams = dc.field(default_factory=CotterPinParams)
+    # The pen, its contact and the plan's heights (used when task is drawing).
+    drawing: DrawingParams = dc.field(default_factory=DrawingParams)
+    # Demonstrations at many placements: ranges each demonstration's seed draws its pose from.
+    placements: PlacementsConfig = dc.field(default_factory=PlacementsConfig)
+
+
+@dc.dataclass
+class PlanConfig:
+    """A task plan written out in the scenario (see :class:`~hemg_drake.tasks.plan.TaskPlan`)."""
+
+    # Waypoint times (s), strictly increasing, at least two.
+    times: list[float] = dc.field(default_factory=list)
+    # Waypoints of the tool point in the scene frame T (m), one [x, y, z] per time; the
+    # scene's pose maps them to the world.
+    points: list[list[float]] = checked([], signed=True)
+    # "free" or "forceful", one per segment (between consecutive waypoints).
+    kinds: list[str] = dc.field(default_factory=list)
+    # Drawing: the pen touches the paper, one flag per segment (empty: all False).
+    pen_down: list[bool] = dc.field(default_factory=list)
+    # Operator's effort per segment relative to nominal, > 0 (empty: all 1).
+    effort: list[float] = dc.field(default_factory=list)

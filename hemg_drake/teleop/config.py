@@ -1,0 +1,111 @@
+"""Settings of the teleoperation systems: workspace map, haptic master, simulated operator,
+force feedback (eqs. 19-21). Each dataclass owns its defaults; its system takes one.
+"""
+
+import dataclasses as dc
+
+from hemg_drake.config_fields import checked
+
+# Force-feedback modes and passivity layers (teleop/feedback.py).
+FEEDBACK_MODES = ("force", "position_error")
+FEEDBACK_PASSIVITY = ("none", "tdpa")
+
+
+@dc.dataclass
+class MappingConfig:
+    """Master-to-slave workspace map (:class:`~hemg_drake.teleop.mapping.WorkspaceMapping`)."""
+
+    # Slave metres per master metre.
+    scale: float = checked(1.0, positive=True)
+    # The slave point that the centre of the master's workspace maps to, from the scene
+    # frame's origin, in the scene frame T (m): the map follows the scene.
+    scene_offset: list[float] = checked([0.0, 0.0, 0.0], signed=True, size=3)
+    # Orientation of the master frame M relative to the scene frame T, roll-pitch-yaw in
+    # degrees (R_WM = R_WT R_TM). The default puts the operator behind the robot, facing
+    # the way it faces.
+    rpy_deg: list[float] = checked([90.0, 0.0, -90.0], signed=True, size=3)
+    # Constant transport delay of the teleoperation channel, in master samples (1 ms each).
+    delay_steps: int = checked(0)
+
+
+@dc.dataclass
+class MasterConfig:
+    """Touch X tip dynamics (:class:`~hemg_drake.teleop.master.HapticMaster`), SI units."""
+
+    # Apparent mass at the tip (kg).
+    mass: float = checked(0.045, positive=True)
+    # Viscous backdrive damping (N s/m).
+    damping: float = checked(0.1)
+    # Coulomb backdrive friction (N).
+    friction: float = checked(0.0)
+    # Motor force saturation (N), the Touch X peak force.
+    peak_force: float = checked(7.9)
+    # Workspace box, width x height x depth (m).
+    workspace_size: list[float] = checked([0.16, 0.12, 0.12], positive=True, size=3
+    )
+    # Soft walls beyond the box: spring (N/m) and damper (N s/m).
+    wall_stiffness: float = checked(5000.0)
+    wall_damping: float = checked(20.0)
+    # Sample period of the haptic loop (s): the device's servo rate, 1 kHz.
+    period: float = checked(1e-3, positive=True)
+
+
+@dc.dataclass
+class OperatorConfig:
+    """The simulated operator (:class:`~hemg_drake.teleop.operator.SimulatedOperator`) and
+    its seeded variability between demonstrations."""
+
+    # Hand impedance pushing the stylus toward the planned point, in the master frame:
+    # stiffness (N/m), damping (N s/m), and the saturation of the hand force's norm (N).
+    hand_stiffness: float = checked(300.0, positive=True)
+    hand_damping: float = checked(5.0)
+    max_hand_force: float = checked(15.0)
+    # Muscle activation in [0, 1]: relaxed, moving freely, working against the task (at
+    # effort 1).
+    rest_activation: float = checked(0.05, fraction=True)
+    free_activation: float = checked(0.2, fraction=True)
+    forceful_activation: float = checked(0.7, fraction=True
+    )
+    # Co-contraction: activation added per newton of force felt on the stylus (1/N).
+    co_contraction_gain: float = checked(0.05)
+    # Time constant of the muscle activation (s).
+    activation_time_constant: float = checked(0.04, positive=True
+    )
+    # Sample period of the activation (s): the MYO's 1/200 s, the rate at which the sEMG
+    # source reads it.
+    period: float = checked(0.005, positive=True)
+    # Variability (TaskPlan.perturbed): log-normal spread of each segment's duration, the
+    # path offset's standard deviation per world axis (m), log-normal spread of the effort.
+    timing_std: float = checked(0.1)
+    path_std: list[float] = checked([0.003, 0.003, 0.003], size=3)
+    effort_std: float = checked(0.1)
+
+    def model_parameters(self):
+        """Keyword arguments of ``SimulatedOperator`` (all fields but the variability)."""
+        data = dc.asdict(self)
+        for name in ("timing_std", "path_std", "effort_std"):
+            del data[name]
+        return data
+
+
+@dc.dataclass
+class FeedbackConfig:
+    """Force fed back to the master (:class:`~hemg_drake.teleop.feedback.ForceFeedback`)."""
+
+    # "force": the slave's interaction force; "position_error": the master PD of Table I.
+    mode: str = checked("force", choices=FEEDBACK_MODES)
+    # Extra scale on the force in mode "force" (dimensionless).
+    gain: float = checked(1.0)
+    # K_pm (N/m) and K_dm (N s/m) in mode "position_error" (Table I: 50 and 50).
+    stiffness: float = checked(50.0)
+    damping: float = checked(50.0)
+    # Saturation of the motor force (N).
+    peak_force: float = checked(7.9)
+    # Slave-to-master transport delay of the fed-back force (or of the slave's position in
+    # mode "position_error"), in master samples (1 ms each); mapping.delay_steps is the
+    # master-to-slave half.
+    delay_steps: int = checked(0)
+    # "none", or "tdpa": a time-domain passivity observer and controller at the master's
+    # port (Hannaford & Ryu 2002) keeps the channel from giving the master more energy
+    # than it took. Mode "force" needs the master's v_MS connected to it.
+    passivity: str = checked("none", choices=FEEDBACK_PASSIVITY)
