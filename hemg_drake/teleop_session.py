@@ -78,7 +78,8 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
         build_demonstration_diagram,
         demonstration_from_logs,
     )
-    from hemg_drake.viz.ink import add_ink_to_recording, in_contact
+    from hemg_drake.analysis.contact import in_contact
+    from hemg_drake.viz.ink import add_ink_to_recording
 
     live = isinstance(source, str)
     if live and source != "meshcat":

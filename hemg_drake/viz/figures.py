@@ -551,7 +551,7 @@ def steps_from_contact(time, f_WE, *, min_gap=0.25):
     -------
     array, shape (7,), or None when the log does not show exactly three strokes.
     """
-    from hemg_drake.viz.ink import in_contact
+    from hemg_drake.analysis.contact import in_contact
 
     time = np.asarray(time, dtype=float)
     down = in_contact(f_WE)
@@ -675,7 +675,7 @@ def plot_placements(demos, log, *, task, X_WT=None, title=None):
     -------
     figure : matplotlib.figure.Figure
     """
-    from hemg_drake.viz.ink import in_contact, ink_strokes
+    from hemg_drake.analysis.contact import in_contact, ink_strokes
 
     figure = Figure(figsize=(6, 6), layout="constrained")
     axes = figure.subplots()

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from pydrake.geometry import Meshcat, MeshcatParams
 
-from hemg_drake.viz.ink import CONTACT_THRESHOLD, add_ink_to_recording, in_contact, ink_strokes
+from hemg_drake.analysis.contact import CONTACT_THRESHOLD, in_contact, ink_strokes
+from hemg_drake.viz.ink import add_ink_to_recording
 
 FPS = 64.0
 
