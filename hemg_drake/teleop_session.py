@@ -184,7 +184,6 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
     return Take(demo, log, built, master, page.updates if page else 0, wall)
 
 
-
 def _takes_hint(folder):
     return f"hemg-drake teleop SCENARIO --out {folder.path} (or hemg-drake demonstrate)"
 

@@ -122,7 +122,6 @@ def _crashed(task, error):
                 error=f"worker died: {type(error).__name__}: {first_line(error)}")  # fmt: skip
 
 
-
 def only_loopback():
     """True if this process's network interfaces are just ``lo`` (a loopback-only network
     namespace); ``socket.if_nameindex`` asks the kernel for this process's namespace."""
