@@ -65,7 +65,6 @@ KNOWN_LONG = {
     "learning/_kernels.py": 550,
     "learning/hsmm.py": 991,
     "learning/reproduce.py": 570,
-    "scenario.py": 665,
 }
 
 
