@@ -292,7 +292,8 @@ def test_moved_scene_moves_the_plan_and_the_map(task, yaw_deg):
 
 
 def test_home_scene_is_where_the_tasks_default_plans_stand():
-    from hemg_drake.tasks.cotter_pin import DEFAULT_POSITION, default_cotter_pin_plan
+    from hemg_drake.tasks.cotter_pin import DEFAULT_POSITION
+    from hemg_drake.tasks.plans import default_cotter_pin_plan
 
     # An empty scene.position is the task's default position, unturned.
     np.testing.assert_allclose(Scenario().X_WT().translation(), DEFAULT_POSITION)

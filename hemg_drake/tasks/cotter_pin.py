@@ -31,7 +31,7 @@ port and a mode for nothing. The interaction force ``f_WE`` is the bushing's for
 tool in W: pointing down (-z) while the slave pulls on a pin that holds.
 
 Tuning with :class:`~hemg_drake.control.pd.VariableGainPd` (default per-joint scale), CLIK
-following :func:`default_cotter_pin_plan` (0.10 m of travel): the measured peak pulls on
+following :func:`~hemg_drake.tasks.plans.default_cotter_pin_plan` (0.10 m of travel): the measured peak pulls on
 the tool, 18 N at K = 5, 34 N at K = 10 and 48 N at K = 15, leave the pin in
 (``hold_force`` = 50 N), while K = 20 and above pull it out (the EMG chain's defaults give
 K = 10 at rest and 100 at full contraction); ``docs/tasks.md`` lists the runs.
@@ -39,7 +39,6 @@ K = 10 at rest and 100 at full contraction); ``docs/tasks.md`` lists the runs.
 
 import copy
 import dataclasses as dc
-import functools
 
 import numpy as np
 from pydrake.math import RigidTransform
@@ -47,20 +46,16 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import LinearBushingRollPitchYaw
 from pydrake.systems.framework import LeafSystem
 
-from hemg_drake.robots.baxter import MODELS_DIR, make_parser
-from hemg_drake.tasks.config import CotterPinParams
-from hemg_drake.tasks.plan import TaskPlan
-from hemg_drake.tasks.sensors import BushingForceSensor
-from hemg_drake.tasks.placement import scene_pose
 from hemg_drake._validate import as_scalar
+from hemg_drake.robots.baxter import make_parser
+from hemg_drake.tasks.config import CotterPinParams
+from hemg_drake.tasks.placement import DEFAULT_POSITIONS, checked_scene_pose
+from hemg_drake.tasks.plans import COTTER_PIN_MODEL, PULL_AXIS_W, pin_geometry, pin_length
+from hemg_drake.tasks.sensors import BushingForceSensor
 
-COTTER_PIN_MODEL = MODELS_DIR / "cotter_pin.sdf"
-# The pin slides out along world +z (the model's z; the scene only turns about z).
-PULL_AXIS_W = np.array([0.0, 0.0, 1.0])
-# The tool point p_WE at BaxterArm.home_positions, to the millimetre: where the ring waits
-# by default (the scene frame T's origin, ``scene.position`` in a scenario).
-HOME_TOOL_POINT = (0.642, -0.837, 0.120)
-DEFAULT_POSITION = HOME_TOOL_POINT
+# Where the ring waits by default (the scene frame T's origin, ``scene.position`` in a
+# scenario): the tool point p_WE at BaxterArm.home_positions, to the millimetre.
+DEFAULT_POSITION = DEFAULT_POSITIONS["cotter_pin"]
 # The pin's explicit forces (detent and grasp springs k, friction and grasp dampers c, all
 # sampled once per step) on its mass m are stable at the plant's step dt while
 # (omega dt)^2 + 2 c dt / m < 4 (omega^2 = k / m; the discrete plant's semi-implicit Euler
@@ -68,21 +63,6 @@ DEFAULT_POSITION = HOME_TOOL_POINT
 _STABILITY_MARGIN = 2.0
 
 
-
-
-@functools.cache
-def _pin_model_geometry():
-    """(pin length, ring offset above the hole's mouth) read from the model file (m)."""
-    plant = MultibodyPlant(0.0)
-    (model,) = make_parser(plant).AddModels(str(COTTER_PIN_MODEL))
-    tip = plant.GetFrameByName("pin_tip", model).GetFixedPoseInBodyFrame().translation()
-    ring = plant.GetFrameByName("ring", model).GetFixedPoseInBodyFrame().translation()
-    return float(-tip[2]), ring.copy()
-
-
-def pin_length():
-    """Depth (m) the pin must rise to be out: its frame (at the hole's mouth) to ``pin_tip``."""
-    return _pin_model_geometry()[0]
 
 
 def detent_force(x, *, hold_force, detent_length, detent_stiffness):
@@ -292,7 +272,7 @@ def add_cotter_pin_scene(plant, arm, *, params=None, X_WT=None):
             f"CotterPinParams.detent_length must be shorter than the pin ({pin_length()} m), "
             f"got {params.detent_length}"
         )
-    X_WT = scene_pose(DEFAULT_POSITION) if X_WT is None else _check_pose(X_WT)
+    X_WT = checked_scene_pose(X_WT, "cotter_pin")
     if plant.is_finalized():
         raise ValueError("add_cotter_pin_scene must be called before plant.Finalize()")
     dt = plant.time_step()
@@ -315,7 +295,7 @@ def add_cotter_pin_scene(plant, arm, *, params=None, X_WT=None):
             f"(omega dt)^2 + 2 c dt / m = {stability:.2f} > {_STABILITY_MARGIN}"
         )
     # The ring's offset above the fixture frame (the hole's mouth) is the model's.
-    p_FR = _pin_model_geometry()[1]
+    p_FR = pin_geometry()[1]
     plant.WeldFrames(
         plant.world_frame(),
         plant.GetFrameByName("fixture", model),
@@ -340,48 +320,4 @@ def add_cotter_pin_scene(plant, arm, *, params=None, X_WT=None):
         pin_length=pin_length(),
         params=copy.deepcopy(params),  # the scene's own: later edits cannot change it
         X_WT=RigidTransform(X_WT),
-    )
-
-
-def _check_pose(X_WT):
-    """X_WT itself if it is a pose that keeps world z up (a turn about z only)."""
-    if not isinstance(X_WT, RigidTransform):
-        raise ValueError(f"X_WT must be a RigidTransform, got {type(X_WT).__name__}")
-    z_T = X_WT.rotation().matrix()[:, 2]
-    if not np.allclose(z_T, PULL_AXIS_W, atol=1e-9):
-        raise ValueError("X_WT may only turn the scene about world z (its yaw)")
-    return X_WT
-
-
-def default_cotter_pin_plan(*, X_WT=None, margin=0.015, carry=0.035):
-    """The pulling task in the paper's N = 4 phases, as timed tool-point waypoints in W.
-
-    1. hold (0-0.5 s, free): the tool waits at the ring;
-    2. pull (0.5-2.0 s, forceful): up the pull axis by ``pin_length + margin``;
-    3. carry away (2.0-3.0 s, free): a further ``carry`` along the axis, clear of the fixture;
-    4. settle (3.0-3.5 s, free): hold still.
-
-    The whole travel (0.10 m by default) stays inside the master's mapped workspace.
-
-    Parameters
-    ----------
-    X_WT : RigidTransform, optional
-        The scene frame: its origin, the ring, is the first waypoint (default as
-        :func:`add_cotter_pin_scene`).
-    margin, carry : float, m, >= 0.
-
-    Returns
-    -------
-    TaskPlan
-    """
-    X_WT = scene_pose(DEFAULT_POSITION) if X_WT is None else _check_pose(X_WT)
-    margin = as_scalar("margin", margin, strict=False)
-    carry = as_scalar("carry", carry, strict=False)
-    pulled = pin_length() + margin
-    p_WR = X_WT.translation()
-    rises = np.array([0.0, 0.0, pulled, pulled + carry, pulled + carry])
-    return TaskPlan(
-        times=np.array([0.0, 0.5, 2.0, 3.0, 3.5]),
-        points=p_WR + rises[:, None] * PULL_AXIS_W,
-        kinds=("free", "forceful", "free", "free"),
     )

@@ -23,11 +23,11 @@ from hemg_drake.tasks.cotter_pin import (
     CotterPinParams,
     PinResistance,
     add_cotter_pin_scene,
-    default_cotter_pin_plan,
     detent_force,
     pin_resistance_force,
 )
 from hemg_drake.tasks.placement import scene_pose
+from hemg_drake.tasks.plans import default_cotter_pin_plan
 
 LOW_GAIN, HIGH_GAIN = 10.0, 100.0
 LOG_PERIOD = 0.01
