@@ -6,7 +6,6 @@ checks a written-out plan must pass.
 """
 
 import dataclasses as dc
-import typing
 
 import numpy as np
 

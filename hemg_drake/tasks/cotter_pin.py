@@ -7,15 +7,13 @@ axis, world +z** (up). Joint position x = withdrawal: 0 = in, ``pin_length`` (0.
 
 What holds the pin (all along the joint, nothing collides):
 
-- a **detent**, in :class:`PinResistance` (reference :func:`detent_force`): a spring of
-  ``detent_stiffness`` towards x = 0 saturated at ``hold_force``, acting while
-  x < ``detent_length`` (3 mm); past it the pin is free of the detent. A pull below
+- a **detent**, in :class:`PinResistance`: a spring of ``detent_stiffness`` towards x = 0
+  saturated at ``hold_force``, acting while x < ``detent_length`` (3 mm); past it the pin is free of the detent. A pull below
   ``hold_force`` only moves the pin by pull / ``detent_stiffness`` (about 1 mm); a pull above
   it pops the pin out. A position-only force: no stiction threshold to regularise, so it is
   deterministic and stable at a 1 ms step.
-- **sliding friction**, viscous: -``sliding_damping`` * xdot, in the same system (twin of
-  both: :func:`pin_resistance_force`). It is explicit (sampled once per step, like the grasp
-  bushing's damper) rather than the joint's own damping: Drake's SAP solver then has no
+- **sliding friction**, viscous: -``sliding_damping`` * xdot, in the same system. It is
+  explicit (sampled once per step, like the grasp bushing's damper) rather than the joint's own damping: Drake's SAP solver then has no
   implicit term to solve for and the scene's plant steps about 1.6x faster, while the
   explicit term stays far inside its stability limit (see ``_STABILITY_MARGIN``). (A
   Coulomb term would need a velocity regularisation stiff enough to chatter at 1 ms on a
@@ -41,12 +39,12 @@ import copy
 import dataclasses as dc
 
 import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
 from pydrake.math import RigidTransform
-from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import LinearBushingRollPitchYaw
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import BasicVector_, LeafSystem_, NumericParameterIndex
+from pydrake.systems.scalar_conversion import TemplateSystem
 
-from hemg_drake._validate import as_scalar
 from hemg_drake.robots.baxter import make_parser
 from hemg_drake.tasks.config import CotterPinParams
 from hemg_drake.tasks.placement import DEFAULT_POSITIONS, checked_scene_pose
@@ -65,97 +63,85 @@ _STABILITY_MARGIN = 2.0
 
 
 
-def detent_force(x, *, hold_force, detent_length, detent_stiffness):
-    """Force of the detent along the pull axis (N) at withdrawal ``x`` (m); twin of the system.
+# double and AutoDiffXd: the law branches on x, which a symbolic x cannot.
+@TemplateSystem.define("PinResistance_", T_list=(float, AutoDiffXd))
+def PinResistance_(T):
+    class Impl(LeafSystem_[T]):
+        """The detent and the sliding friction that hold the cotter pin, as a generalized force.
 
-    -clip(detent_stiffness * x, -hold_force, hold_force) for x < detent_length, else 0: a
-    spring back to x = 0 that gives at most ``hold_force``, and lets go past the detent.
+        .. pydrake_system::
 
-    Parameters
-    ----------
-    x : float or array, pin withdrawal (m).
+            name: PinResistance
+            input_ports:
+            - pin_state
+            output_ports:
+            - generalized_force
 
-    Returns
-    -------
-    float or array shaped like ``x``, N (negative: pushes the pin in).
-    """
-    x = np.asarray(x, dtype=float)
-    spring = -np.clip(detent_stiffness * x, -hold_force, hold_force)
-    return np.where(x < detent_length, spring, 0.0)[()]
+        ``pin_state`` is the pin model instance's [x; xdot] (m, m/s; connect
+        ``plant.get_state_output_port(pin_model)``). ``generalized_force`` (1, N along the
+        pull axis) is the detent's spring minus the sliding friction::
 
+            tau = -clip(detent_stiffness * x, -hold_force, hold_force) * [x < detent_length]
+                  - sliding_damping * xdot
 
-def pin_resistance_force(x, xdot, *, hold_force, detent_length, detent_stiffness, sliding_damping):
-    """Everything that resists the pin along the pull axis (N): detent and sliding friction.
+        a spring back to x = 0 that gives at most ``hold_force`` and lets go past the detent
+        (a position-only law: no stiction threshold), and viscous friction. This system is
+        the law's one implementation. It drives the pin's own joint actuator
+        (``pin_resistance``, added by :func:`add_cotter_pin_scene`) through
+        ``plant.get_actuation_input_port(pin_model)``, so the plant's
+        ``applied_generalized_force`` input stays free for users.
 
-    ``detent_force(x, ...) - sliding_damping * xdot``: the twin of :class:`PinResistance`.
+        Parameters (a numeric parameter of the Context, defaults from ``config``):
+        [hold_force (N), detent_length (m), detent_stiffness (N/m), sliding_damping (N s/m)].
+        Scalar-convertible between double and AutoDiffXd.
 
-    Parameters
-    ----------
-    x, xdot : float or arrays of one shape: withdrawal (m) and its rate (m/s).
-
-    Returns
-    -------
-    float or array shaped like ``x``, N.
-    """
-    detent = detent_force(
-        x, hold_force=hold_force, detent_length=detent_length, detent_stiffness=detent_stiffness
-    )
-    return detent - sliding_damping * np.asarray(xdot, dtype=float)[()]
-
-
-class PinResistance(LeafSystem):
-    """The detent and the sliding friction that hold the cotter pin, as a generalized force.
-
-    .. pydrake_system::
-
-        name: PinResistance
-        input_ports:
-        - pin_state
-        output_ports:
-        - generalized_force
-
-    ``pin_state`` is the pin model instance's [x; xdot] (m, m/s; connect
-    ``plant.get_state_output_port(pin_model)``). ``generalized_force`` (1, N along the pull
-    axis) is :func:`pin_resistance_force`: the detent's spring minus ``sliding_damping``
-    times the pin's speed. It drives the pin's own joint actuator (``pin_resistance``, added
-    by :func:`add_cotter_pin_scene`) through ``plant.get_actuation_input_port(pin_model)``,
-    so the plant's ``applied_generalized_force`` input stays free for users.
-
-    Timing: stateless, direct feedthrough of the state; the discrete plant samples it once
-    per step, so the detent spring and the friction are explicit (``add_cotter_pin_scene``
-    checks their stability at the plant's step).
-    """
-
-    def __init__(self, *, hold_force, detent_length, detent_stiffness, sliding_damping):
+        Timing: stateless, direct feedthrough of the state; the discrete plant samples it
+        once per step, so the detent spring and the friction are explicit
+        (``add_cotter_pin_scene`` checks their stability at the plant's step).
         """
-        Parameters
-        ----------
-        hold_force, detent_length, detent_stiffness, sliding_damping : float, N, m, N/m,
-            N s/m (see :class:`CotterPinParams`).
-        """
-        LeafSystem.__init__(self)
-        self._law = dict(
-            hold_force=as_scalar("hold_force", hold_force),
-            detent_length=as_scalar("detent_length", detent_length),
-            detent_stiffness=as_scalar("detent_stiffness", detent_stiffness),
-            sliding_damping=as_scalar("sliding_damping", sliding_damping, strict=False),
-        )
-        self.pin_state_input = self.DeclareVectorInputPort("pin_state", 2)
-        self.generalized_force_output = self.DeclareVectorOutputPort(
-            "generalized_force",
-            1,
-            self._calc_generalized_force,
-            prerequisites_of_calc={self.pin_state_input.ticket()},
-        )
 
-    def _calc_generalized_force(self, context, output):
-        x, xdot = self.pin_state_input.Eval(context).tolist()
-        # pin_resistance_force's law on plain floats (numpy costs more than the arithmetic
-        # at 1 kHz; the tests compare the two).
-        law = self._law
-        spring = -min(max(law["detent_stiffness"] * x, -law["hold_force"]), law["hold_force"])
-        detent = spring if x < law["detent_length"] else 0.0
-        output.SetAtIndex(0, detent - law["sliding_damping"] * xdot)
+        def _construct(self, *, config, converter=None):
+            """
+            Parameters
+            ----------
+            config : CotterPinParams, the law's defaults (its other fields are the grasp's).
+            """
+            LeafSystem_[T].__init__(self, converter)
+            config = copy.deepcopy(config).check()
+            self._config = config  # construction only, for scalar conversion
+            self._law = self.DeclareNumericParameter(
+                BasicVector_[T](
+                    [config.hold_force, config.detent_length, config.detent_stiffness,
+                     config.sliding_damping]  # fmt: skip
+                )
+            )
+            self.pin_state_input = self.DeclareVectorInputPort("pin_state", 2)
+            self.generalized_force_output = self.DeclareVectorOutputPort(
+                "generalized_force",
+                1,
+                self._calc_generalized_force,
+                prerequisites_of_calc={
+                    self.pin_state_input.ticket(),
+                    self.numeric_parameter_ticket(NumericParameterIndex(self._law)),
+                },
+            )
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, config=other._config, converter=converter)
+
+        def _calc_generalized_force(self, context, output):
+            # Plain floats (or AutoDiffXd objects): numpy scalars cost more than the arithmetic.
+            x, xdot = self.pin_state_input.Eval(context).tolist()
+            law = context.get_numeric_parameter(self._law).CopyToVector()
+            hold, length, stiffness, damping = law.tolist()
+            spring = -min(max(stiffness * x, -hold), hold)
+            detent = spring if x < length else 0.0 * x
+            output.SetAtIndex(0, detent - damping * xdot)
+
+    return Impl
+
+
+PinResistance = PinResistance_[None]
 
 
 @dc.dataclass(frozen=True, eq=False)
@@ -216,15 +202,7 @@ class CotterPinScene:
         if builder.HasSubsystemNamed(names[0]):
             return tuple(builder.GetSubsystemByName(name) for name in names)
         plant = self.plant
-        detent = builder.AddNamedSystem(
-            names[0],
-            PinResistance(
-                hold_force=self.params.hold_force,
-                detent_length=self.params.detent_length,
-                detent_stiffness=self.params.detent_stiffness,
-                sliding_damping=self.params.sliding_damping,
-            ),
-        )
+        detent = builder.AddNamedSystem(names[0], PinResistance(config=self.params))
         builder.Connect(plant.get_state_output_port(self.model_instance), detent.pin_state_input)
         builder.Connect(
             detent.generalized_force_output, plant.get_actuation_input_port(self.model_instance)
