@@ -231,7 +231,7 @@ def _layered(scenario, layers, overrides, *, source, overrides_source):
 
 def _blame(message, source, overrides, overrides_source):
     """Who a failed check is about: the last override that set its key, else the source."""
-    named = re.findall(r"key '([\w.]+)", message)
+    named = re.findall(r"'([\w.]+)'", message)  # every quoted key path (and value)
     for override in reversed(overrides):
         key = str(override).partition("=")[0].strip()
         if any(name == key or f"{name}.".startswith(f"{key}.") or key.startswith(f"{name}.")

@@ -127,7 +127,7 @@ def test_config_defaults_round_trip_through_yaml(config):
         (EmgConfig(calibration_duration=0.05), "calibration_duration",
          r"key 'x\.calibration_duration' gives 10 samples, fewer than the window 'x\.window'"),
         (ReproductionConfig(tracker="lqr", weighting="spatial"), "weighting",
-         r"key 'x\.weighting' = 'spatial' does not go with tracker 'lqr'"),
+         r"key 'x\.weighting' = 'spatial' does not go with 'x\.tracker' = 'lqr'"),
         (ReproductionConfig(start_offsets=[[0.0, 0.0]]), "start_offsets",
          r"key 'x\.start_offsets' must hold \[dx, dy, dz\]"),
         (PlacementsConfig(position_range=[[0.7, 0, 0], [0.6, 0, 0]]), "position_range",
@@ -248,6 +248,20 @@ def test_override_keeps_the_files_other_keys_and_later_overrides_win():
     assert scenario.seed == file.seed == 1
     # The copy is new: the original is unchanged.
     assert file.replaced(["seed=7"]).seed == 7 and file.seed == 1
+
+
+def test_values_are_checked_once_after_the_last_layer():
+    # The file's k_max is 200: k_min = 250 alone is refused, but overrides may pass through
+    # it on their way to a valid scenario (each layer is loaded, the result checked once).
+    with pytest.raises(ValueError, match=r"^--set emg\.k_min=250: keys 'emg\.k_min' < 'emg\.k_max'"):
+        load_scenario(shipped_scenario("cotter_pin"), overrides=["emg.k_min=250"])
+    scenario = load_scenario(shipped_scenario("cotter_pin"),
+                             overrides=["emg.k_min=250", "emg.k_max=300"])  # fmt: skip
+    assert (scenario.emg.k_min, scenario.emg.k_max) == (250.0, 300.0)
+    # A rule between two keys blames the last override that set either.
+    with pytest.raises(ValueError, match=r"^--set reproduction\.tracker=lqr: "):
+        load_scenario(shipped_scenario("cotter_pin"),
+                      overrides=["reproduction.weighting=spatial", "reproduction.tracker=lqr"])  # fmt: skip
 
 
 def test_override_of_a_section_given_in_yaml():

@@ -78,8 +78,9 @@ class ReproductionConfig:
         each start offset is [dx, dy, dz]. Raises ValueError naming the key under ``key``."""
         if self.tracker == "lqr" and self.weighting == "spatial":
             raise ValueError(
-                f"key '{key_path(key, 'weighting')}' = 'spatial' does not go with tracker "
-                "'lqr' (it tracks a state sequence: 'temporal' or 'forward')"
+                f"key '{key_path(key, 'weighting')}' = 'spatial' does not go with "
+                f"'{key_path(key, 'tracker')}' = 'lqr' (it tracks a state sequence: 'temporal' "
+                "or 'forward')"
             )
         if any(len(offset) != 3 for offset in self.start_offsets):
             raise ValueError(
