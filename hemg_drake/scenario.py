@@ -22,6 +22,7 @@ the CLI's ``--set``)::
     plan = scenario.task_plan()          # in the world, where the scene stands
 """
 
+import copy
 import dataclasses as dc
 import importlib.resources
 import math
@@ -149,7 +150,8 @@ class Scenario:
         Raises ValueError (naming ``source``, the override and the key) as
         :func:`load_scenario` does.
         """
-        return _layered(self, [], overrides, source="the scenario", overrides_source=source)
+        return _layered(copy.deepcopy(self), [], overrides, source="the scenario",
+                        overrides_source=source)  # fmt: skip
 
 
 def load_scenario(path, *, overrides=()):

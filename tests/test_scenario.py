@@ -246,8 +246,13 @@ def test_override_keeps_the_files_other_keys_and_later_overrides_win():
     assert scenario.emg.k_min == file.emg.k_min == 10.0
     assert scenario.mapping.scene_offset == file.mapping.scene_offset == [0.0, 0.0, 0.05]
     assert scenario.seed == file.seed == 1
-    # The copy is new: the original is unchanged.
+    # The copy is new, down to its sections' lists: the original is unchanged.
     assert file.replaced(["seed=7"]).seed == 7 and file.seed == 1
+    for copy in (file.replaced(["seed=7"]), file.replaced([])):
+        assert copy is not file
+        copy.operator.path_std[0] = 1.0
+        copy.plant.time_step = 5e-4
+    assert file.operator.path_std[0] == 0.003 and file.plant.time_step == 1e-3
 
 
 def test_values_are_checked_once_after_the_last_layer():
