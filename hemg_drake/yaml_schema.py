@@ -4,6 +4,8 @@
 key nor the file. :func:`check_types` walks the raw data (``yaml.safe_load`` output) over a
 dataclass or Drake config struct and names the key path of the first problem, in one line;
 scenarios (:mod:`hemg_drake.scenario`) and sweep files (:mod:`hemg_drake.sweep`) share it.
+:func:`override_data` turns a ``--set key.path=value`` into the data of one more layer for
+``yaml_load_typed(defaults=...)``; :func:`parse_yaml` reads YAML text with one-line errors.
 """
 
 import dataclasses as dc

@@ -67,8 +67,9 @@ def pin_geometry():
     model = ET.parse(COTTER_PIN_MODEL).getroot().find("model")
     if model.find("link[@name='pin']/pose") is not None:
         raise ValueError(f"{COTTER_PIN_MODEL}: the link 'pin' must sit at the model's frame")
-    tip = _frame_offset(model, "pin_tip")
-    return float(-tip[2]), _frame_offset(model, "ring")
+    tip, ring = _frame_offset(model, "pin_tip"), _frame_offset(model, "ring")
+    ring.flags.writeable = False  # cached: shared by every caller
+    return float(-tip[2]), ring
 
 
 def pin_length():
