@@ -124,14 +124,20 @@ class Scenario:
         return WorkspaceMapping(scale=self.mapping.scale, R_WM=self.R_WM(), p_WMo=p_WMo)
 
     def check(self, key=""):
-        """The rules that span sections (each section checks its own): a plant step of at
-        most ``MAX_TIME_STEP`` and a log period that is a whole number of plant steps.
-        Raises ValueError naming the key."""
+        """The rules that span sections or need a model (each section checks its own): a
+        plant step of at most ``MAX_TIME_STEP``, a log period that is a whole number of plant
+        steps, a pin detent shorter than the pin. Raises ValueError naming the key."""
         time_step = self.plant.time_step
         if not 0 < time_step <= MAX_TIME_STEP:
             raise ValueError(
                 f"key 'plant.time_step' must be positive and at most {MAX_TIME_STEP} s (the "
                 f"PD and the master are tuned for it), got {time_step}"
+            )
+        detent_length = self.scene.cotter_pin.detent_length
+        if detent_length >= plans.pin_length():
+            raise ValueError(
+                f"key 'scene.cotter_pin.detent_length' must be shorter than the pin "
+                f"({plans.pin_length()} m, its model's), got {detent_length}"
             )
         steps = self.log_period / time_step
         if steps < 1 or not math.isclose(steps, round(steps)):

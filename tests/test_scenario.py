@@ -444,6 +444,7 @@ def test_missing_file():
         ("emg: {calibration_duration: 0.05}", ["emg.calibration_duration", "emg.window"]),
         ("plant: {time_step: 0.01}", ["plant.time_step", "0.001"]),
         ("log_period: 0.0105", ["log_period", "multiple"]),
+        ("scene: {cotter_pin: {detent_length: 0.06}}", ["scene.cotter_pin.detent_length", "0.05"]),
         ("plan: {times: [0, 1], points: [[0, 0, 0]], kinds: [free]}", ["plan", "points"]),
         ("plan: {times: [0, 1], points: [[0, 0, 0], [1, 1, 1]], kinds: [fly]}", ["plan", "kinds"]),
     ],

@@ -24,9 +24,10 @@ class CotterPinParams:
     """Physics of the cotter-pin scene (SI units); loadable from YAML (``scene.cotter_pin``).
 
     The placement is not a parameter: the scene frame T (:func:`scene_pose`) puts the ring's
-    centre, with the pin fully in, at T's origin. Every field is checked by :meth:`check` (the detent against the pin's length, read from
-    its model, by :func:`~hemg_drake.tasks.cotter_pin.add_cotter_pin_scene`)
-    (also called by :func:`add_cotter_pin_scene`), which raises ValueError naming the field.
+    centre, with the pin fully in, at T's origin. Every field is checked by :meth:`check`
+    (also called by :func:`~hemg_drake.tasks.cotter_pin.add_cotter_pin_scene`), which raises
+    ValueError naming the field; the detent against the pin's length (read from its model,
+    :func:`~hemg_drake.tasks.plans.pin_length`) by the scene and by ``Scenario.check``.
     """
 
     # Largest force (N) with which the detent holds the pin in.
