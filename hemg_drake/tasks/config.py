@@ -127,7 +127,8 @@ class SceneConfig:
     """Where the task's object stands, and its physics (the scene frame T)."""
 
     # Position of the scene frame T in the world (m): the cotter pin's ring centre with the
-    # pin in; the sheet's top-surface centre. Empty: the task's default (DEFAULT_POSITIONS).
+    # pin in; the sheet's top-surface centre. Empty: the task's default
+    # (tasks.placement.DEFAULT_POSITIONS).
     # The operator's plan and the workspace map move with it.
     position: list[float] = checked([], signed=True, size=(0, 3))
     # Turn of the scene about world +z (deg): the fixture, the sheet and its strokes, the
