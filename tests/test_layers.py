@@ -36,6 +36,8 @@ PLACES = {
     "learning": "systems",
     "robots": "systems",
     "tasks": "systems",
+    # A task plan is data (numpy only); a config may check a written-out plan with it.
+    "tasks.plan": "configs",
     "diagrams": "station",
     "scenario": "station",
     "placements": "station",
