@@ -7,9 +7,21 @@ output. Sub-commands import their modules lazily so that ``hemg-drake --help`` i
 
 import argparse
 import math
-import os
 import sys
-from pathlib import Path
+
+from hemg_drake.commands import (
+    check_output_file,
+    check_output_folder,
+    demo_command,
+    demonstrate_command,
+    emg_figure_command,
+    export_command,
+    import_robomimic_command,
+    learn_command,
+    reproduce_command,
+    sweep_command,
+    teleop_command,
+)
 
 SET_HELP = (
     "override a scenario key, in YAML value syntax (repeatable), e.g. --set emg.k_max=150 "
@@ -22,15 +34,6 @@ OPTIONAL_EXTRAS = {"h5py": "export", "ray": "ray", "pyOpenHaptics": "touchx", "p
 # emg-figure's synthetic recording: at most this long (s); a longer one takes minutes and
 # gigabytes to plot for no more insight.
 MAX_EMG_FIGURE_DURATION = 600.0
-
-
-def _print(line):
-    """Print, and keep working if the reader went away (``| head``)."""
-    try:
-        print(line, flush=True)
-    except BrokenPipeError:
-        # Later lines go nowhere; the job itself carries on and finishes its files.
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
 
 
 def _int_at_least(name, minimum):
@@ -68,212 +71,6 @@ def _finite_float(name, *, positive=False, maximum=math.inf):
         return value
 
     return parse
-
-
-def check_output_folder(path):
-    """Raise ValueError unless ``path`` is a writable folder or can be made one (it is not
-    made here: nothing is written before the inputs are checked too).
-
-    Checked before any simulation, so a bad ``--out`` costs nothing.
-    """
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise ValueError(f"{path}: exists and is not a folder")
-    existing = path
-    while not existing.exists():
-        existing = existing.parent
-    if not existing.is_dir():
-        raise ValueError(f"{path}: cannot write there ({existing} is a file, not a folder)")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise ValueError(f"{path}: cannot write there ({existing} is not writable)")
-    return path
-
-
-def check_output_file(path):
-    """Raise ValueError unless a file can be written at ``path`` (not a folder)."""
-    path = Path(path)
-    if path.is_dir():
-        raise ValueError(f"{path}: is a folder; give a file name, e.g. {path / 'fig6.png'}")
-    check_output_folder(path.parent if str(path.parent) else Path("."))
-    return path
-
-
-def _scenario_path(name):
-    """A scenario file, or the name of a shipped one (``cotter_pin``, ``drawing``)."""
-    from hemg_drake.scenario import TASKS, shipped_scenario
-
-    if name in TASKS and not Path(name).exists():
-        return shipped_scenario(name)
-    return Path(name)
-
-
-def _demo(args):
-    from hemg_drake.pipeline import run_demo
-
-    check_output_folder(args.out)
-    run_demo(
-        args.out, tasks=args.tasks, overrides=args.set, replays=not args.no_replay,
-        placements=not args.no_placements, progress=_print,
-    )  # fmt: skip
-
-
-def _with_flags(args, **keys):
-    """``--set`` overrides followed by one per flag given: flag name -> scenario key."""
-    overrides = list(args.set)
-    for flag, key in keys.items():
-        value = getattr(args, flag)
-        if value is not None:
-            overrides.append(f"{key}={value}")
-    return overrides
-
-
-def _demonstrate(args):
-    from hemg_drake.pipeline import demonstrate
-    from hemg_drake.scenario import load_scenario
-
-    overrides = _with_flags(args, demos="num_demonstrations", duration="duration", seed="seed")
-    scenario = load_scenario(_scenario_path(args.scenario), overrides=overrides)
-    check_output_folder(args.out)
-    count = scenario.num_demonstrations
-    _print(
-        f"{scenario.task}: {count} demonstration{'s' if count != 1 else ''} of "
-        f"{scenario.duration:g} s into {args.out}"
-    )
-    for path in demonstrate(scenario, args.out, replays=not args.no_replay, progress=_print):
-        _print(f"wrote {path}")
-
-
-def _learn(args):
-    from hemg_drake.pipeline import learn
-
-    learn(args.run, overrides=args.set, n_iter=args.iterations, progress=_print)
-
-
-def _reproduce(args):
-    from hemg_drake.pipeline import reproduce
-
-    overrides = _with_flags(
-        args, weighting="reproduction.weighting", restoring_gain="reproduction.restoring_gain",
-        tracker="reproduction.tracker",
-    )  # fmt: skip
-    if args.out is not None:
-        check_output_folder(args.out)
-    reproduce(
-        args.run,
-        overrides=overrides,
-        start_offset=args.start_offset,
-        out_dir=args.out,
-        replay=not args.no_replay,
-        progress=_print,
-    )
-
-
-def _teleop(args):
-    from hemg_drake.scenario import load_scenario
-    from hemg_drake.teleop_session import existing_takes, teleop
-
-    scenario = load_scenario(_scenario_path(args.scenario), overrides=args.set)
-    check_output_folder(args.out)
-    existing_takes(scenario, args.out)  # refuse a mismatched folder before opening a port
-    meshcat = None
-    if args.replay_inputs is not None:
-        if not Path(args.replay_inputs).is_file():
-            raise ValueError(f"{args.replay_inputs}: no such inputs log")
-        if args.takes != 1:
-            raise ValueError("--takes needs a person at the page; --replay-inputs replays one")
-    else:
-        from hemg_drake.teleop.browser_page import start_meshcat
-
-        meshcat = start_meshcat(args.port)
-        _print(f"Meshcat: http://localhost:{meshcat.port()}")  # the first line, always
-    for _ in range(args.takes):
-        written = teleop(
-            scenario, args.out, meshcat=meshcat, duration=args.duration,
-            replay_inputs=args.replay_inputs, replays=not args.no_replay, progress=_print,
-        )  # fmt: skip
-        _print("wrote " + ", ".join(str(path) for path in written))
-
-
-def _emg_figure(args):
-    import numpy as np
-
-    from hemg_drake.emg.sources import MYO_RATE, load_emg_recording, synthesize_emg
-    from hemg_drake.viz.figures import plot_emg_envelopes, save_figure
-
-    check_output_file(args.output)
-    if args.input:
-        samples = load_emg_recording(args.input)
-        count = len(samples)
-        source = f"{args.input} ({count} sample{'s' if count != 1 else ''})"
-    else:
-        if args.duration * MYO_RATE < 1:
-            raise ValueError(f"--duration must be at least one sample (5 ms), got {args.duration}")
-        # Two contractions rising from rest and relaxing, 2.5 s each, then rest.
-        time = np.arange(int(args.duration * MYO_RATE)) / MYO_RATE
-        activation = 0.05 + 0.9 * np.clip(np.sin(np.pi * time / 2.5), 0.0, None) ** 2
-        samples = synthesize_emg(activation, args.seed)
-        source = f"a synthetic recording of {len(samples)} samples"
-    too_long = [w for w in args.windows if w > len(samples)]
-    if too_long:
-        raise ValueError(
-            f"--windows {too_long} longer than {source}: a window must be at most the "
-            f"recording's length"
-        )
-    figure = plot_emg_envelopes(samples, args.windows, per_channel=args.per_channel)
-    save_figure(figure, args.output)
-    _print(f"wrote {args.output}")
-
-
-def _sweep(args):
-    from hemg_drake.sweep import load_sweep, run_sweep, summary
-
-    if args.address and args.backend != "ray":
-        raise ValueError("--address joins a Ray cluster: it needs --backend ray")
-    check_output_folder(args.out)
-    try:
-        records = run_sweep(
-            args.sweep, args.out, backend=args.backend, workers=args.workers,
-            address=args.address, resume=args.resume,
-        )  # fmt: skip
-    except KeyboardInterrupt:
-        print(f"hemg-drake sweep: finished trials are kept in {args.out}/trials/: run again "
-              f"with --resume to go on", file=sys.stderr)  # fmt: skip
-        raise
-    spec = load_sweep(args.sweep)[0]
-    for line in summary(records, spec):
-        _print(line)
-    failed = [r for r in records if r["status"] == "failed"]
-    for record in failed:
-        _print(f"failed: {record['id']}: {record['error']}")
-    _print(f"wrote {Path(args.out) / 'results.csv'} ({len(records)} trials, {len(failed)} failed)")
-
-
-def _export(args):
-    from hemg_drake.learning.demos import load_dataset
-    from hemg_drake.learning.export import export_robomimic
-    from hemg_drake.run_folder import RunFolder
-
-    run = Path(args.run)
-    dataset = run if run.is_file() else RunFolder(run).dataset
-    check_output_file(args.output)
-    demos, metadata = load_dataset(dataset)
-    total = export_robomimic(args.output, demos, metadata)
-    _print(f"wrote {args.output} ({len(demos)} demonstrations, {total} samples, {args.format})")
-
-
-def _import_robomimic(args):
-    from hemg_drake.learning.demos import save_dataset
-    from hemg_drake.learning.export import load_robomimic
-    from hemg_drake.run_folder import RunFolder
-
-    demos, metadata = load_robomimic(args.input)  # read and checked before the folder
-    check_output_folder(args.out)
-    folder = RunFolder(args.out, create=True)
-    metadata["imported_from"] = str(args.input)
-    with folder.stage("demonstrate"):
-        save_dataset(folder.dataset, demos, metadata)
-        folder.finish("demonstrate", [folder.dataset])
-    _print(f"wrote {folder.dataset} ({len(demos)} demonstrations from {args.input})")
 
 
 def _version():
@@ -331,7 +128,7 @@ def build_parser():
         "(TASK/placements/, about 25 s of the demo's 50 s)",
     )  # fmt: skip
     add_set(demo)
-    demo.set_defaults(func=_demo)
+    demo.set_defaults(func=demo_command)
 
     demonstrate = command(
         "demonstrate", "record teleoperated demonstrations: dataset.npz, HTML replays, plots"
@@ -354,7 +151,7 @@ def build_parser():
     )
     demonstrate.add_argument("--no-replay", action="store_true", help="write no HTML replays")
     add_set(demonstrate)
-    demonstrate.set_defaults(func=_demonstrate)
+    demonstrate.set_defaults(func=demonstrate_command)
 
     learn = command("learn", "fit the HSMM of a run folder's dataset")
     learn.add_argument("run", help="run folder holding dataset.npz, e.g. runs/cotter_pin/")
@@ -363,7 +160,7 @@ def build_parser():
         help="EM iterations at most (default: the scenario's learning.n_iter)",
     )  # fmt: skip
     add_set(learn)
-    learn.set_defaults(func=_learn)
+    learn.set_defaults(func=learn_command)
 
     reproduce = command("reproduce", "simulate the learnt task; write replay, figures, metrics")
     reproduce.add_argument("run", help="run folder holding dataset.npz and model.npz")
@@ -390,7 +187,7 @@ def build_parser():
     reproduce.add_argument("--out", help="output folder (default: the run folder)")
     reproduce.add_argument("--no-replay", action="store_true", help="write no HTML replay")
     add_set(reproduce)
-    reproduce.set_defaults(func=_reproduce)
+    reproduce.set_defaults(func=reproduce_command)
 
     emg = command("emg-figure", "Fig. 6: summed sEMG and its moving-RMS envelopes")
     emg.add_argument(
@@ -412,7 +209,7 @@ def build_parser():
         default=10.0, help="synthetic recording length (s)",
     )  # fmt: skip
     emg.add_argument("-o", "--output", default="fig6.png", help="image file (.png, .svg, .pdf)")
-    emg.set_defaults(func=_emg_figure)
+    emg.set_defaults(func=emg_figure_command)
     export = command("export", "write a run's demonstrations in another format (robomimic HDF5)")
     export.add_argument("run", help="run folder holding dataset.npz (or a dataset file)")
     export.add_argument(
@@ -420,14 +217,14 @@ def build_parser():
         help="robomimic: its HDF5 layout (data/demo_i/obs, actions; needs h5py)",
     )  # fmt: skip
     export.add_argument("output", help="file to write, e.g. runs/pin/demos.hdf5")
-    export.set_defaults(func=_export)
+    export.set_defaults(func=export_command)
     imports = command("import", "read demonstrations exported with export into a run folder")
     imports.add_argument("input", help="robomimic HDF5 file written by hemg-drake export")
     imports.add_argument(
         "--format", choices=["robomimic"], default="robomimic", help="the file's format"
     )
     imports.add_argument("--out", required=True, help="run folder to write dataset.npz into")
-    imports.set_defaults(func=_import_robomimic)
+    imports.set_defaults(func=import_robomimic_command)
 
     teleop = command(
         "teleop", "drive the arm yourself in the browser (Meshcat); append the take to a dataset"
@@ -454,7 +251,7 @@ def build_parser():
     )  # fmt: skip
     teleop.add_argument("--no-replay", action="store_true", help="write no HTML replay")
     add_set(teleop)
-    teleop.set_defaults(func=_teleop)
+    teleop.set_defaults(func=teleop_command)
 
     sweep = command("sweep", "run a sweep file's trials on all cores (or Ray); table + figure")
     sweep.add_argument(
@@ -472,7 +269,7 @@ def build_parser():
     )  # fmt: skip
     sweep.add_argument("--address", help="Ray cluster to join (ray start --head prints it)")
     sweep.add_argument("--resume", action="store_true", help="skip the trials already done")
-    sweep.set_defaults(func=_sweep)
+    sweep.set_defaults(func=sweep_command)
     return parser
 
 

@@ -278,7 +278,7 @@ def test_a_missing_optional_package_is_one_line_naming_its_extra(tmp_path, run_c
     def needs_h5py(args):
         raise ModuleNotFoundError("No module named 'h5py'", name="h5py")
 
-    monkeypatch.setattr(cli, "_export", needs_h5py)
+    monkeypatch.setattr(cli, "export_command", needs_h5py)
     code, out, err = run_cli(["export", str(tmp_path), "--format", "robomimic",
                               str(tmp_path / "x.hdf5")])  # fmt: skip
     assert code == 2 and "Traceback" not in err and err.count("\n") == 1

@@ -10,8 +10,8 @@ Layers, lowest first; a module may import its own layer and those below, never a
    builders, ``placements``;
 3. analysis of logs: ``analysis``, ``evaluation``, ``tasks.metrics``;
 4. visualisation: ``viz``;
-5. applications: ``pipeline``, ``run_folder``, ``sweep``, ``cli``, ``teleop_session``,
-   ``notebook``.
+5. applications: ``pipeline``, ``run_folder``, ``sweep``, ``cli`` and its ``commands``,
+   ``teleop_session``, ``notebook``.
 """
 
 import ast
@@ -49,6 +49,7 @@ PLACES = {
     "run_folder": "applications",
     "sweep": "applications",
     "cli": "applications",
+    "commands": "applications",
     "teleop_session": "applications",
     "notebook": "applications",
 }
@@ -62,7 +63,6 @@ KNOWN_UPWARD = {
 # Modules over MAX_LINES on main, with their line counts then: they may only shrink, and an
 # entry at or under MAX_LINES fails, so that it is deleted here.
 KNOWN_LONG = {
-    "cli.py": 512,
     "emg/sources.py": 569,
     "learning/_kernels.py": 550,
     "learning/hsmm.py": 991,

@@ -1,0 +1,227 @@
+"""The sub-commands of ``hemg-drake`` (:mod:`hemg_drake.cli` parses their arguments).
+
+Each ``*_command`` takes the parsed arguments, checks its inputs and output before any
+simulation and raises ``ValueError`` or ``OSError`` for a mistake (the entry point answers it
+in one line). Each imports its modules when it runs, so that ``hemg-drake --help`` is instant.
+"""
+
+import os
+import sys
+from pathlib import Path
+
+
+def _print(line):
+    """Print, and keep working if the reader went away (``| head``)."""
+    try:
+        print(line, flush=True)
+    except BrokenPipeError:
+        # Later lines go nowhere; the job itself carries on and finishes its files.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+
+
+def check_output_folder(path):
+    """Raise ValueError unless ``path`` is a writable folder or can be made one (it is not
+    made here: nothing is written before the inputs are checked too).
+
+    Checked before any simulation, so a bad ``--out`` costs nothing.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{path}: exists and is not a folder")
+    existing = path
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ValueError(f"{path}: cannot write there ({existing} is a file, not a folder)")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ValueError(f"{path}: cannot write there ({existing} is not writable)")
+    return path
+
+
+def check_output_file(path):
+    """Raise ValueError unless a file can be written at ``path`` (not a folder)."""
+    path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{path}: is a folder; give a file name, e.g. {path / 'fig6.png'}")
+    check_output_folder(path.parent if str(path.parent) else Path("."))
+    return path
+
+
+def _scenario_path(name):
+    """A scenario file, or the name of a shipped one (``cotter_pin``, ``drawing``)."""
+    from hemg_drake.scenario import TASKS, shipped_scenario
+
+    if name in TASKS and not Path(name).exists():
+        return shipped_scenario(name)
+    return Path(name)
+
+
+def demo_command(args):
+    from hemg_drake.pipeline import run_demo
+
+    check_output_folder(args.out)
+    run_demo(
+        args.out, tasks=args.tasks, overrides=args.set, replays=not args.no_replay,
+        placements=not args.no_placements, progress=_print,
+    )  # fmt: skip
+
+
+def _with_flags(args, **keys):
+    """``--set`` overrides followed by one per flag given: flag name -> scenario key."""
+    overrides = list(args.set)
+    for flag, key in keys.items():
+        value = getattr(args, flag)
+        if value is not None:
+            overrides.append(f"{key}={value}")
+    return overrides
+
+
+def demonstrate_command(args):
+    from hemg_drake.pipeline import demonstrate
+    from hemg_drake.scenario import load_scenario
+
+    overrides = _with_flags(args, demos="num_demonstrations", duration="duration", seed="seed")
+    scenario = load_scenario(_scenario_path(args.scenario), overrides=overrides)
+    check_output_folder(args.out)
+    count = scenario.num_demonstrations
+    _print(
+        f"{scenario.task}: {count} demonstration{'s' if count != 1 else ''} of "
+        f"{scenario.duration:g} s into {args.out}"
+    )
+    for path in demonstrate(scenario, args.out, replays=not args.no_replay, progress=_print):
+        _print(f"wrote {path}")
+
+
+def learn_command(args):
+    from hemg_drake.pipeline import learn
+
+    learn(args.run, overrides=args.set, n_iter=args.iterations, progress=_print)
+
+
+def reproduce_command(args):
+    from hemg_drake.pipeline import reproduce
+
+    overrides = _with_flags(
+        args, weighting="reproduction.weighting", restoring_gain="reproduction.restoring_gain",
+        tracker="reproduction.tracker",
+    )  # fmt: skip
+    if args.out is not None:
+        check_output_folder(args.out)
+    reproduce(
+        args.run,
+        overrides=overrides,
+        start_offset=args.start_offset,
+        out_dir=args.out,
+        replay=not args.no_replay,
+        progress=_print,
+    )
+
+
+def teleop_command(args):
+    from hemg_drake.scenario import load_scenario
+    from hemg_drake.teleop_session import existing_takes, teleop
+
+    scenario = load_scenario(_scenario_path(args.scenario), overrides=args.set)
+    check_output_folder(args.out)
+    existing_takes(scenario, args.out)  # refuse a mismatched folder before opening a port
+    meshcat = None
+    if args.replay_inputs is not None:
+        if not Path(args.replay_inputs).is_file():
+            raise ValueError(f"{args.replay_inputs}: no such inputs log")
+        if args.takes != 1:
+            raise ValueError("--takes needs a person at the page; --replay-inputs replays one")
+    else:
+        from hemg_drake.teleop.browser_page import start_meshcat
+
+        meshcat = start_meshcat(args.port)
+        _print(f"Meshcat: http://localhost:{meshcat.port()}")  # the first line, always
+    for _ in range(args.takes):
+        written = teleop(
+            scenario, args.out, meshcat=meshcat, duration=args.duration,
+            replay_inputs=args.replay_inputs, replays=not args.no_replay, progress=_print,
+        )  # fmt: skip
+        _print("wrote " + ", ".join(str(path) for path in written))
+
+
+def emg_figure_command(args):
+    import numpy as np
+
+    from hemg_drake.emg.sources import MYO_RATE, load_emg_recording, synthesize_emg
+    from hemg_drake.viz.figures import plot_emg_envelopes, save_figure
+
+    check_output_file(args.output)
+    if args.input:
+        samples = load_emg_recording(args.input)
+        count = len(samples)
+        source = f"{args.input} ({count} sample{'s' if count != 1 else ''})"
+    else:
+        if args.duration * MYO_RATE < 1:
+            raise ValueError(f"--duration must be at least one sample (5 ms), got {args.duration}")
+        # Two contractions rising from rest and relaxing, 2.5 s each, then rest.
+        time = np.arange(int(args.duration * MYO_RATE)) / MYO_RATE
+        activation = 0.05 + 0.9 * np.clip(np.sin(np.pi * time / 2.5), 0.0, None) ** 2
+        samples = synthesize_emg(activation, args.seed)
+        source = f"a synthetic recording of {len(samples)} samples"
+    too_long = [w for w in args.windows if w > len(samples)]
+    if too_long:
+        raise ValueError(
+            f"--windows {too_long} longer than {source}: a window must be at most the "
+            f"recording's length"
+        )
+    figure = plot_emg_envelopes(samples, args.windows, per_channel=args.per_channel)
+    save_figure(figure, args.output)
+    _print(f"wrote {args.output}")
+
+
+def sweep_command(args):
+    from hemg_drake.sweep import load_sweep, run_sweep, summary
+
+    if args.address and args.backend != "ray":
+        raise ValueError("--address joins a Ray cluster: it needs --backend ray")
+    check_output_folder(args.out)
+    try:
+        records = run_sweep(
+            args.sweep, args.out, backend=args.backend, workers=args.workers,
+            address=args.address, resume=args.resume,
+        )  # fmt: skip
+    except KeyboardInterrupt:
+        print(f"hemg-drake sweep: finished trials are kept in {args.out}/trials/: run again "
+              f"with --resume to go on", file=sys.stderr)  # fmt: skip
+        raise
+    spec = load_sweep(args.sweep)[0]
+    for line in summary(records, spec):
+        _print(line)
+    failed = [r for r in records if r["status"] == "failed"]
+    for record in failed:
+        _print(f"failed: {record['id']}: {record['error']}")
+    _print(f"wrote {Path(args.out) / 'results.csv'} ({len(records)} trials, {len(failed)} failed)")
+
+
+def export_command(args):
+    from hemg_drake.learning.demos import load_dataset
+    from hemg_drake.learning.export import export_robomimic
+    from hemg_drake.run_folder import RunFolder
+
+    run = Path(args.run)
+    dataset = run if run.is_file() else RunFolder(run).dataset
+    check_output_file(args.output)
+    demos, metadata = load_dataset(dataset)
+    total = export_robomimic(args.output, demos, metadata)
+    _print(f"wrote {args.output} ({len(demos)} demonstrations, {total} samples, {args.format})")
+
+
+def import_robomimic_command(args):
+    from hemg_drake.learning.demos import save_dataset
+    from hemg_drake.learning.export import load_robomimic
+    from hemg_drake.run_folder import RunFolder
+
+    demos, metadata = load_robomimic(args.input)  # read and checked before the folder
+    check_output_folder(args.out)
+    folder = RunFolder(args.out, create=True)
+    metadata["imported_from"] = str(args.input)
+    with folder.stage("demonstrate"):
+        save_dataset(folder.dataset, demos, metadata)
+        folder.finish("demonstrate", [folder.dataset])
+    _print(f"wrote {folder.dataset} ({len(demos)} demonstrations from {args.input})")
+
+
