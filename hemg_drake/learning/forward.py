@@ -6,7 +6,7 @@ reproduce`); it lives here so that the model does not import the reproduction.
 
 import numpy as np
 
-from hemg_drake.learning import _kernels
+from hemg_drake.learning import _step_kernels
 
 
 class ResidualForward:
@@ -47,4 +47,6 @@ class ResidualForward:
         h : array, shape (N,)
         predicted_next : array, shape (N, d_max)
         """
-        return _kernels.residual_step(predicted, log_emission, self.transmat_T, self.durations)
+        return _step_kernels.residual_step(
+            predicted, log_emission, self.transmat_T, self.durations
+        )

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from hemg_drake.learning import _kernels
+from hemg_drake.learning import _step_kernels
 
 
 def gaussian_log_pdf(x, means, covariances):
@@ -35,7 +35,7 @@ _COMPILED = 64
 
 def _log_pdf_whitened(x, means, inverse_cholesky, log_det):
     if len(x) >= _COMPILED:  # long batches (EM): 3-4x faster than a matrix product per state
-        mahalanobis = _kernels.mahalanobis(np.ascontiguousarray(x.T), means, inverse_cholesky)
+        mahalanobis = _step_kernels.mahalanobis(np.ascontiguousarray(x.T), means, inverse_cholesky)
     else:  # one query or a few (reproduction): one batched product
         diff = x[:, None, :, None] - means[None, :, :, None]  # (T, N, D, 1)
         mahalanobis = np.square(inverse_cholesky @ diff).sum(axis=(2, 3))
