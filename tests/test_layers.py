@@ -65,7 +65,6 @@ KNOWN_UPWARD = {
 KNOWN_LONG = {
     "emg/sources.py": 569,
     "learning/hsmm.py": 991,
-    "learning/reproduce.py": 570,
 }
 
 
