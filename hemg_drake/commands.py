@@ -57,6 +57,7 @@ def _scenario_path(name):
 
 
 def demo_command(args):
+    """``hemg-drake demo``: demonstrate, learn and reproduce each task into ``args.out``."""
     from hemg_drake.pipeline import run_demo
 
     check_output_folder(args.out)
@@ -77,6 +78,7 @@ def _with_flags(args, **keys):
 
 
 def demonstrate_command(args):
+    """``hemg-drake demonstrate``: record a scenario's demonstrations into a run folder."""
     from hemg_drake.pipeline import demonstrate
     from hemg_drake.scenario import load_scenario
 
@@ -93,12 +95,14 @@ def demonstrate_command(args):
 
 
 def learn_command(args):
+    """``hemg-drake learn``: fit the HSMM of a run folder's dataset."""
     from hemg_drake.pipeline import learn
 
     learn(args.run, overrides=args.set, n_iter=args.iterations, progress=_print)
 
 
 def reproduce_command(args):
+    """``hemg-drake reproduce``: simulate the learnt task of a run folder."""
     from hemg_drake.pipeline import reproduce
 
     overrides = _with_flags(
@@ -118,6 +122,7 @@ def reproduce_command(args):
 
 
 def teleop_command(args):
+    """``hemg-drake teleop``: takes at the browser page (or one replayed from its inputs)."""
     from hemg_drake.scenario import load_scenario
     from hemg_drake.teleop_session import existing_takes, teleop
 
@@ -144,6 +149,7 @@ def teleop_command(args):
 
 
 def emg_figure_command(args):
+    """``hemg-drake emg-figure``: Fig. 6 of a recording, or of a synthetic one."""
     import numpy as np
 
     from hemg_drake.emg.sources import MYO_RATE, load_emg_recording, synthesize_emg
@@ -174,6 +180,7 @@ def emg_figure_command(args):
 
 
 def sweep_command(args):
+    """``hemg-drake sweep``: run a sweep file's trials; print the summary and failures."""
     from hemg_drake.sweep import load_sweep, run_sweep, summary
 
     if args.address and args.backend != "ray":
@@ -198,6 +205,7 @@ def sweep_command(args):
 
 
 def export_command(args):
+    """``hemg-drake export``: write a run's demonstrations as robomimic HDF5."""
     from hemg_drake.learning.demos import load_dataset
     from hemg_drake.learning.export import export_robomimic
     from hemg_drake.run_folder import RunFolder
@@ -211,6 +219,7 @@ def export_command(args):
 
 
 def import_robomimic_command(args):
+    """``hemg-drake import``: read robomimic HDF5 into a run folder's dataset."""
     from hemg_drake.learning.demos import save_dataset
     from hemg_drake.learning.export import load_robomimic
     from hemg_drake.run_folder import RunFolder
