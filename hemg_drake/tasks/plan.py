@@ -271,18 +271,21 @@ class TaskPlan:
         -------
         TaskPlan
         """
-        seed = as_seed(seed)
-        rng = np.random.default_rng(seed)
+        return self.perturbed_by(
+            *self.perturbation_draws(seed),
+            timing_std=timing_std, path_std=path_std, effort_std=effort_std,
+        )  # fmt: skip
+
+    def perturbation_draws(self, seed):
+        """The draws (normals, uniforms) of :meth:`perturbed_by` that :meth:`perturbed` makes
+        from ``seed`` (``np.random.default_rng``), in the order it has always drawn them."""
+        rng = np.random.default_rng(as_seed(seed))
         n_segments = len(self.kinds)
-        # The draws in the order the plan has always drawn them (same seed, same plan).
         timing = rng.standard_normal(n_segments)
         c = rng.standard_normal((3, 3))
         phase = rng.random((2, 3))
         effort = rng.standard_normal(n_segments)
-        return self.perturbed_by(
-            np.concatenate([timing, c.ravel(), effort]), phase.ravel(),
-            timing_std=timing_std, path_std=path_std, effort_std=effort_std,
-        )  # fmt: skip
+        return np.concatenate([timing, c.ravel(), effort]), phase.ravel()
 
     def perturbation_sizes(self):
         """(number of standard normal draws, number of uniform draws) of :meth:`perturbed_by`."""
