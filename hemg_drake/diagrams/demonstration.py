@@ -162,21 +162,21 @@ def build_demonstration_diagram(
 
     if operator_factory is None:
         operator_system = SimulatedOperator(
-            plan=plan, mapping=mapping, **scenario.operator.model_parameters()
+            plan=scenario.task_plan(), mapping=mapping, config=scenario.operator
         )
     else:
         operator_system = operator_factory(
             scenario=scenario, mapping=mapping, p_MS_initial=p_MS_initial, seed=seed
         )
     operator = add("operator", operator_system)
-    master = add("master", HapticMaster(p_MS_initial=p_MS_initial, **dc.asdict(scenario.master)))
+    master = add("master", HapticMaster(config=scenario.master, p_MS_initial=p_MS_initial))
     workspace_map = add(
         "workspace_map",
         WorkspaceMap(
             mapping=mapping,
-            delay_steps=scenario.mapping.delay_steps,
             period=scenario.master.period,  # the channel's samples are the master's
             p_MS_initial=p_MS_initial,
+            config=scenario.mapping,
         ),
     )
     emg_source = add("emg_source", make_emg_source(scenario, seed))
@@ -192,7 +192,7 @@ def build_demonstration_diagram(
     variable_gain.set_name("variable_gain")
     force_feedback = add(
         "force_feedback",
-        ForceFeedback(mapping=mapping, period=scenario.master.period, **dc.asdict(scenario.feedback)),
+        ForceFeedback(mapping=mapping, period=scenario.master.period, config=scenario.feedback),
     )
 
     connect = builder.Connect
@@ -290,6 +290,10 @@ def run_demonstration(built, *, duration=None, replay_path=None):
     Demonstration
     """
     simulator, duration = make_simulator(built, duration, replay_path)
+    operator = built.diagram.GetSubsystemByName("operator")
+    if hasattr(operator, "set_seed"):  # the simulated operator's variability: built.plan
+        root = simulator.get_mutable_context()
+        operator.set_seed(operator.GetMyMutableContextFromRoot(root), built.seed)
     simulator.Initialize()
     if built.recorder is not None:
         built.recorder.start()
