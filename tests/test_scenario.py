@@ -22,10 +22,7 @@ from hemg_drake.scenario import (
     shipped_scenario,
 )
 from hemg_drake.tasks.plan import TaskPlan
-from hemg_drake.teleop.feedback import ForceFeedback
-from hemg_drake.teleop.mapping import WorkspaceMap, WorkspaceMapping
-from hemg_drake.teleop.master import MasterDynamics
-from hemg_drake.teleop.operator import OperatorModel
+from hemg_drake.teleop.mapping import WorkspaceMapping
 
 import hemg_drake
 
@@ -93,35 +90,16 @@ def test_unknown_shipped_scenario():
     "section, function, names",
     [
         ("clik", Clik.__init__, ["gain", "method", "damping", "period"]),
-        (
-            "master",
-            MasterDynamics.__init__,
-            ["mass", "damping", "friction", "peak_force", "workspace_size",
-             "wall_stiffness", "wall_damping", "period"],
-        ),  # fmt: skip
-        (
-            "operator",
-            OperatorModel.__init__,
-            ["hand_stiffness", "hand_damping", "max_hand_force", "rest_activation",
-             "free_activation", "forceful_activation", "co_contraction_gain",
-             "activation_time_constant", "period"],
-        ),  # fmt: skip
         ("operator", TaskPlan.perturbed, ["timing_std", "effort_std"]),
         ("emg", RmsEnvelope.__init__, ["window", "per_channel"]),
         ("emg", VariableGain.__init__, ["A_emg", "k_min", "k_max"]),
-        (
-            "feedback",
-            ForceFeedback.__init__,
-            ["mode", "gain", "stiffness", "damping", "peak_force"],
-        ),
         ("learning", HSMM.__init__, ["init", "reg_covar", "n_iter"]),
         (
             "reproduction",
             reproduce,
             ["weighting", "restoring_gain", "tracker", "horizon", "control_cost", "state_cost"],
         ),
-        ("reproduction", HsmmLqrReproducer.__init__, ["max_lead"]),
-        ("mapping", WorkspaceMap.__init__, ["delay_steps"]),
+        ("reproduction", HsmmLqrReproducer._construct, ["max_lead"]),
     ],
 )
 def test_every_default_is_the_systems_own(section, function, names):
@@ -139,12 +117,6 @@ def test_defaults_that_issue_13_found_twice():
     assert scenario.reproduction.weighting == signature_defaults(reproduce)["weighting"]
     assert scenario.operator.path_std == [signature_defaults(TaskPlan.perturbed)["path_std"]] * 3
     assert scenario.mapping.scale == WorkspaceMapping().scale
-
-
-def test_operator_section_builds_the_default_operator_model():
-    # Every OperatorModel parameter with a default is in the scenario, and nothing else.
-    expected = signature_defaults(OperatorModel.__init__)
-    assert Scenario().operator.model_parameters() == expected
 
 
 def test_plant_defaults_to_live_output_ports_and_yaml_can_sample_them():
