@@ -273,6 +273,15 @@ def demonstration_from_logs(log, emg_log, seed):
     )
 
 
+def seed_operator(built, root_context):
+    """Put the draws of ``built.seed`` into the simulated operator's Context (before
+    ``Simulator.Initialize``), so that it follows ``built.plan``; a no-op for another
+    operator (``operator_factory``)."""
+    operator = built.diagram.GetSubsystemByName("operator")
+    if hasattr(operator, "set_seed"):
+        operator.set_seed(operator.GetMyMutableContextFromRoot(root_context), built.seed)
+
+
 def run_demonstration(built, *, duration=None, replay_path=None):
     """Simulate a built demonstration diagram and read its logs.
 
@@ -290,10 +299,7 @@ def run_demonstration(built, *, duration=None, replay_path=None):
     Demonstration
     """
     simulator, duration = make_simulator(built, duration, replay_path)
-    operator = built.diagram.GetSubsystemByName("operator")
-    if hasattr(operator, "set_seed"):  # the simulated operator's variability: built.plan
-        root = simulator.get_mutable_context()
-        operator.set_seed(operator.GetMyMutableContextFromRoot(root), built.seed)
+    seed_operator(built, simulator.get_mutable_context())
     simulator.Initialize()
     if built.recorder is not None:
         built.recorder.start()
