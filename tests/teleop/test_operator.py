@@ -262,3 +262,36 @@ def test_nan_stylus_input_is_rejected(name):
     system.GetInputPort(name).FixValue(context, [0.0, np.nan, 0.0])
     with pytest.raises(ValueError, match=f"{name} must be finite"):
         system.GetOutputPort("hand_force").Eval(context)
+
+
+def test_monte_carlo_runs_several_seeds_of_one_built_loop():
+    # MonteCarloSimulation: one built operator + master loop, a random context per sample
+    # (SetRandomContext), the end time of the operator's drawn plan as the output.
+    from pydrake.systems.analysis import MonteCarloSimulation
+
+    spreads = dict(timing_std=0.1, path_std=[0.002, 0.002, 0.002], effort_std=0.1)
+    builder = DiagramBuilder()
+    master = builder.AddSystem(HapticMaster(p_MS_initial=MAPPING.slave_to_master(PLAN.points[0])))
+    operator = builder.AddSystem(SimulatedOperator(plan=PLAN, mapping=MAPPING, **spreads))
+    zero = builder.AddSystem(ConstantVectorSource(np.zeros(3)))
+    builder.Connect(zero.get_output_port(), operator.GetInputPort("feedback_force"))
+    builder.Connect(zero.get_output_port(), master.GetInputPort("motor_force"))
+    builder.Connect(operator.GetOutputPort("hand_force"), master.GetInputPort("hand_force"))
+    for name in ("p_MS", "v_MS"):
+        builder.Connect(master.GetOutputPort(name), operator.GetInputPort(name))
+    diagram = builder.Build()
+
+    def end_time(system, context):
+        return operator.plan(operator.GetMyContextFromRoot(context)).end_time
+
+    def results(seed):
+        runs = MonteCarloSimulation(
+            make_simulator=lambda generator: Simulator(diagram), output=end_time,
+            final_time=0.05, num_samples=4, generator=RandomGenerator(seed),
+        )  # fmt: skip
+        return [run.output for run in runs]
+
+    first, again = results(1), results(1)
+    assert first == again  # same generator seed, same draws
+    assert len(set(first)) == 4  # four different plans from one diagram
+    assert all(abs(t / PLAN.end_time - 1.0) < 0.3 for t in first)
