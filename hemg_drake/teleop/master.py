@@ -21,6 +21,9 @@ from hemg_drake.teleop.config import MasterConfig
 TOUCH_X_PEAK_FORCE = MasterConfig().peak_force  # N
 TOUCH_X_WORKSPACE = tuple(MasterConfig().workspace_size)  # m, width x height x depth
 
+# Resolved once: a template lookup per call would cost microseconds at 1 kHz.
+_DOUBLE_CONTEXT = Context_[float]
+
 
 def saturate_norm(force, limit):
     """Scale ``force`` down to norm ``limit`` if it is longer, keeping its direction.
@@ -98,7 +101,7 @@ def _state_vector(context, index):
     """Discrete state group ``index`` as an array: a view for double, a copy for
     AutoDiffXd (whose object arrays pydrake cannot reference)."""
     group = context.get_discrete_state(index)
-    return group.value() if isinstance(context, Context_[float]) else group.CopyToVector()
+    return group.value() if isinstance(context, _DOUBLE_CONTEXT) else group.CopyToVector()
 
 
 @TemplateSystem.define("HapticMaster_", T_list=[float, AutoDiffXd])

@@ -26,6 +26,9 @@ MAX_HAND_FORCE = OperatorConfig().max_hand_force  # N
 # sampling interval is longer than any run.
 _DRAW_INTERVAL = 1e9  # s
 
+# Resolved once: a template lookup per call would cost microseconds at 1 kHz.
+_DOUBLE_CONTEXT = Context_[float]
+
 
 def hand_impedance_force(p_target, v_target, p_MS, v_MS, *, stiffness, damping, max_force):
     """The hand's force on the stylus, an impedance towards a target (eq. 19's F_h):
@@ -148,7 +151,7 @@ def OperatorLaw_(T):
         def _draw(self, context, state):
             normals = self._normals_input.Eval(context)
             uniforms = self._uniforms_input.Eval(context)
-            if not isinstance(context, Context_[float]):
+            if not isinstance(context, _DOUBLE_CONTEXT):
                 normals = np.array([x.value() for x in normals])
                 uniforms = np.array([x.value() for x in uniforms])
             plans = self._plans(normals, uniforms)
@@ -160,7 +163,7 @@ def OperatorLaw_(T):
 
         def _input(self, context, name, port):
             values = port.Eval(context).tolist()
-            if isinstance(context, Context_[float]) and not all_finite(values):
+            if isinstance(context, _DOUBLE_CONTEXT) and not all_finite(values):
                 raise ValueError(f"{name} must be finite, got {values}")
             return values
 
