@@ -303,30 +303,17 @@ def test_feedback_converts_to_autodiff_with_the_law_jacobian(mapping, mode):
         np.testing.assert_allclose(jacobian, expected, rtol=1e-14, atol=1e-14)
 
 
-def get_state(context):
-    """All discrete state groups of ``context``, concatenated."""
-    values = context.get_discrete_state()
-    return np.concatenate([values.get_vector(i).CopyToVector() for i in range(values.num_groups())])
-
-
-def set_state(context, x):
-    """Set every discrete state group of ``context`` from the concatenation ``x``."""
-    values = context.get_mutable_discrete_state()
-    start = 0
-    for i in range(values.num_groups()):
-        group = values.get_mutable_vector(i)
-        group.SetFromVector(x[start : start + group.size()])
-        start += group.size()
-
-
 @pytest.mark.parametrize("delay_steps, passivity", [(0, "none"), (3, "none"), (3, "tdpa")])
 def test_spring_loop_clones_and_its_autodiff_update_is_the_finite_difference(
     delay_steps, passivity
 ):
     # The free-space loop of the delay study (master, map, spring, feedback, delays).
-    from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
-
-    from hemg_drake.teleop.delay_loop import build_delayed_spring_loop
+    from hemg_drake.teleop.delay_loop import (
+        build_delayed_spring_loop,
+        discrete_state as get_state,
+        discrete_update_jacobian,
+        set_discrete_state as set_state,
+    )
 
     diagram, _, _ = build_delayed_spring_loop(delay_steps, passivity)
     # Clone: two simulators, bit-identical states.
@@ -347,13 +334,8 @@ def test_spring_loop_clones_and_its_autodiff_update_is_the_finite_difference(
         return np.concatenate([values.get_vector(i).CopyToVector()
                                for i in range(values.num_groups())])  # fmt: skip
 
-    loop = diagram.ToAutoDiffXd()
-    context = loop.CreateDefaultContext()
-    set_state(context, InitializeAutoDiff(x0).ravel())
-    values = loop.EvalUniquePeriodicDiscreteUpdate(context)
-    jacobian = ExtractGradient(np.concatenate([
-        values.get_vector(i).CopyToVector() for i in range(values.num_groups())
-    ]))  # fmt: skip
+    set_state(float_context, x0)
+    jacobian = discrete_update_jacobian(diagram, float_context)
     h = 1e-7
     numeric = np.column_stack([
         (update(x0 + h * e) - update(x0 - h * e)) / (2 * h) for e in np.eye(len(x0))
