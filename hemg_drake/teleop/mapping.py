@@ -124,12 +124,12 @@ class WorkspaceMap(Diagram):
     :class:`~hemg_drake.teleop.master.HapticMaster`'s outputs), the output at time t is the
     mapped input at t - n * period; until the n-th sample (at t = (n - 1) period) it is the
     map of ``p_MS_initial`` at rest. Drake's delay starts at zero, so it carries the
-    offset from that rest pose, u - [p_MS_initial; 0], and the map adds D [p_MS_initial; 0]
-    back to its constant (exact for a zero ``p_MS_initial``, otherwise to rounding).
+    offset from that rest pose, u - [p_MS_initial; 0], which is added back before the map
+    (exact for a zero ``p_MS_initial``, otherwise to one rounding).
 
     Structure (Drake's systems only, so it clones and converts to AutoDiffXd):
-    ``Multiplexer`` -> [``AffineSystem`` (the offset) -> ``DiscreteTimeDelay``] ->
-    ``AffineSystem`` (the map) -> ``Demultiplexer``.
+    ``Multiplexer`` -> [``AffineSystem`` (the offset) -> ``DiscreteTimeDelay`` ->
+    ``AffineSystem`` (the rest pose back)] -> ``AffineSystem`` (the map) -> ``Demultiplexer``.
 
     Parameters
     ----------
@@ -168,10 +168,13 @@ class WorkspaceMap(Diagram):
             delay = builder.AddNamedSystem(
                 "delay", DiscreteTimeDelay(as_scalar("period", period), steps - 1, 6)
             )
+            # The rest pose added back before the map (not folded into its constant), so
+            # the map sees the same numbers as without a delay: bytes as before.
+            restore = builder.AddNamedSystem("restore", _stateless_affine(np.eye(6), rest))
             builder.Connect(signal, offset.get_input_port())
             builder.Connect(offset.get_output_port(), delay.get_input_port())
-            signal = delay.get_output_port()
-            y0 = y0 + D @ rest
+            builder.Connect(delay.get_output_port(), restore.get_input_port())
+            signal = restore.get_output_port()
         to_slave = builder.AddNamedSystem("map", _stateless_affine(D, y0))
         split = builder.AddNamedSystem("split", Demultiplexer([3, 3]))
         builder.Connect(signal, to_slave.get_input_port())
