@@ -3,7 +3,7 @@
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
-from pydrake.systems.primitives import MatrixGain, Multiplexer
+from pydrake.systems.primitives import Adder, Gain, MatrixGain
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from hemg_drake.learning.reproduce import (
@@ -269,9 +269,10 @@ class TrackingForce(Diagram):
         - F_tr
 
     F_tr = K_ptr (x_g - x*) + K_dtr xdot* (eq. 23), in N, from positions in m and
-    velocities in m/s: Drake's ``Multiplexer`` of the three inputs into a ``MatrixGain``
-    [-K_ptr, K_dtr, K_ptr] (diagonal blocks). No state, direct feedthrough: it follows the
-    rate of its inputs. Drake systems only, so it clones and converts to AutoDiffXd.
+    velocities in m/s, from Drake's primitives in the order of the equation: the goal error
+    ``Adder`` (x_g + (-x*), a ``Gain`` of -1), ``MatrixGain`` K_ptr and K_dtr (diagonal), and
+    their ``Adder``. No state, direct feedthrough: it follows the rate of its inputs. Drake
+    systems only, so it clones and converts to AutoDiffXd.
 
     Parameters
     ----------
@@ -290,11 +291,18 @@ class TrackingForce(Diagram):
         K_p = np.diag(_check_gain(kp, "kp", size))
         K_d = np.diag(_check_gain(kd, "kd", size))
         builder = DiagramBuilder()
-        inputs = builder.AddNamedSystem("inputs", Multiplexer([size] * 3))
-        gain = builder.AddNamedSystem("eq23", MatrixGain(np.hstack([-K_p, K_d, K_p])))
-        builder.Connect(inputs.get_output_port(), gain.get_input_port())
-        for i, name in enumerate(("x_star", "xdot_star", "x_goal")):
-            builder.ExportInput(inputs.get_input_port(i), name)
-        builder.ExportOutput(gain.get_output_port(), "F_tr")
+        negate = builder.AddNamedSystem("negate_x_star", Gain(-1.0, size))
+        error = builder.AddNamedSystem("goal_error", Adder(2, size))
+        stiffness = builder.AddNamedSystem("K_ptr", MatrixGain(K_p))
+        damping = builder.AddNamedSystem("K_dtr", MatrixGain(K_d))
+        total = builder.AddNamedSystem("F_tr", Adder(2, size))
+        builder.Connect(negate.get_output_port(), error.get_input_port(1))
+        builder.Connect(error.get_output_port(), stiffness.get_input_port())
+        builder.Connect(stiffness.get_output_port(), total.get_input_port(0))
+        builder.Connect(damping.get_output_port(), total.get_input_port(1))
+        builder.ExportInput(negate.get_input_port(), "x_star")
+        builder.ExportInput(damping.get_input_port(), "xdot_star")
+        builder.ExportInput(error.get_input_port(0), "x_goal")
+        builder.ExportOutput(total.get_output_port(), "F_tr")
         builder.BuildInto(self)
         self.set_name("TrackingForce")
