@@ -1,4 +1,10 @@
-"""HsmmGmrReproducer, HsmmLqrReproducer and TrackingForce in Drake diagrams."""
+"""HsmmGmrReproducer, HsmmLqrReproducer and TrackingForce in Drake diagrams.
+
+The comparisons with ``reproduce`` are wiring tests (it runs the same policy step offline);
+the maths is pinned by references that share no code with it: eq. 18 on the system's own
+outputs, the cross-track attractor pulling onto the demonstrated path, eq. 23 by hand, and
+``test_reproducer_reference.py``'s closed forms.
+"""
 
 import numpy as np
 import pytest
