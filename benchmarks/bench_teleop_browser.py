@@ -26,6 +26,7 @@ controls open and the arm pulling the pin, e.g. docs/img/teleop_page.png.
 import argparse
 import contextlib
 import math
+import sys
 import tempfile
 import threading
 import time
@@ -38,7 +39,12 @@ import websocket
 from hemg_drake.fileio import write_bytes_atomic
 from hemg_drake.pipeline import replay_recorder
 from hemg_drake.scenario import load_scenario, shipped_scenario
-from hemg_drake.teleop.browser import COLUMNS, HeadlessPage, run_take, start_meshcat
+from hemg_drake.teleop.browser_inputs import COLUMNS
+from hemg_drake.teleop.browser_page import start_meshcat
+from hemg_drake.teleop_session import run_take
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from tooling.headless_page import HeadlessPage  # noqa: E402  (test tooling, not runtime)
 
 
 class Listener:

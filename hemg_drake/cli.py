@@ -170,7 +170,7 @@ def _reproduce(args):
 
 def _teleop(args):
     from hemg_drake.scenario import load_scenario
-    from hemg_drake.teleop.browser import existing_takes, teleop
+    from hemg_drake.teleop_session import existing_takes, teleop
 
     scenario = load_scenario(_scenario_path(args.scenario), overrides=args.set)
     check_output_folder(args.out)
@@ -182,7 +182,7 @@ def _teleop(args):
         if args.takes != 1:
             raise ValueError("--takes needs a person at the page; --replay-inputs replays one")
     else:
-        from hemg_drake.teleop.browser import start_meshcat
+        from hemg_drake.teleop.browser_page import start_meshcat
 
         meshcat = start_meshcat(args.port)
         _print(f"Meshcat: http://localhost:{meshcat.port()}")  # the first line, always

@@ -14,9 +14,9 @@ maths is in :mod:`hemg_drake.tasks.metrics`):
 
 import numpy as np
 
+from hemg_drake.analysis.contact import in_contact, ink_strokes
 from hemg_drake.learning.demos import observations
 from hemg_drake.tasks import metrics
-from hemg_drake.viz.ink import in_contact, ink_strokes
 
 # Drawing: shortest pen contact (log samples, 0.01 s each) that counts as a stroke.
 MIN_STROKE_SAMPLES = 10

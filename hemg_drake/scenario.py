@@ -3,15 +3,18 @@
 A scenario file is one YAML mapping whose keys are the fields of :class:`Scenario` (nested
 sections for the sub-dataclasses); every key may be left out to take its default. Every
 default exists once: each section is a system's own ``...Config`` dataclass, which lives
-beside the system (``hemg_drake/<package>/config.py``) and owns its defaults, so
-``Scenario()`` builds exactly the systems the library builds with its defaults. The plant and the simulator are configured
-by Drake's own ``MultibodyPlantConfig`` and ``SimulatorConfig``; the scene's physics by the
-task modules' ``CotterPinParams`` and ``DrawingParams``.
+beside the system (``hemg_drake/<package>/config.py``) and owns its defaults and its range
+checks. The plant and the simulator are configured by Drake's own ``MultibodyPlantConfig``
+and ``SimulatorConfig``; the scene's physics by ``CotterPinParams`` and ``DrawingParams``.
+This module imports those configs only: loading a scenario imports no system.
 
-It is read with Drake's ``yaml_load_typed`` (which refuses unknown keys and wrong types);
-:func:`load_scenario` adds what that does not check (the key path of a wrongly typed value,
-vector sizes, finite and non-negative numbers, choices) and reports every problem as one
-``ValueError`` naming the file and the key. Any key can be overridden with
+It is read as Drake's ``hardware_sim`` reads its scenarios: ``yaml_load_typed`` layers the
+file and then each override on top of the defaults (``defaults=``). Before each layer,
+:func:`~hemg_drake.yaml_schema.check_types` names the key path of an unknown key or a
+wrongly typed value (Drake's own messages name neither); after the last,
+:func:`~hemg_drake.config_fields.check_config` checks every value against its field's
+range and each config's rules (``check(key)``). Every problem is one ``ValueError`` naming
+the file (or the override) and the key. Any key can be overridden with
 ``overrides=["emg.k_max=150", "scene.position=[0.65, -0.80, 0.12]"]`` (YAML value syntax;
 the CLI's ``--set``)::
 
@@ -19,6 +22,7 @@ the CLI's ``--set``)::
     plan = scenario.task_plan()          # in the world, where the scene stands
 """
 
+import copy
 import dataclasses as dc
 import importlib.resources
 import math
@@ -26,32 +30,26 @@ import re
 import typing
 from pathlib import Path
 
-import numpy as np
 import yaml
-from pydrake.common.yaml import yaml_dump_typed, yaml_load, yaml_load_typed
-from pydrake.math import RollPitchYaw, RotationMatrix
+from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import SimulatorConfig
 
+from hemg_drake.config_fields import check_config, checked
 from hemg_drake.control.config import MAX_TIME_STEP, ClikConfig, PdConfig
-from hemg_drake.config_fields import checked
-from hemg_drake.emg.config import MYO_RATE, EmgConfig
+from hemg_drake.emg.config import EmgConfig
 from hemg_drake.fileio import read_yaml_text
 from hemg_drake.learning.config import LearningConfig, ReproductionConfig
-from hemg_drake.tasks import cotter_pin, drawing
+from hemg_drake.tasks import plans
 from hemg_drake.tasks.config import PlanConfig, SceneConfig
-from hemg_drake.tasks.placement import scene_pose, to_world
-from hemg_drake.tasks.plan import TaskPlan
+from hemg_drake.tasks.placement import master_orientation, task_scene_pose, to_world
 from hemg_drake.teleop.config import FeedbackConfig, MappingConfig, MasterConfig, OperatorConfig
-from hemg_drake.teleop.mapping import WorkspaceMapping
-from hemg_drake.yaml_schema import check_types, first_line, schema_fields
+from hemg_drake.yaml_schema import check_types, first_line, override_data, parse_yaml
 
 TASKS = ("cotter_pin", "drawing")
 # Longest demonstration (s): 10 minutes of a 1 kHz diagram is minutes to simulate and about
 # 0.5 GB of logs; a longer one is more likely a typo than a plan.
 MAX_DURATION = 600.0
-# Where each task's scene stands by default (scene frame T's origin, m, in W).
-DEFAULT_POSITIONS = {"cotter_pin": cotter_pin.DEFAULT_POSITION, "drawing": drawing.DEFAULT_POSITION}
 # The scenarios shipped with the package (hemg_drake/scenarios/<name>.yaml).
 SCENARIOS = importlib.resources.files("hemg_drake") / "scenarios"
 
@@ -103,37 +101,50 @@ class Scenario:
 
     def X_WT(self):
         """The scene frame's pose in the world (``scene.position``, ``scene.yaw_deg``)."""
-        position = self.scene.position or DEFAULT_POSITIONS[self.task]
-        return scene_pose(position, self.scene.yaw_deg)
+        return task_scene_pose(self.task, self.scene)
 
     def scene_params(self):
         """The task's scene parameters: ``scene.cotter_pin`` or ``scene.drawing``."""
         return getattr(self.scene, self.task)
 
     def task_plan(self):
-        """The plan in force, in the world: the override or the task's default, placed."""
-        X_WT = self.X_WT()
-        if self.plan is not None:
-            data = dc.asdict(self.plan)
-            # Empty optional lists take TaskPlan's defaults.
-            for name in ("pen_down", "effort"):
-                if not data[name]:
-                    del data[name]
-            data["points"] = to_world(X_WT, data["points"]).tolist()
-            return TaskPlan.from_dict(data)
-        if self.task == "cotter_pin":
-            return cotter_pin.default_cotter_pin_plan(X_WT=X_WT)
-        return drawing.default_drawing_plan(self.scene.drawing, X_WT=X_WT)
+        """The plan in force, in the world: ``plan`` or the task's default, placed."""
+        return plans.task_plan(self.task, self.scene, self.plan)
 
     def R_WM(self):
         """The master frame's orientation in W: the scene's yaw, then ``mapping.rpy_deg``."""
-        R_TM = RotationMatrix(RollPitchYaw(np.radians(self.mapping.rpy_deg)))
-        return self.X_WT().rotation() @ R_TM
+        return master_orientation(self.X_WT(), self.mapping.rpy_deg)
 
     def workspace_mapping(self):
-        """The :class:`WorkspaceMapping` of the scenario, placed with the scene."""
+        """The :class:`~hemg_drake.teleop.mapping.WorkspaceMapping`, placed with the scene."""
+        # Imported here: teleop.mapping defines systems, which loading a scenario must not.
+        from hemg_drake.teleop.mapping import WorkspaceMapping
+
         p_WMo = to_world(self.X_WT(), self.mapping.scene_offset)
         return WorkspaceMapping(scale=self.mapping.scale, R_WM=self.R_WM(), p_WMo=p_WMo)
+
+    def check(self, key=""):
+        """The rules that span sections or need a model (each section checks its own): a
+        plant step of at most ``MAX_TIME_STEP``, a log period that is a whole number of plant
+        steps, a pin detent shorter than the pin. Raises ValueError naming the key."""
+        time_step = self.plant.time_step
+        if not 0 < time_step <= MAX_TIME_STEP:
+            raise ValueError(
+                f"key 'plant.time_step' must be positive and at most {MAX_TIME_STEP} s (the "
+                f"PD and the master are tuned for it), got {time_step}"
+            )
+        detent_length = self.scene.cotter_pin.detent_length
+        if detent_length >= plans.pin_length():
+            raise ValueError(
+                f"key 'scene.cotter_pin.detent_length' must be shorter than the pin "
+                f"({plans.pin_length()} m, its model's), got {detent_length}"
+            )
+        steps = self.log_period / time_step
+        if steps < 1 or not math.isclose(steps, round(steps)):
+            raise ValueError(
+                f"key 'log_period' must be a whole multiple of 'plant.time_step', got "
+                f"{self.log_period}"
+            )
 
     def to_yaml(self):
         """YAML text that :func:`parse_scenario` reads back to an equal scenario."""
@@ -145,14 +156,8 @@ class Scenario:
         Raises ValueError (naming ``source``, the override and the key) as
         :func:`load_scenario` does.
         """
-        return parse_scenario(self.to_yaml(), source="the scenario", overrides=overrides,
-                              overrides_source=source)  # fmt: skip
-
-
-# Checks of Drake's config structs' fields, which carry no metadata of their own.
-_STRUCT_CHECKS = {"plant.time_step": {"positive": True}}
-# Sections whose dataclass checks itself (``check()``), by key path.
-_SELF_CHECKED = ("scene.cotter_pin", "scene.drawing")
+        return _layered(copy.deepcopy(self), [], overrides, source="the scenario",
+                        overrides_source=source)  # fmt: skip
 
 
 def load_scenario(path, *, overrides=()):
@@ -180,7 +185,7 @@ def load_scenario(path, *, overrides=()):
     """
     path = Path(path)
     text = read_yaml_text(path, kind="scenario")
-    if not text.strip() or (_parses(text) and yaml_load(data=text) in (None, {})):
+    if parse_yaml(text, str(path)) in (None, {}):
         # An empty file would silently run the default scenario.
         raise ValueError(f"{path}: the scenario file is empty; give at least its 'task'")
     return parse_scenario(text, source=str(path), overrides=overrides)
@@ -194,177 +199,50 @@ def shipped_scenario(name):
     return Path(str(path))
 
 
-def _parses(text):
-    try:
-        yaml_load(data=text)
-    except yaml.YAMLError:
-        return False
-    return True
-
-
 def parse_scenario(text, *, source="<scenario>", overrides=(), overrides_source="--set"):
     """Like :func:`load_scenario`, from YAML text; ``source`` names it in errors.
 
     ``overrides_source`` names the overrides in their errors (``--set`` by default).
     """
-    raw = _parse_yaml(text, source)
-    if raw is None:
-        raw = {}
-    if not isinstance(raw, dict):
+    data = parse_yaml(text, source)
+    if data is not None and not isinstance(data, dict):
         raise ValueError(f"{source}: the top level must be a mapping of Scenario's fields")
+    layers = [(source, data)] if data else []
+    return _layered(Scenario(), layers, overrides, source=source,
+                    overrides_source=overrides_source)  # fmt: skip
+
+
+def _layered(scenario, layers, overrides, *, source, overrides_source):
+    """``scenario`` with the data ``layers`` ((origin, data) pairs) and then ``overrides``
+    loaded on top, in order, as ``yaml_load_typed(defaults=...)`` layers; then checked."""
+    layers = list(layers)
     for override in overrides:
-        where = f"{overrides_source} {override}"
+        origin = f"{overrides_source} {override}"
         try:
-            _apply_override(raw, override, where)
-            check_types(raw, Scenario)
+            layers.append((origin, override_data(override, Scenario)))
         except ValueError as error:
-            raise ValueError(f"{where}: {first_line(error)}") from None
+            raise ValueError(f"{origin}: {first_line(error)}") from None
+    for origin, data in layers:
+        try:
+            check_types(data, Scenario)  # names the key path: Drake's messages do not
+            text = yaml.safe_dump(data, sort_keys=False)
+            scenario = yaml_load_typed(schema=Scenario, data=text, defaults=scenario)
+        except (RuntimeError, ValueError, AssertionError) as error:
+            raise ValueError(f"{origin}: {first_line(error)}") from None
     try:
-        check_types(raw, Scenario)
-        data = yaml.safe_dump(raw, sort_keys=False)
-        scenario = yaml_load_typed(schema=Scenario, data=data, defaults=Scenario())
-        _check_values(scenario)
-    except (RuntimeError, ValueError, AssertionError) as error:
+        check_config(scenario)
+    except ValueError as error:
         origin = _blame(first_line(error), source, overrides, overrides_source)
         raise ValueError(f"{origin}: {first_line(error)}") from None
     return scenario
 
 
 def _blame(message, source, overrides, overrides_source):
-    """Who a failed check is about: the override that set its key, else the source."""
-    named = re.findall(r"key '([\w.]+)", message)
+    """Who a failed check is about: the last override that set its key, else the source."""
+    named = re.findall(r"'([\w.]+)'", message)  # every quoted key path (and value)
     for override in reversed(overrides):
         key = str(override).partition("=")[0].strip()
         if any(name == key or f"{name}.".startswith(f"{key}.") or key.startswith(f"{name}.")
                for name in named):  # fmt: skip
             return f"{overrides_source} {override}"
     return source
-
-
-def _parse_yaml(text, source):
-    try:
-        return yaml_load(data=text) if text.strip() else {}
-    except yaml.YAMLError as error:
-        mark = getattr(error, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(error, "problem", None) or first_line(error)
-        raise ValueError(f"{source}: malformed YAML{where}: {problem}") from None
-
-
-def _apply_override(raw, override, where):
-    """Set ``key.path=value`` (YAML value) in the raw mapping ``raw``."""
-    key, equals, value_text = str(override).partition("=")
-    key = key.strip()
-    if not equals or not key or any(not part for part in key.split(".")):
-        raise ValueError("an override must read key=value, e.g. emg.k_max=150")
-    if not value_text.strip():
-        raise ValueError(f"an override needs a value after '=', e.g. {key}=...")
-    value = _parse_yaml(value_text, "the value")
-    node = raw
-    *parents, leaf = key.split(".")
-    for depth, name in enumerate(parents):
-        child = node.get(name)
-        if child is None:
-            child = node[name] = {}
-        if not isinstance(child, dict):
-            path = ".".join(parents[: depth + 1])
-            raise ValueError(f"key '{path}' holds a value, not a section: cannot set '{key}'")
-        node = child
-    node[leaf] = value
-
-
-def _leaves(obj, key="", checks=None):
-    """(key path, value, checks) of every value (number, string, list) in a loaded scenario."""
-    if obj is None or isinstance(obj, (bool, str, int, float, list, np.ndarray)):
-        yield key, obj, checks or _STRUCT_CHECKS.get(key, {})
-    elif key in _SELF_CHECKED:
-        try:
-            obj.check()
-        except ValueError as error:
-            raise ValueError(f"key '{key}': {error}") from None
-    else:
-        metadata = {f.name: f.metadata for f in dc.fields(obj)} if dc.is_dataclass(obj) else {}
-        for name in schema_fields(type(obj)):
-            path = f"{key}.{name}" if key else name
-            yield from _leaves(getattr(obj, name), path, metadata.get(name))
-
-
-def _check_values(scenario):
-    for key, value, checks in _leaves(scenario):
-        choices = checks.get("choices")
-        if choices is not None and value not in choices:
-            raise ValueError(f"key '{key}' = {value!r} is not one of {tuple(choices)}")
-        if isinstance(value, (bool, str)) or value is None:
-            continue
-        try:
-            numbers = np.array(value, dtype=float)
-        except ValueError:  # strings (plan.kinds), ragged lists: the TaskPlan checks them
-            continue
-        size = checks.get("size")
-        sizes = size if isinstance(size, tuple) else (size,)
-        if size is not None and not (numbers.ndim == 1 and len(numbers) in sizes):
-            count = " or ".join(str(n) for n in sizes)
-            raise ValueError(f"key '{key}' must hold {count} numbers, got {value!r}")
-        if not np.all(np.isfinite(numbers)):
-            raise ValueError(f"key '{key}' must be finite, got {value!r}")
-        if checks.get("positive") and np.any(numbers <= 0):
-            raise ValueError(f"key '{key}' must be positive, got {value!r}")
-        if not checks.get("signed") and np.any(numbers < 0):
-            raise ValueError(f"key '{key}' must not be negative, got {value!r}")
-        maximum = checks.get("maximum")
-        if maximum is not None and np.any(numbers > maximum):
-            raise ValueError(f"key '{key}' must be at most {maximum:g}, got {value!r}")
-        if checks.get("fraction") and np.any(numbers > 1):
-            raise ValueError(f"key '{key}' must lie in [0, 1], got {value!r}")
-    settings = scenario.reproduction
-    if settings.tracker == "lqr" and settings.weighting == "spatial":
-        raise ValueError(
-            "key 'reproduction.weighting' = 'spatial' does not go with tracker 'lqr' (it "
-            "tracks a state sequence: 'temporal' or 'forward')"
-        )
-    placements = scenario.scene.placements
-    box = np.array(placements.position_range, dtype=float).reshape(-1, 3) if all(
-        len(row) == 3 for row in placements.position_range
-    ) else None  # fmt: skip
-    if placements.position_range and (box is None or len(box) != 2 or np.any(box[0] > box[1])):
-        raise ValueError(
-            "key 'scene.placements.position_range' must be [[xmin, ymin, zmin], [xmax, ymax, "
-            f"zmax]] with each min <= max, got {placements.position_range}"
-        )
-    yaws = placements.yaw_range_deg
-    if yaws and yaws[0] > yaws[1]:
-        raise ValueError(
-            f"key 'scene.placements.yaw_range_deg' must be [smallest, largest], got {yaws}"
-        )
-    offsets = scenario.reproduction.start_offsets
-    if any(len(offset) != 3 for offset in offsets):
-        raise ValueError(f"key 'reproduction.start_offsets' must hold [dx, dy, dz] lists, got {offsets}")
-    if scenario.plant.time_step > MAX_TIME_STEP:
-        raise ValueError(
-            f"key 'plant.time_step' must be at most {MAX_TIME_STEP} s (the PD and the master "
-            f"are tuned for it), got {scenario.plant.time_step}"
-        )
-    calibration_samples = int(round(scenario.emg.calibration_duration * MYO_RATE))
-    if calibration_samples < scenario.emg.window:
-        raise ValueError(
-            f"key 'emg.calibration_duration' gives {calibration_samples} samples, fewer than "
-            f"the window 'emg.window' = {scenario.emg.window}: no envelope to calibrate"
-        )
-    if not scenario.emg.k_min < scenario.emg.k_max:
-        raise ValueError(
-            f"keys 'emg.k_min' < 'emg.k_max' required, got {scenario.emg.k_min}, "
-            f"{scenario.emg.k_max}"
-        )
-    if scenario.log_period < scenario.plant.time_step or not math.isclose(
-        scenario.log_period / scenario.plant.time_step,
-        round(scenario.log_period / scenario.plant.time_step),
-    ):
-        raise ValueError(
-            f"key 'log_period' must be a whole multiple of 'plant.time_step', got "
-            f"{scenario.log_period}"
-        )
-    if scenario.plan is not None:
-        try:
-            scenario.task_plan()
-        except ValueError as error:
-            raise ValueError(f"key 'plan': {error}") from None

@@ -4,11 +4,15 @@
 key nor the file. :func:`check_types` walks the raw data (``yaml.safe_load`` output) over a
 dataclass or Drake config struct and names the key path of the first problem, in one line;
 scenarios (:mod:`hemg_drake.scenario`) and sweep files (:mod:`hemg_drake.sweep`) share it.
+:func:`override_data` turns a ``--set key.path=value`` into the data of one more layer for
+``yaml_load_typed(defaults=...)``; :func:`parse_yaml` reads YAML text with one-line errors.
 """
 
 import dataclasses as dc
 import re
 import typing
+
+import yaml
 
 
 def first_line(error):
@@ -82,3 +86,51 @@ def check_types(value, schema, key=""):
         for name, item in value.items():
             value[name] = check_types(item, fields[name], f"{key}.{name}" if key else name)
     return value
+
+
+def parse_yaml(text, source):
+    """The data of YAML ``text``; malformed YAML is a one-line ValueError naming ``source``
+    (with the line and column)."""
+    try:
+        return yaml.safe_load(text) if text.strip() else None
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(error, "problem", None) or first_line(error)
+        raise ValueError(f"{source}: malformed YAML{where}: {problem}") from None
+
+
+def override_data(override, schema):
+    """``"dotted.key=value"`` (value in YAML syntax) as nested data ``{dotted: {key: value}}``.
+
+    The dotted key's sections are looked up in ``schema`` (a dataclass or Drake config struct)
+    so that a key that holds a value is refused as a section; an unknown name is left for
+    :func:`check_types` to name. Raises ValueError (one line) for a malformed override.
+    """
+    key, equals, value_text = str(override).partition("=")
+    key = key.strip()
+    if not equals or not key or any(not part for part in key.split(".")):
+        raise ValueError("an override must read key=value, e.g. emg.k_max=150")
+    if not value_text.strip():
+        raise ValueError(f"an override needs a value after '=', e.g. {key}=...")
+    value = parse_yaml(value_text, "the value")
+    *parents, leaf = key.split(".")
+    for depth, name in enumerate(parents):
+        fields = schema_fields(schema)
+        if name not in fields:
+            break
+        schema = _section(fields[name])
+        if schema is None:
+            path = ".".join(parents[: depth + 1])
+            raise ValueError(f"key '{path}' holds a value, not a section: cannot set '{key}'")
+    data = {leaf: value}
+    for name in reversed(parents):
+        data = {name: data}
+    return data
+
+
+def _section(schema):
+    """``schema`` (Optional[X] unwrapped) if it is a dataclass or a config struct, else None."""
+    if typing.get_origin(schema) is typing.Union:
+        schema = next(a for a in typing.get_args(schema) if a is not type(None))
+    return schema if dc.is_dataclass(schema) or hasattr(schema, "__fields__") else None

@@ -1,48 +1,33 @@
-"""Scenarios: the shipped files, one source per default, --set overrides, the placed scene,
-and errors that name the file (or the override) and the key."""
+"""Scenarios: the shipped files, configs that own their defaults and checks, --set
+overrides, the placed scene, and errors that name the file (or the override) and the key."""
 
+import ast
 import dataclasses as dc
-import inspect
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-
-from hemg_drake.control.clik import Clik
-from hemg_drake.emg.envelope import RmsEnvelope
-from hemg_drake.emg.gain import VariableGain
-from hemg_drake.learning.hsmm import HSMM
-from hemg_drake.learning.reproduce import reproduce
-from hemg_drake.learning.systems import HsmmLqrReproducer
-from hemg_drake.scenario import (
-    Scenario,
-    load_scenario,
-    parse_scenario,
-    shipped_scenario,
-)
-from hemg_drake.tasks.plan import TaskPlan
-from hemg_drake.teleop.mapping import WorkspaceMapping
+from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 
 import hemg_drake
+from hemg_drake.config_fields import check_config
+from hemg_drake.control.config import ClikConfig, PdConfig
+from hemg_drake.emg.config import EmgConfig
+from hemg_drake.learning.config import LearningConfig, ReproductionConfig
+from hemg_drake.scenario import Scenario, load_scenario, parse_scenario, shipped_scenario
+from hemg_drake.tasks.config import (
+    CotterPinParams,
+    DrawingParams,
+    PlacementsConfig,
+    PlanConfig,
+    SceneConfig,
+)
+from hemg_drake.teleop.config import FeedbackConfig, MappingConfig, MasterConfig, OperatorConfig
 
-
-def signature_defaults(function):
-    """Every keyword default of ``function``, read from its signature here (not through
-    the scenario module's helpers)."""
-    return {
-        name: parameter.default
-        for name, parameter in inspect.signature(function).parameters.items()
-        if parameter.default is not inspect.Parameter.empty
-    }
-
-
-def as_plain(value):
-    """Tuples and arrays as lists of floats, so a signature's (0.16, 0.12, 0.12) compares
-    with a scenario's [0.16, 0.12, 0.12]."""
-    if isinstance(value, (tuple, list, np.ndarray)):
-        return [float(v) for v in value]
-    return value
+PACKAGE = Path(hemg_drake.__file__).parent
 
 
 def Rz(yaw_deg):
@@ -83,40 +68,122 @@ def test_unknown_shipped_scenario():
         shipped_scenario("welding")
 
 
-# --- every default exists once: the scenario's equal the systems' ------------------------
+# --- configs beside their systems own the defaults and the checks ------------------------
+
+# Each section of a scenario and the config class of its package that it must be.
+SECTIONS = {
+    "scene": SceneConfig,
+    "mapping": MappingConfig,
+    "master": MasterConfig,
+    "operator": OperatorConfig,
+    "emg": EmgConfig,
+    "clik": ClikConfig,
+    "pd": PdConfig,
+    "feedback": FeedbackConfig,
+    "learning": LearningConfig,
+    "reproduction": ReproductionConfig,
+}
+CONFIGS = sorted(
+    {*SECTIONS.values(), CotterPinParams, DrawingParams, PlacementsConfig, PlanConfig},
+    key=lambda config: config.__name__,
+)
+
+
+@pytest.mark.parametrize("section", sorted(SECTIONS))
+def test_every_section_is_a_config_class_from_its_package(section):
+    config = getattr(Scenario(), section)
+    assert type(config) is SECTIONS[section]
+    # Beside its systems: hemg_drake.<package>.config.
+    assert type(config).__module__.split(".")[-1] == "config"
+
+
+@pytest.mark.parametrize("path", sorted(PACKAGE.glob("*/config.py")), ids=lambda p: p.parent.name)
+def test_config_modules_import_no_system(path):
+    # The standard library, numpy, the field helper; tasks also the argument checks and the
+    # TaskPlan a written-out plan must make (both numpy only).
+    allowed = {"dataclasses", "typing", "numpy", "hemg_drake.config_fields",
+               "hemg_drake._validate", "hemg_drake.tasks.plan"}  # fmt: skip
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    imported = {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import)
+                for alias in node.names}  # fmt: skip
+    imported |= {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
+    assert imported <= allowed, imported - allowed
+
+
+@pytest.mark.parametrize("config", CONFIGS, ids=lambda config: config.__name__)
+def test_config_defaults_round_trip_through_yaml(config):
+    text = yaml_dump_typed(config())
+    assert dc.asdict(yaml_load_typed(schema=config, data=text)) == dc.asdict(config())
+    # And every default is a value its own checks accept (but PlanConfig's: a scenario
+    # without a plan has none, and an empty plan is no plan).
+    if config is not PlanConfig:
+        check_config(config(), "section")
 
 
 @pytest.mark.parametrize(
-    "section, function, names",
+    "config, key, message",
     [
-        ("clik", Clik.__init__, ["gain", "method", "damping", "period"]),
-        ("operator", TaskPlan.perturbed, ["timing_std", "effort_std"]),
-        ("emg", RmsEnvelope.__init__, ["window", "per_channel"]),
-        ("emg", VariableGain.__init__, ["A_emg", "k_min", "k_max"]),
-        ("learning", HSMM.__init__, ["init", "reg_covar", "n_iter"]),
-        (
-            "reproduction",
-            reproduce,
-            ["weighting", "restoring_gain", "tracker", "horizon", "control_cost", "state_cost"],
-        ),
-        ("reproduction", HsmmLqrReproducer._construct, ["max_lead"]),
+        (EmgConfig(k_min=300.0, k_max=200.0), "k_min", r"keys 'x\.k_min' < 'x\.k_max'"),
+        (EmgConfig(calibration_duration=0.05), "calibration_duration",
+         r"key 'x\.calibration_duration' gives 10 samples, fewer than the window 'x\.window'"),
+        (ReproductionConfig(tracker="lqr", weighting="spatial"), "weighting",
+         r"key 'x\.weighting' = 'spatial' does not go with 'x\.tracker' = 'lqr'"),
+        (ReproductionConfig(start_offsets=[[0.0, 0.0]]), "start_offsets",
+         r"key 'x\.start_offsets' must hold \[dx, dy, dz\]"),
+        (PlacementsConfig(position_range=[[0.7, 0, 0], [0.6, 0, 0]]), "position_range",
+         r"key 'x\.position_range' must be .* each min <= max"),
+        (PlacementsConfig(yaw_range_deg=[10.0, -10.0]), "yaw_range_deg",
+         r"key 'x\.yaw_range_deg' must be \[smallest, largest\]"),
+        (PlanConfig(times=[0.0, 1.0], points=[[0, 0, 0]], kinds=["free"]), "points",
+         r"key 'x': TaskPlan field 'points'"),
+        (CotterPinParams(), "hold_force", r"key 'x\.hold_force' must be finite and > 0"),
+        (DrawingParams(), "pen_radius", r"key 'x\.pen_radius' must be finite and > 0"),
     ],
-)
-def test_every_default_is_the_systems_own(section, function, names):
-    config = getattr(Scenario(), section)
-    expected = signature_defaults(function)
-    for name in names:
-        assert as_plain(getattr(config, name)) == as_plain(expected[name]), f"{section}.{name}"
+)  # fmt: skip
+def test_each_config_check_names_its_key(config, key, message):
+    if isinstance(config, (CotterPinParams, DrawingParams)):
+        setattr(config, key, 0.0)  # their fields are checked on construction
+    with pytest.raises(ValueError, match=message):
+        config.check("x")
+    # The scenario calls it with the section's key path, after the fields' own checks.
+    with pytest.raises(ValueError, match=message.replace("'x", "'a\\.b")):
+        check_config(config, "a.b")
 
 
-def test_defaults_that_issue_13_found_twice():
-    # The values that used to differ between the scenario and the library.
-    scenario = Scenario()
-    assert scenario.operator.period == 0.005
-    assert scenario.emg.k_max == signature_defaults(VariableGain.__init__)["k_max"]
-    assert scenario.reproduction.weighting == signature_defaults(reproduce)["weighting"]
-    assert scenario.operator.path_std == [signature_defaults(TaskPlan.perturbed)["path_std"]] * 3
-    assert scenario.mapping.scale == WorkspaceMapping().scale
+def test_field_metadata_checks_name_the_key_under_the_prefix():
+    with pytest.raises(ValueError, match=r"^key 'mapping\.scale' must be positive, got 0"):
+        check_config(MappingConfig(scale=0.0), "mapping")
+    with pytest.raises(ValueError, match=r"^key 'scene\.position' must hold 0 or 3 numbers"):
+        check_config(SceneConfig(position=[1.0, 2.0]), "scene")
+    with pytest.raises(ValueError, match=r"^key 'operator\.path_std' must be finite"):
+        check_config(OperatorConfig(path_std=[0.0, math.nan, 0.0]), "operator")
+
+
+def test_loading_a_scenario_imports_no_system():
+    """Loading the shipped scenarios and building their plans and poses imports neither
+    numba, scipy nor any module of the package that defines a system."""
+    code = (
+        "import sys\n"
+        "from hemg_drake.scenario import load_scenario, shipped_scenario\n"
+        "for name in ('cotter_pin', 'drawing'):\n"
+        "    scenario = load_scenario(shipped_scenario(name))\n"
+        "    scenario.task_plan(), scenario.X_WT(), scenario.R_WM()\n"
+        "print(' '.join(sorted(sys.modules)))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            check=True, cwd=PACKAGE.parent)  # fmt: skip
+    modules = result.stdout.split()
+    assert "hemg_drake.scenario" in modules
+    assert not [m for m in modules if m.split(".")[0] in ("numba", "scipy")]
+    for known in ("hemg_drake.tasks.cotter_pin", "hemg_drake.tasks.drawing",
+                  "hemg_drake.teleop.mapping", "hemg_drake.robots.baxter"):  # fmt: skip
+        assert known not in modules
+    # No module of the package that was loaded defines a system or builds a diagram.
+    ours = [m for m in modules if m.startswith("hemg_drake.")]
+    for module in ours:
+        path = PACKAGE.parent.joinpath(*module.split("."))
+        source = (path / "__init__.py" if path.is_dir() else path.with_suffix(".py")).read_text()
+        assert "LeafSystem" not in source and "DiagramBuilder" not in source, module
 
 
 def test_plant_defaults_to_live_output_ports_and_yaml_can_sample_them():
@@ -179,8 +246,27 @@ def test_override_keeps_the_files_other_keys_and_later_overrides_win():
     assert scenario.emg.k_min == file.emg.k_min == 10.0
     assert scenario.mapping.scene_offset == file.mapping.scene_offset == [0.0, 0.0, 0.05]
     assert scenario.seed == file.seed == 1
-    # The copy is new: the original is unchanged.
+    # The copy is new, down to its sections' lists: the original is unchanged.
     assert file.replaced(["seed=7"]).seed == 7 and file.seed == 1
+    for copy in (file.replaced(["seed=7"]), file.replaced([])):
+        assert copy is not file
+        copy.operator.path_std[0] = 1.0
+        copy.plant.time_step = 5e-4
+    assert file.operator.path_std[0] == 0.003 and file.plant.time_step == 1e-3
+
+
+def test_values_are_checked_once_after_the_last_layer():
+    # The file's k_max is 200: k_min = 250 alone is refused, but overrides may pass through
+    # it on their way to a valid scenario (each layer is loaded, the result checked once).
+    with pytest.raises(ValueError, match=r"^--set emg\.k_min=250: keys 'emg\.k_min' < 'emg\.k_max'"):
+        load_scenario(shipped_scenario("cotter_pin"), overrides=["emg.k_min=250"])
+    scenario = load_scenario(shipped_scenario("cotter_pin"),
+                             overrides=["emg.k_min=250", "emg.k_max=300"])  # fmt: skip
+    assert (scenario.emg.k_min, scenario.emg.k_max) == (250.0, 300.0)
+    # A rule between two keys blames the last override that set either.
+    with pytest.raises(ValueError, match=r"^--set reproduction\.tracker=lqr: "):
+        load_scenario(shipped_scenario("cotter_pin"),
+                      overrides=["reproduction.weighting=spatial", "reproduction.tracker=lqr"])  # fmt: skip
 
 
 def test_override_of_a_section_given_in_yaml():
@@ -264,7 +350,8 @@ def test_moved_scene_moves_the_plan_and_the_map(task, yaw_deg):
 
 
 def test_home_scene_is_where_the_tasks_default_plans_stand():
-    from hemg_drake.tasks.cotter_pin import DEFAULT_POSITION, default_cotter_pin_plan
+    from hemg_drake.tasks.cotter_pin import DEFAULT_POSITION
+    from hemg_drake.tasks.plans import default_cotter_pin_plan
 
     # An empty scene.position is the task's default position, unturned.
     np.testing.assert_allclose(Scenario().X_WT().translation(), DEFAULT_POSITION)
@@ -357,6 +444,7 @@ def test_missing_file():
         ("emg: {calibration_duration: 0.05}", ["emg.calibration_duration", "emg.window"]),
         ("plant: {time_step: 0.01}", ["plant.time_step", "0.001"]),
         ("log_period: 0.0105", ["log_period", "multiple"]),
+        ("scene: {cotter_pin: {detent_length: 0.06}}", ["scene.cotter_pin.detent_length", "0.05"]),
         ("plan: {times: [0, 1], points: [[0, 0, 0]], kinds: [free]}", ["plan", "points"]),
         ("plan: {times: [0, 1], points: [[0, 0, 0], [1, 1, 1]], kinds: [fly]}", ["plan", "kinds"]),
     ],

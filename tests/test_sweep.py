@@ -201,11 +201,11 @@ def test_ray_backend_call_pattern_with_a_fake_ray(tmp_path, monkeypatch):
         "scenario: cotter_pin\naxes: [{name: emg.k_min, values: [-1, -2]}]\nseeds: [0]\n"
     )
     # Outside a loopback-only namespace a local Ray would bind the machine's address: refused.
-    monkeypatch.setattr(sweep, "only_loopback", lambda: False)
+    monkeypatch.setattr(sweep.runners, "only_loopback", lambda: False)
     with pytest.raises(ValueError, match="binds this machine's network address"):
         sweep.run_sweep(path, tmp_path / "refused", backend="ray", workers=3)
     assert fake.calls == []
-    monkeypatch.setattr(sweep, "only_loopback", lambda: True)
+    monkeypatch.setattr(sweep.runners, "only_loopback", lambda: True)
     records = sweep.run_sweep(path, tmp_path / "out", backend="ray", workers=3)
     assert [r["status"] for r in records] == ["failed", "failed"]
     (_, init), (_, options) = fake.calls[0], fake.calls[1]

@@ -3,7 +3,7 @@
 
 import dataclasses as dc
 
-from hemg_drake.config_fields import checked
+from hemg_drake.config_fields import checked, key_path
 
 # Where a demonstration's raw sEMG comes from (emg.source).
 EMG_SOURCES = ("synthetic", "myo", "libemg")
@@ -35,3 +35,20 @@ class EmgConfig:
     # as hemg-drake teleop runs).
     source: str = checked("synthetic", choices=EMG_SOURCES)
     libemg_tag: str = "emg"
+
+    def check(self, key=""):
+        """The rules between fields (their ranges are the fields' own): k_min < k_max, and a
+        calibration at least one RMS window long. Raises ValueError naming the keys under
+        ``key``."""
+        if not self.k_min < self.k_max:
+            raise ValueError(
+                f"keys '{key_path(key, 'k_min')}' < '{key_path(key, 'k_max')}' required, got "
+                f"{self.k_min}, {self.k_max}"
+            )
+        calibration_samples = int(round(self.calibration_duration * MYO_RATE))
+        if calibration_samples < self.window:
+            raise ValueError(
+                f"key '{key_path(key, 'calibration_duration')}' gives {calibration_samples} "
+                f"samples, fewer than the window '{key_path(key, 'window')}' = {self.window}: "
+                "no envelope to calibrate"
+            )

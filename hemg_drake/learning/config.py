@@ -3,7 +3,7 @@
 
 import dataclasses as dc
 
-from hemg_drake.config_fields import checked
+from hemg_drake.config_fields import checked, key_path
 
 # HSMM initialisations, reproduction state weightings, trackers and LQR state costs.
 HSMM_INITS = ("kmeans", "time", "polyline")
@@ -72,3 +72,18 @@ class ReproductionConfig:
     # Start offsets (m, in the scene frame T) of the extra reproductions that the full
     # demo runs, each from the demonstrations' mean start plus the offset.
     start_offsets: list[list[float]] = checked([], signed=True)
+
+    def check(self, key=""):
+        """The rules between fields: the "lqr" tracker takes a state-sequence weighting, and
+        each start offset is [dx, dy, dz]. Raises ValueError naming the key under ``key``."""
+        if self.tracker == "lqr" and self.weighting == "spatial":
+            raise ValueError(
+                f"key '{key_path(key, 'weighting')}' = 'spatial' does not go with "
+                f"'{key_path(key, 'tracker')}' = 'lqr' (it tracks a state sequence: 'temporal' "
+                "or 'forward')"
+            )
+        if any(len(offset) != 3 for offset in self.start_offsets):
+            raise ValueError(
+                f"key '{key_path(key, 'start_offsets')}' must hold [dx, dy, dz] lists, got "
+                f"{self.start_offsets}"
+            )

@@ -7,7 +7,6 @@ never from the current directory, and parsed with the package map entry
 ``package://hemg_drake_models/``.
 """
 
-import importlib.resources
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,28 +14,9 @@ import numpy as np
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.tree import Frame, ModelInstanceIndex
 
+# Found without pydrake (so the task plans can read the files too); public here as before.
+from hemg_drake.model_files import MODELS_DIR, find_models_dir  # noqa: F401
 
-def find_models_dir(candidates=None):
-    """The project's ``models/`` folder: the first candidate that holds its ``package.xml``.
-
-    By default: the package's own ``hemg_drake/models`` (package data in any install, found
-    with ``importlib.resources``; in a checkout a link to the repository's ``models/``), then
-    ``models/`` beside the package. If neither holds the models, the first candidate is
-    returned and loading a model raises ``FileNotFoundError`` naming the missing file.
-    """
-    if candidates is None:
-        candidates = (
-            Path(str(importlib.resources.files("hemg_drake") / "models")),
-            Path(__file__).resolve().parents[2] / "models",
-        )
-    candidates = [Path(candidate) for candidate in candidates]
-    for candidate in candidates:
-        if (candidate / "package.xml").is_file():
-            return candidate
-    return candidates[0]
-
-
-MODELS_DIR = find_models_dir()
 PACKAGE_NAME = "hemg_drake_models"
 BAXTER_URDF = MODELS_DIR / "baxter_right_arm.urdf"
 

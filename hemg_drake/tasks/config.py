@@ -1,11 +1,22 @@
 """Settings of the task scenes: where the scene stands, its physics, its placements, a plan.
+
+Besides the standard library and the field helper, this module imports the argument checks
+(``hemg_drake._validate``) and :class:`~hemg_drake.tasks.plan.TaskPlan` (numpy only), whose
+checks a written-out plan must pass.
 """
 
 import dataclasses as dc
-import typing
+
+import numpy as np
 
 from hemg_drake._validate import as_scalar
-from hemg_drake.config_fields import checked
+from hemg_drake.config_fields import checked, key_path
+from hemg_drake.tasks.plan import TaskPlan
+
+
+def _field_name(config, key, field):
+    """How a check names a field: its key path under ``key``, else ``Class.field``."""
+    return f"key '{key_path(key, field)}'" if key else f"{type(config).__name__}.{field}"
 
 
 @dc.dataclass
@@ -13,9 +24,10 @@ class CotterPinParams:
     """Physics of the cotter-pin scene (SI units); loadable from YAML (``scene.cotter_pin``).
 
     The placement is not a parameter: the scene frame T (:func:`scene_pose`) puts the ring's
-    centre, with the pin fully in, at T's origin. Every field is checked by :meth:`check` (the detent against the pin's length, read from
-    its model, by :func:`~hemg_drake.tasks.cotter_pin.add_cotter_pin_scene`)
-    (also called by :func:`add_cotter_pin_scene`), which raises ValueError naming the field.
+    centre, with the pin fully in, at T's origin. Every field is checked by :meth:`check`
+    (also called by :func:`~hemg_drake.tasks.cotter_pin.add_cotter_pin_scene`), which raises
+    ValueError naming the field; the detent against the pin's length (read from its model,
+    :func:`~hemg_drake.tasks.plans.pin_length`) by the scene and by ``Scenario.check``.
     """
 
     # Largest force (N) with which the detent holds the pin in.
@@ -33,13 +45,13 @@ class CotterPinParams:
     def __post_init__(self):
         self.check()
 
-    def check(self):
-        """Raise ValueError naming the first bad field; return self."""
-        name = type(self).__name__
+    def check(self, key=""):
+        """Raise ValueError naming the first bad field (its key path under ``key`` if given,
+        else ``CotterPinParams.field``); return self."""
         for field in ("hold_force", "detent_length", "detent_stiffness", "grasp_stiffness"):
-            as_scalar(f"{name}.{field}", getattr(self, field))
+            as_scalar(_field_name(self, key, field), getattr(self, field))
         for field in ("sliding_damping", "grasp_damping"):
-            as_scalar(f"{name}.{field}", getattr(self, field), strict=False)
+            as_scalar(_field_name(self, key, field), getattr(self, field), strict=False)
         return self
 
 
@@ -68,17 +80,17 @@ class DrawingParams:
     def __post_init__(self):
         self.check()
 
-    def check(self):
-        """Raise ValueError naming the first bad field; return self."""
-        name = type(self).__name__
+    def check(self, key=""):
+        """Raise ValueError naming the first bad field (its key path under ``key`` if given,
+        else ``DrawingParams.field``); return self."""
         for field in ("pen_radius", "pen_stiffness", "press_depth", "hover_height"):
-            as_scalar(f"{name}.{field}", getattr(self, field))
+            as_scalar(_field_name(self, key, field), getattr(self, field))
         for field in ("pen_dissipation", "pen_friction"):
-            as_scalar(f"{name}.{field}", getattr(self, field), strict=False)
+            as_scalar(_field_name(self, key, field), getattr(self, field), strict=False)
         if self.press_depth >= self.hover_height:
             raise ValueError(
-                f"{name}.press_depth ({self.press_depth}) must be less than hover_height "
-                f"({self.hover_height})"
+                f"{_field_name(self, key, 'press_depth')} ({self.press_depth}) must be less "
+                f"than {_field_name(self, key, 'hover_height')} ({self.hover_height})"
             )
         return self
 
@@ -94,13 +106,29 @@ class PlacementsConfig:
     # Range of scene yaws (deg): [smallest, largest].
     yaw_range_deg: list[float] = checked([], signed=True, size=(0, 2))
 
+    def check(self, key=""):
+        """The ranges' order: each min <= max. Raises ValueError naming the key."""
+        box = self.position_range
+        rows = np.array(box, dtype=float) if all(len(row) == 3 for row in box) else None
+        if box and (rows is None or rows.shape != (2, 3) or np.any(rows[0] > rows[1])):
+            raise ValueError(
+                f"key '{key_path(key, 'position_range')}' must be [[xmin, ymin, zmin], [xmax, "
+                f"ymax, zmax]] with each min <= max, got {box}"
+            )
+        yaws = self.yaw_range_deg
+        if yaws and yaws[0] > yaws[1]:
+            raise ValueError(
+                f"key '{key_path(key, 'yaw_range_deg')}' must be [smallest, largest], got {yaws}"
+            )
+
 
 @dc.dataclass
 class SceneConfig:
     """Where the task's object stands, and its physics (the scene frame T)."""
 
     # Position of the scene frame T in the world (m): the cotter pin's ring centre with the
-    # pin in; the sheet's top-surface centre. Empty: the task's default (DEFAULT_POSITIONS).
+    # pin in; the sheet's top-surface centre. Empty: the task's default
+    # (tasks.placement.DEFAULT_POSITIONS).
     # The operator's plan and the workspace map move with it.
     position: list[float] = checked([], signed=True, size=(0, 3))
     # Turn of the scene about world +z (deg): the fixture, the sheet and its strokes, the
@@ -129,3 +157,20 @@ class PlanConfig:
     pen_down: list[bool] = dc.field(default_factory=list)
     # Operator's effort per segment relative to nominal, > 0 (empty: all 1).
     effort: list[float] = dc.field(default_factory=list)
+
+    def task_plan(self):
+        """The :class:`TaskPlan` written out here, in the scene frame T (empty optional lists
+        take TaskPlan's defaults). Raises ValueError naming the plan's field at fault."""
+        data = dc.asdict(self)
+        for name in ("pen_down", "effort"):
+            if not data[name]:
+                del data[name]
+        return TaskPlan.from_dict(data)
+
+    def check(self, key=""):
+        """Raise ValueError (naming ``key``) if the fields make no valid :class:`TaskPlan`."""
+        try:
+            self.task_plan()
+        except ValueError as error:
+            where = f"key '{key}'" if key else type(self).__name__
+            raise ValueError(f"{where}: {error}") from None

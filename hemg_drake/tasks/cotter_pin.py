@@ -7,15 +7,13 @@ axis, world +z** (up). Joint position x = withdrawal: 0 = in, ``pin_length`` (0.
 
 What holds the pin (all along the joint, nothing collides):
 
-- a **detent**, in :class:`PinResistance` (reference :func:`detent_force`): a spring of
-  ``detent_stiffness`` towards x = 0 saturated at ``hold_force``, acting while
-  x < ``detent_length`` (3 mm); past it the pin is free of the detent. A pull below
+- a **detent**, in :class:`PinResistance`: a spring of ``detent_stiffness`` towards x = 0
+  saturated at ``hold_force``, acting while x < ``detent_length`` (3 mm); past it the pin is free of the detent. A pull below
   ``hold_force`` only moves the pin by pull / ``detent_stiffness`` (about 1 mm); a pull above
   it pops the pin out. A position-only force: no stiction threshold to regularise, so it is
   deterministic and stable at a 1 ms step.
-- **sliding friction**, viscous: -``sliding_damping`` * xdot, in the same system (twin of
-  both: :func:`pin_resistance_force`). It is explicit (sampled once per step, like the grasp
-  bushing's damper) rather than the joint's own damping: Drake's SAP solver then has no
+- **sliding friction**, viscous: -``sliding_damping`` * xdot, in the same system. It is
+  explicit (sampled once per step, like the grasp bushing's damper) rather than the joint's own damping: Drake's SAP solver then has no
   implicit term to solve for and the scene's plant steps about 1.6x faster, while the
   explicit term stays far inside its stability limit (see ``_STABILITY_MARGIN``). (A
   Coulomb term would need a velocity regularisation stiff enough to chatter at 1 ms on a
@@ -31,7 +29,7 @@ port and a mode for nothing. The interaction force ``f_WE`` is the bushing's for
 tool in W: pointing down (-z) while the slave pulls on a pin that holds.
 
 Tuning with :class:`~hemg_drake.control.pd.VariableGainPd` (default per-joint scale), CLIK
-following :func:`default_cotter_pin_plan` (0.10 m of travel): the measured peak pulls on
+following :func:`~hemg_drake.tasks.plans.default_cotter_pin_plan` (0.10 m of travel): the measured peak pulls on
 the tool, 18 N at K = 5, 34 N at K = 10 and 48 N at K = 15, leave the pin in
 (``hold_force`` = 50 N), while K = 20 and above pull it out (the EMG chain's defaults give
 K = 10 at rest and 100 at full contraction); ``docs/tasks.md`` lists the runs.
@@ -39,28 +37,23 @@ K = 10 at rest and 100 at full contraction); ``docs/tasks.md`` lists the runs.
 
 import copy
 import dataclasses as dc
-import functools
 
 import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
 from pydrake.math import RigidTransform
-from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import LinearBushingRollPitchYaw
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import BasicVector_, LeafSystem_, NumericParameterIndex
+from pydrake.systems.scalar_conversion import TemplateSystem
 
-from hemg_drake.robots.baxter import MODELS_DIR, make_parser
+from hemg_drake.robots.baxter import make_parser
 from hemg_drake.tasks.config import CotterPinParams
-from hemg_drake.tasks.plan import TaskPlan
+from hemg_drake.tasks.placement import DEFAULT_POSITIONS, checked_scene_pose
+from hemg_drake.tasks.plans import COTTER_PIN_MODEL, PULL_AXIS_W, pin_geometry, pin_length
 from hemg_drake.tasks.sensors import BushingForceSensor
-from hemg_drake.tasks.placement import scene_pose
-from hemg_drake._validate import as_scalar
 
-COTTER_PIN_MODEL = MODELS_DIR / "cotter_pin.sdf"
-# The pin slides out along world +z (the model's z; the scene only turns about z).
-PULL_AXIS_W = np.array([0.0, 0.0, 1.0])
-# The tool point p_WE at BaxterArm.home_positions, to the millimetre: where the ring waits
-# by default (the scene frame T's origin, ``scene.position`` in a scenario).
-HOME_TOOL_POINT = (0.642, -0.837, 0.120)
-DEFAULT_POSITION = HOME_TOOL_POINT
+# Where the ring waits by default (the scene frame T's origin, ``scene.position`` in a
+# scenario): the tool point p_WE at BaxterArm.home_positions, to the millimetre.
+DEFAULT_POSITION = DEFAULT_POSITIONS["cotter_pin"]
 # The pin's explicit forces (detent and grasp springs k, friction and grasp dampers c, all
 # sampled once per step) on its mass m are stable at the plant's step dt while
 # (omega dt)^2 + 2 c dt / m < 4 (omega^2 = k / m; the discrete plant's semi-implicit Euler
@@ -70,112 +63,85 @@ _STABILITY_MARGIN = 2.0
 
 
 
-@functools.cache
-def _pin_model_geometry():
-    """(pin length, ring offset above the hole's mouth) read from the model file (m)."""
-    plant = MultibodyPlant(0.0)
-    (model,) = make_parser(plant).AddModels(str(COTTER_PIN_MODEL))
-    tip = plant.GetFrameByName("pin_tip", model).GetFixedPoseInBodyFrame().translation()
-    ring = plant.GetFrameByName("ring", model).GetFixedPoseInBodyFrame().translation()
-    return float(-tip[2]), ring.copy()
+# double and AutoDiffXd: the law branches on x, which a symbolic x cannot.
+@TemplateSystem.define("PinResistance_", T_list=(float, AutoDiffXd))
+def PinResistance_(T):
+    class Impl(LeafSystem_[T]):
+        """The detent and the sliding friction that hold the cotter pin, as a generalized force.
 
+        .. pydrake_system::
 
-def pin_length():
-    """Depth (m) the pin must rise to be out: its frame (at the hole's mouth) to ``pin_tip``."""
-    return _pin_model_geometry()[0]
+            name: PinResistance
+            input_ports:
+            - pin_state
+            output_ports:
+            - generalized_force
 
+        ``pin_state`` is the pin model instance's [x; xdot] (m, m/s; connect
+        ``plant.get_state_output_port(pin_model)``). ``generalized_force`` (1, N along the
+        pull axis) is the detent's spring minus the sliding friction::
 
-def detent_force(x, *, hold_force, detent_length, detent_stiffness):
-    """Force of the detent along the pull axis (N) at withdrawal ``x`` (m); twin of the system.
+            tau = -clip(detent_stiffness * x, -hold_force, hold_force) * [x < detent_length]
+                  - sliding_damping * xdot
 
-    -clip(detent_stiffness * x, -hold_force, hold_force) for x < detent_length, else 0: a
-    spring back to x = 0 that gives at most ``hold_force``, and lets go past the detent.
+        a spring back to x = 0 that gives at most ``hold_force`` and lets go past the detent
+        (a position-only law: no stiction threshold), and viscous friction. This system is
+        the law's one implementation. It drives the pin's own joint actuator
+        (``pin_resistance``, added by :func:`add_cotter_pin_scene`) through
+        ``plant.get_actuation_input_port(pin_model)``, so the plant's
+        ``applied_generalized_force`` input stays free for users.
 
-    Parameters
-    ----------
-    x : float or array, pin withdrawal (m).
+        Parameters (a numeric parameter of the Context, defaults from ``config``):
+        [hold_force (N), detent_length (m), detent_stiffness (N/m), sliding_damping (N s/m)].
+        Scalar-convertible between double and AutoDiffXd.
 
-    Returns
-    -------
-    float or array shaped like ``x``, N (negative: pushes the pin in).
-    """
-    x = np.asarray(x, dtype=float)
-    spring = -np.clip(detent_stiffness * x, -hold_force, hold_force)
-    return np.where(x < detent_length, spring, 0.0)[()]
-
-
-def pin_resistance_force(x, xdot, *, hold_force, detent_length, detent_stiffness, sliding_damping):
-    """Everything that resists the pin along the pull axis (N): detent and sliding friction.
-
-    ``detent_force(x, ...) - sliding_damping * xdot``: the twin of :class:`PinResistance`.
-
-    Parameters
-    ----------
-    x, xdot : float or arrays of one shape: withdrawal (m) and its rate (m/s).
-
-    Returns
-    -------
-    float or array shaped like ``x``, N.
-    """
-    detent = detent_force(
-        x, hold_force=hold_force, detent_length=detent_length, detent_stiffness=detent_stiffness
-    )
-    return detent - sliding_damping * np.asarray(xdot, dtype=float)[()]
-
-
-class PinResistance(LeafSystem):
-    """The detent and the sliding friction that hold the cotter pin, as a generalized force.
-
-    .. pydrake_system::
-
-        name: PinResistance
-        input_ports:
-        - pin_state
-        output_ports:
-        - generalized_force
-
-    ``pin_state`` is the pin model instance's [x; xdot] (m, m/s; connect
-    ``plant.get_state_output_port(pin_model)``). ``generalized_force`` (1, N along the pull
-    axis) is :func:`pin_resistance_force`: the detent's spring minus ``sliding_damping``
-    times the pin's speed. It drives the pin's own joint actuator (``pin_resistance``, added
-    by :func:`add_cotter_pin_scene`) through ``plant.get_actuation_input_port(pin_model)``,
-    so the plant's ``applied_generalized_force`` input stays free for users.
-
-    Timing: stateless, direct feedthrough of the state; the discrete plant samples it once
-    per step, so the detent spring and the friction are explicit (``add_cotter_pin_scene``
-    checks their stability at the plant's step).
-    """
-
-    def __init__(self, *, hold_force, detent_length, detent_stiffness, sliding_damping):
+        Timing: stateless, direct feedthrough of the state; the discrete plant samples it
+        once per step, so the detent spring and the friction are explicit
+        (``add_cotter_pin_scene`` checks their stability at the plant's step).
         """
-        Parameters
-        ----------
-        hold_force, detent_length, detent_stiffness, sliding_damping : float, N, m, N/m,
-            N s/m (see :class:`CotterPinParams`).
-        """
-        LeafSystem.__init__(self)
-        self._law = dict(
-            hold_force=as_scalar("hold_force", hold_force),
-            detent_length=as_scalar("detent_length", detent_length),
-            detent_stiffness=as_scalar("detent_stiffness", detent_stiffness),
-            sliding_damping=as_scalar("sliding_damping", sliding_damping, strict=False),
-        )
-        self.pin_state_input = self.DeclareVectorInputPort("pin_state", 2)
-        self.generalized_force_output = self.DeclareVectorOutputPort(
-            "generalized_force",
-            1,
-            self._calc_generalized_force,
-            prerequisites_of_calc={self.pin_state_input.ticket()},
-        )
 
-    def _calc_generalized_force(self, context, output):
-        x, xdot = self.pin_state_input.Eval(context).tolist()
-        # pin_resistance_force's law on plain floats (numpy costs more than the arithmetic
-        # at 1 kHz; the tests compare the two).
-        law = self._law
-        spring = -min(max(law["detent_stiffness"] * x, -law["hold_force"]), law["hold_force"])
-        detent = spring if x < law["detent_length"] else 0.0
-        output.SetAtIndex(0, detent - law["sliding_damping"] * xdot)
+        def _construct(self, *, config, converter=None):
+            """
+            Parameters
+            ----------
+            config : CotterPinParams, the law's defaults (its other fields are the grasp's).
+            """
+            LeafSystem_[T].__init__(self, converter)
+            config = copy.deepcopy(config).check()
+            self._config = config  # construction only, for scalar conversion
+            self._law = self.DeclareNumericParameter(
+                BasicVector_[T](
+                    [config.hold_force, config.detent_length, config.detent_stiffness,
+                     config.sliding_damping]  # fmt: skip
+                )
+            )
+            self.pin_state_input = self.DeclareVectorInputPort("pin_state", 2)
+            self.generalized_force_output = self.DeclareVectorOutputPort(
+                "generalized_force",
+                1,
+                self._calc_generalized_force,
+                prerequisites_of_calc={
+                    self.pin_state_input.ticket(),
+                    self.numeric_parameter_ticket(NumericParameterIndex(self._law)),
+                },
+            )
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, config=other._config, converter=converter)
+
+        def _calc_generalized_force(self, context, output):
+            # Plain floats (or AutoDiffXd objects): numpy scalars cost more than the arithmetic.
+            x, xdot = self.pin_state_input.Eval(context).tolist()
+            law = context.get_numeric_parameter(self._law).CopyToVector()
+            hold, length, stiffness, damping = law.tolist()
+            spring = -min(max(stiffness * x, -hold), hold)
+            detent = spring if x < length else 0.0 * x
+            output.SetAtIndex(0, detent - damping * xdot)
+
+    return Impl
+
+
+PinResistance = PinResistance_[None]
 
 
 @dc.dataclass(frozen=True, eq=False)
@@ -236,15 +202,7 @@ class CotterPinScene:
         if builder.HasSubsystemNamed(names[0]):
             return tuple(builder.GetSubsystemByName(name) for name in names)
         plant = self.plant
-        detent = builder.AddNamedSystem(
-            names[0],
-            PinResistance(
-                hold_force=self.params.hold_force,
-                detent_length=self.params.detent_length,
-                detent_stiffness=self.params.detent_stiffness,
-                sliding_damping=self.params.sliding_damping,
-            ),
-        )
+        detent = builder.AddNamedSystem(names[0], PinResistance(config=self.params))
         builder.Connect(plant.get_state_output_port(self.model_instance), detent.pin_state_input)
         builder.Connect(
             detent.generalized_force_output, plant.get_actuation_input_port(self.model_instance)
@@ -292,7 +250,7 @@ def add_cotter_pin_scene(plant, arm, *, params=None, X_WT=None):
             f"CotterPinParams.detent_length must be shorter than the pin ({pin_length()} m), "
             f"got {params.detent_length}"
         )
-    X_WT = scene_pose(DEFAULT_POSITION) if X_WT is None else _check_pose(X_WT)
+    X_WT = checked_scene_pose(X_WT, "cotter_pin")
     if plant.is_finalized():
         raise ValueError("add_cotter_pin_scene must be called before plant.Finalize()")
     dt = plant.time_step()
@@ -315,7 +273,7 @@ def add_cotter_pin_scene(plant, arm, *, params=None, X_WT=None):
             f"(omega dt)^2 + 2 c dt / m = {stability:.2f} > {_STABILITY_MARGIN}"
         )
     # The ring's offset above the fixture frame (the hole's mouth) is the model's.
-    p_FR = _pin_model_geometry()[1]
+    p_FR = pin_geometry()[1]
     plant.WeldFrames(
         plant.world_frame(),
         plant.GetFrameByName("fixture", model),
@@ -340,48 +298,4 @@ def add_cotter_pin_scene(plant, arm, *, params=None, X_WT=None):
         pin_length=pin_length(),
         params=copy.deepcopy(params),  # the scene's own: later edits cannot change it
         X_WT=RigidTransform(X_WT),
-    )
-
-
-def _check_pose(X_WT):
-    """X_WT itself if it is a pose that keeps world z up (a turn about z only)."""
-    if not isinstance(X_WT, RigidTransform):
-        raise ValueError(f"X_WT must be a RigidTransform, got {type(X_WT).__name__}")
-    z_T = X_WT.rotation().matrix()[:, 2]
-    if not np.allclose(z_T, PULL_AXIS_W, atol=1e-9):
-        raise ValueError("X_WT may only turn the scene about world z (its yaw)")
-    return X_WT
-
-
-def default_cotter_pin_plan(*, X_WT=None, margin=0.015, carry=0.035):
-    """The pulling task in the paper's N = 4 phases, as timed tool-point waypoints in W.
-
-    1. hold (0-0.5 s, free): the tool waits at the ring;
-    2. pull (0.5-2.0 s, forceful): up the pull axis by ``pin_length + margin``;
-    3. carry away (2.0-3.0 s, free): a further ``carry`` along the axis, clear of the fixture;
-    4. settle (3.0-3.5 s, free): hold still.
-
-    The whole travel (0.10 m by default) stays inside the master's mapped workspace.
-
-    Parameters
-    ----------
-    X_WT : RigidTransform, optional
-        The scene frame: its origin, the ring, is the first waypoint (default as
-        :func:`add_cotter_pin_scene`).
-    margin, carry : float, m, >= 0.
-
-    Returns
-    -------
-    TaskPlan
-    """
-    X_WT = scene_pose(DEFAULT_POSITION) if X_WT is None else _check_pose(X_WT)
-    margin = as_scalar("margin", margin, strict=False)
-    carry = as_scalar("carry", carry, strict=False)
-    pulled = pin_length() + margin
-    p_WR = X_WT.translation()
-    rises = np.array([0.0, 0.0, pulled, pulled + carry, pulled + carry])
-    return TaskPlan(
-        times=np.array([0.0, 0.5, 2.0, 3.0, 3.5]),
-        points=p_WR + rises[:, None] * PULL_AXIS_W,
-        kinds=("free", "forceful", "free", "free"),
     )

@@ -26,8 +26,10 @@ modulus for the paper, neither known for a felt tip, and a thin sheet is the cas
 hydroelastic pressure fields are least accurate. Relying on ``hydroelastic_with_fallback``
 gave the same point contact only because neither geometry had hydroelastic properties.
 
-:func:`default_drawing_plan` draws a line, an arc and a zig-zag with pen lifts between them,
-the six steps I-VI of Fig. 10 (see :func:`drawing_steps`); pen-down segments put the tip
+The plan (:func:`~hemg_drake.tasks.plans.default_drawing_plan`, beside the other plans, so
+that a scenario builds it without a plant) draws a line, an arc and a zig-zag with pen lifts
+between them, the six steps I-VI of Fig. 10 (see :func:`~hemg_drake.tasks.plans.
+drawing_steps`); pen-down segments put the tip
 ``press_depth`` below the paper so that the pen presses. The pen's contact force is
 ``f_WE`` of a :class:`~hemg_drake.tasks.sensors.ContactForceSensor` on the hand.
 """
@@ -40,17 +42,14 @@ from pydrake.geometry import AddContactMaterial, Cylinder, ProximityProperties, 
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import ContactModel, CoulombFriction
 
-from hemg_drake.tasks.config import DrawingParams
 from hemg_drake.robots.baxter import MODELS_DIR, make_parser
-from hemg_drake.tasks.plan import TaskPlan
+from hemg_drake.tasks.config import DrawingParams
+from hemg_drake.tasks.placement import DEFAULT_POSITIONS, checked_scene_pose
 from hemg_drake.tasks.sensors import ContactForceSensor
-from hemg_drake.tasks.placement import scene_pose, to_world
-from hemg_drake._validate import as_scalar
 
 DRAWING_MODEL = MODELS_DIR / "drawing.sdf"
-# Centre of the sheet's top surface by default (m, W): 3 cm under the tool point at
-# BaxterArm.home_positions (0.642, -0.837, 0.120), to 3 mm.
-DEFAULT_POSITION = (0.64, -0.84, 0.09)
+# Centre of the sheet's top surface by default (m, W; hemg_drake.tasks.placement says why).
+DEFAULT_POSITION = DEFAULT_POSITIONS["drawing"]
 # A4, as in the model file: (x, y) extent of the sheet (m).
 SHEET_SIZE = (0.210, 0.297)
 _PEN_GREEN = (0.1, 0.6, 0.25, 1.0)
@@ -135,7 +134,7 @@ def add_drawing_scene(plant, arm, *, params=None, X_WT=None):
         other than point contact, or a plant without a SceneGraph.
     """
     params = (DrawingParams() if params is None else params).check()
-    X_WT = _pose(X_WT)
+    X_WT = checked_scene_pose(X_WT, "drawing", what="sheet")
     if plant.is_finalized():
         raise ValueError("add_drawing_scene must be called before plant.Finalize()")
     if not plant.time_step() > 0:
@@ -165,17 +164,6 @@ def add_drawing_scene(plant, arm, *, params=None, X_WT=None):
     )
 
 
-def _pose(X_WT):
-    """The scene frame, default or checked to turn about world z only."""
-    if X_WT is None:
-        return scene_pose(DEFAULT_POSITION)
-    if not isinstance(X_WT, RigidTransform):
-        raise ValueError(f"X_WT must be a RigidTransform, got {type(X_WT).__name__}")
-    if not np.allclose(X_WT.rotation().matrix()[:, 2], [0.0, 0.0, 1.0], atol=1e-9):
-        raise ValueError("X_WT may only turn the sheet about world z (its yaw)")
-    return X_WT
-
-
 def _add_pen(plant, arm, params):
     """Tip sphere (collision and visual) ending at the tool point, and a pen body (visual)."""
     hand = arm.hand_frame.body()
@@ -200,118 +188,4 @@ def _add_pen(plant, arm, params):
         Cylinder(0.0095, length),
         "pen_barrel",
         np.array(_PEN_GREEN),
-    )
-
-
-def _stroke_shapes():
-    """The three strokes as (k, 2) arrays of sheet coordinates (m) from the sheet's centre."""
-    line = np.array([[-0.05, -0.09], [0.06, -0.09]])
-    angle = np.linspace(-0.5 * np.pi, 0.5 * np.pi, 7)
-    arc = np.column_stack([0.005 + 0.045 * np.cos(angle), -0.01 + 0.045 * np.sin(angle)])
-    zigzag = np.column_stack([[-0.02, 0.02, -0.02, 0.02, -0.02], np.linspace(0.05, 0.11, 5)])
-    return line, arc, zigzag
-
-
-# Timing (s) of the moves around the strokes: brisk, as a person lifts and moves a pen.
-_PRESS_TIME = 0.2
-_LIFT_TIME = 0.3
-_TRAVEL_TIME = 0.5
-# A pen-down chord takes length / _DRAW_SPEED plus _TURN_TIME per half turn (pi rad) of the
-# corner that ends it: people slow down before sharp turns (the corners of the zig-zag get
-# the most time, the arc's gentle bends little). Chosen so that the line takes 1.2 s and an
-# arc chord 0.3 s.
-_DRAW_SPEED = 0.13
-_TURN_TIME = 0.75
-# Pen-down segments start and end this high above the paper (m): the arm's lag and
-# overshoot at the end of a free move stay clear of the paper.
-_CLEARANCE = 0.005
-
-
-def _chord_times(xy):
-    """Duration (s) of each chord of a stroke's corners ``xy`` (k, 2), by its length and turn.
-
-    The last chord turns by 90 degrees into the pen's lift.
-    """
-    chords = np.diff(xy, axis=0)
-    lengths = np.linalg.norm(chords, axis=1)
-    directions = chords / lengths[:, None]
-    cosines = np.sum(directions[:-1] * directions[1:], axis=1)
-    turns = np.append(np.arccos(np.clip(cosines, -1.0, 1.0)), 0.5 * np.pi)
-    return lengths / _DRAW_SPEED + _TURN_TIME * turns / np.pi
-
-
-def default_drawing_plan(params=None, *, X_WT=None):
-    """Three strokes with pen lifts between them: the paper's six steps I-VI (Fig. 10).
-
-    I stroke 1, a 11 cm line; II lift and move; III stroke 2, a 14 cm half circle (six
-    chords); IV lift and move; V stroke 3, a 17 cm zig-zag; VI lift and back. The plan
-    starts and ends ``hover_height`` above the sheet's centre (by default where the tool
-    point is at the arm's home pose). Around each stroke: descend (free) to 5 mm above the
-    paper, press (pen down) to ``press_depth`` below it, draw (pen down, one segment per
-    chord), release (pen down) to 5 mm above, lift (free) to ``hover_height``. Pen-down
-    segments are forceful, the others free. 11.7 s in all; chord durations by length and
-    turn (people slow down before sharp corners), brisk pen lifts.
-
-    Parameters
-    ----------
-    params : DrawingParams, optional; the plan's heights.
-    X_WT : RigidTransform, optional
-        The sheet's frame (as :func:`add_drawing_scene`); the plan is written in it and
-        mapped to W, so the strokes turn with the sheet.
-
-    Returns
-    -------
-    TaskPlan, waypoints in W.
-    """
-    params = (DrawingParams() if params is None else params).check()
-    X_WT = _pose(X_WT)
-    center = np.zeros(3)
-    hover = params.hover_height
-    touch = _CLEARANCE
-    press = -params.press_depth
-    above_center = np.array([*center[:2], hover])
-    points, durations, pen_down = [above_center], [], []
-
-    def go(point, duration, down):
-        points.append(np.asarray(point, dtype=float))
-        durations.append(duration)
-        pen_down.append(down)
-
-    for shape in _stroke_shapes():
-        xy = center[:2] + shape
-        go([*xy[0], hover], _TRAVEL_TIME, False)
-        go([*xy[0], touch], _LIFT_TIME, False)
-        go([*xy[0], press], _PRESS_TIME, True)
-        for corner, chord_time in zip(xy[1:], _chord_times(xy)):
-            go([*corner, press], chord_time, True)
-        go([*xy[-1], touch], _PRESS_TIME, True)
-        go([*xy[-1], hover], _LIFT_TIME, False)
-    go(above_center, _TRAVEL_TIME, False)
-    times = np.concatenate([[0.0], np.cumsum(durations)])
-    kinds = tuple("forceful" if down else "free" for down in pen_down)
-    points_W = to_world(X_WT, np.array(points))
-    return TaskPlan(times=times, points=points_W, kinds=kinds, pen_down=tuple(pen_down))
-
-
-def drawing_steps(plan):
-    """Boundaries of the six steps I-VI of a drawing plan (s), shape (7,).
-
-    Step I runs from the plan's start to the end of the first pen-down stretch (stroke 1),
-    II from there to the start of the second stretch, and so on; VI from the end of the third
-    stroke to the plan's end. Works on perturbed plans (it reads ``pen_down``).
-
-    Raises
-    ------
-    ValueError
-        The plan does not have exactly three pen-down stretches.
-    """
-    down = np.asarray(plan.pen_down, dtype=int)
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], down, [0]])))
-    if edges.size != 6:
-        raise ValueError(
-            f"a drawing plan needs exactly 3 pen-down stretches, got {edges.size // 2}"
-        )
-    starts, ends = plan.times[edges[0::2]], plan.times[edges[1::2]]
-    return np.array(
-        [plan.start_time, ends[0], starts[1], ends[1], starts[2], ends[2], plan.end_time]
     )

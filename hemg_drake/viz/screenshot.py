@@ -12,7 +12,8 @@ from hemg_drake.fileio import write_bytes_atomic
 # Meshcat needs WebGL; headless Chromium only has it through SwiftShader (software).
 # Without these flags the screenshot is a blank page.
 WEBGL_FLAGS = ("--headless=new", "--use-angle=swiftshader", "--enable-unsafe-swiftshader")
-# A throw-away profile that talks to no one (also the live teleop page's, HeadlessPage).
+# A throw-away profile that talks to no one (also the live teleop page's in the tests,
+# tests/tooling/headless_page.py).
 QUIET_FLAGS = (
     "--no-sandbox",
     "--no-first-run",

@@ -352,7 +352,7 @@ def _draw_first_stroke(orientation_gain):
 
     from hemg_drake.diagrams.plan_follower import build_plan_follower
     from hemg_drake.scenario import load_scenario, shipped_scenario
-    from hemg_drake.tasks.drawing import drawing_steps
+    from hemg_drake.tasks.plans import drawing_steps
 
     scenario = load_scenario(
         shipped_scenario("drawing"), overrides=[f"clik.orientation_gain={orientation_gain}"]

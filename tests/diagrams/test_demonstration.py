@@ -304,7 +304,7 @@ def test_position_error_feedback_pulls_the_stylus_back_to_a_held_slave(pin_scena
 
 @pytest.mark.slow
 def test_drawing_inks_three_strokes_with_high_stiffness_on_the_paper():
-    from hemg_drake.tasks.drawing import drawing_steps
+    from hemg_drake.tasks.plans import drawing_steps
     from hemg_drake.viz.ink import in_contact, ink_strokes
 
     scenario = load_scenario(shipped_scenario("drawing"))

@@ -12,7 +12,7 @@ from hemg_drake.diagrams.plan_follower import build_plan_follower
 from hemg_drake.diagrams.station import make_slave_station
 from hemg_drake.robots.baxter import HOME_POSITIONS
 from hemg_drake.scenario import Scenario, load_scenario, shipped_scenario
-from hemg_drake.tasks import cotter_pin, drawing
+from hemg_drake.tasks import cotter_pin, drawing, plans
 
 GRAVITY = 9.81
 # A scene moved and turned away from its default place (m, deg).
@@ -278,7 +278,7 @@ def test_a_moved_turned_sheet_and_its_strokes_stand_where_the_scenario_says(draw
     # The sheet's long side (y) turned by the yaw.
     np.testing.assert_allclose(X_WS.rotation().matrix(), rotation_z(YAW_DEG), atol=1e-12)
     # The plan is the default one turned about the sheet's centre and carried to it.
-    default = drawing.default_drawing_plan()
+    default = plans.default_drawing_plan()
     plan = moved.task_plan()
     expected = (default.points - drawing.DEFAULT_POSITION) @ rotation_z(YAW_DEG).T + MOVED_SHEET
     np.testing.assert_allclose(plan.points, expected, atol=1e-12)

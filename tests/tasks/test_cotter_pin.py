@@ -8,6 +8,7 @@ import itertools
 
 import numpy as np
 import pytest
+from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
 from pydrake.common.yaml import yaml_load_typed
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant
@@ -15,7 +16,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from hemg_drake.diagrams.plan_follower import build_plan_follower
-from hemg_drake.robots.baxter import add_baxter_arm
+from hemg_drake.robots.baxter import add_baxter_arm, make_parser
 from hemg_drake.scenario import load_scenario, shipped_scenario
 from hemg_drake.tasks.cotter_pin import (
     DEFAULT_POSITION,
@@ -23,11 +24,14 @@ from hemg_drake.tasks.cotter_pin import (
     CotterPinParams,
     PinResistance,
     add_cotter_pin_scene,
-    default_cotter_pin_plan,
-    detent_force,
-    pin_resistance_force,
 )
 from hemg_drake.tasks.placement import scene_pose
+from hemg_drake.tasks.plans import (
+    COTTER_PIN_MODEL,
+    default_cotter_pin_plan,
+    pin_geometry,
+    pin_length,
+)
 
 LOW_GAIN, HIGH_GAIN = 10.0, 100.0
 LOG_PERIOD = 0.01
@@ -147,19 +151,45 @@ def test_the_gain_threshold_lies_between_15_and_20(product, gain, out):
 
 
 def test_detent_system_against_the_law_by_hand():
-    law = dict(hold_force=50.0, detent_length=0.003, detent_stiffness=3e4)
-    detent = PinResistance(**law, sliding_damping=20.0)
+    """The detent and friction (the law's one implementation) against values worked by hand:
+    tau = -clip(k x, -F, F) while x < L (else 0) - c xdot, with F = 50 N, L = 3 mm,
+    k = 3e4 N/m, c = 20 N s/m."""
+    detent = PinResistance(config=CotterPinParams())
     context = detent.CreateDefaultContext()
-    # Spring, saturated spring, released, pushed back in from a slight overshoot; at rest
-    # and sliding out at 0.1 m/s against 20 N s/m of friction.
-    cases = ((0.0005, -15.0), (0.002, -50.0), (0.004, 0.0), (-0.0001, 3.0))
-    for (x, by_hand), xdot in itertools.product(cases, (0.0, 0.1)):
+    # Spring (-3e4 * 0.0005), saturated spring, just inside the detent (saturated), released
+    # past it, pushed back in from a slight overshoot; each at rest and sliding out at
+    # 0.1 m/s (-2 N of friction) or in at 0.05 m/s (+1 N).
+    cases = ((0.0005, -15.0), (0.002, -50.0), (0.0029, -50.0), (0.004, 0.0), (-0.0001, 3.0))
+    friction = ((0.0, 0.0), (0.1, -2.0), (-0.05, 1.0))
+    for (x, detent_by_hand), (xdot, friction_by_hand) in itertools.product(cases, friction):
         detent.pin_state_input.FixValue(context, [x, xdot])
         tau = detent.generalized_force_output.Eval(context)
         assert tau.shape == (1,)  # the pin's one actuator
-        assert tau[0] == pytest.approx(by_hand - 20.0 * xdot)
-        assert detent_force(x, **law) == pytest.approx(by_hand)
-        assert tau[0] == pin_resistance_force(x, xdot, **law, sliding_damping=20.0)
+        assert tau[0] == pytest.approx(detent_by_hand + friction_by_hand, abs=1e-12)
+
+
+def test_detent_parameters_live_in_the_context():
+    """One system, other parameters per context: a 30 N detent 5 mm long, no friction."""
+    detent = PinResistance(config=CotterPinParams())
+    context = detent.CreateDefaultContext()
+    context.get_mutable_numeric_parameter(0).SetFromVector([30.0, 0.005, 3e4, 0.0])
+    for x, by_hand in ((0.0004, -12.0), (0.004, -30.0), (0.006, 0.0)):
+        detent.pin_state_input.FixValue(context, [x, 0.1])
+        assert detent.generalized_force_output.Eval(context)[0] == pytest.approx(by_hand)
+
+
+def test_detent_converts_to_autodiff():
+    """Clone and AutoDiffXd: d tau / d x is -k inside the unsaturated spring, -c for xdot."""
+    detent = PinResistance(config=CotterPinParams())
+    clone = detent.Clone()
+    context = clone.CreateDefaultContext()
+    clone.get_input_port(0).FixValue(context, [0.0005, 0.1])
+    assert clone.get_output_port(0).Eval(context)[0] == pytest.approx(-15.0 - 2.0)
+    autodiff = detent.ToAutoDiffXd()
+    context = autodiff.CreateDefaultContext()
+    autodiff.get_input_port(0).FixValue(context, InitializeAutoDiff(np.array([0.0005, 0.1])))
+    gradient = ExtractGradient(autodiff.get_output_port(0).Eval(context))
+    np.testing.assert_allclose(gradient, [[-3e4, -20.0]])
 
 
 def test_scene_systems_drive_the_pin_actuator(product):
@@ -186,6 +216,19 @@ def test_ring_waits_at_the_scene_frame_on_the_home_tool_point(product):
     assert np.linalg.norm(p_WE - p_WR) < 0.002
     assert scene.pin_displacement(context) == 0.0
     assert scene.pin_length == pytest.approx(0.05)
+
+
+def test_pin_geometry_read_from_the_model_file_is_the_plants():
+    """The plan reads the pin's length and ring offset from the SDF as XML (no plant); the
+    plant's parse of the same file gives the same figures."""
+    plant = MultibodyPlant(0.0)
+    (model,) = make_parser(plant).AddModels(str(COTTER_PIN_MODEL))
+    tip = plant.GetFrameByName("pin_tip", model).GetFixedPoseInBodyFrame().translation()
+    ring = plant.GetFrameByName("ring", model).GetFixedPoseInBodyFrame().translation()
+    length, p_FR = pin_geometry()
+    assert length == -tip[2] == pin_length() == 0.05
+    np.testing.assert_array_equal(p_FR, ring)
+    np.testing.assert_array_equal(p_FR, [0.0, 0.0, 0.015])
 
 
 def test_plan_has_four_phases_along_the_pull_axis():

@@ -30,10 +30,9 @@ from hemg_drake.tasks.drawing import (
     SHEET_SIZE,
     DrawingParams,
     add_drawing_scene,
-    default_drawing_plan,
-    drawing_steps,
 )
 from hemg_drake.tasks.plan import TaskPlan
+from hemg_drake.tasks.plans import default_drawing_plan, drawing_steps
 from hemg_drake.viz.ink import in_contact, ink_strokes
 
 GAIN = 100.0

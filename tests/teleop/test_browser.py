@@ -20,11 +20,13 @@ from hemg_drake.cli import main
 from hemg_drake.learning.demos import load_dataset
 from hemg_drake.run_folder import RunFolder
 from hemg_drake.scenario import load_scenario, shipped_scenario
-from hemg_drake.teleop import browser
-from hemg_drake.teleop.browser import (
-    COLUMNS, END_BUTTON, SLIDER_ACTIVATION, SLIDER_X, BrowserMaster, LoggedInputs, dead_zone,
-    load_inputs, run_take, start_meshcat, teleop,
+from hemg_drake.teleop.browser import BrowserMaster, dead_zone
+from hemg_drake.teleop.browser_inputs import (
+    COLUMNS, END_BUTTON, SLIDER_ACTIVATION, SLIDER_X, LoggedInputs, load_inputs,
 )  # fmt: skip
+from hemg_drake.teleop.browser_page import start_meshcat
+from hemg_drake.teleop_session import run_take, teleop
+from tooling.headless_page import HeadlessPage  # tests/tooling: test tooling, not runtime
 
 websocket = pytest.importorskip("websocket", reason="websocket-client is in the dev extra")
 msgpack = pytest.importorskip("msgpack")
@@ -325,7 +327,7 @@ def test_keys_in_the_real_page_move_the_stylus_and_escape_ends_the_take(
     """Headless Chromium opens the live page; DevTools key presses drive the sliders."""
     import time
 
-    browser_page = browser.HeadlessPage(meshcat.web_url())
+    browser_page = HeadlessPage(meshcat.web_url())
     pressed = {}
 
     def script(t):
@@ -374,7 +376,7 @@ def test_a_keyboard_take_draws_the_first_stroke_on_the_sheet(meshcat):
     stylus along the drawing's first stroke: the pen touches the sheet and draws the line."""
     from hemg_drake.evaluation import strokes
     from hemg_drake.tasks.metrics import stroke_errors
-    from hemg_drake.teleop.browser import SLIDER_Y, SLIDER_Z
+    from hemg_drake.teleop.browser_inputs import SLIDER_Y, SLIDER_Z
 
     scenario = load_scenario(shipped_scenario("drawing"), overrides=["duration=2.9"])
     plan, mapping = scenario.task_plan(), scenario.workspace_mapping()

@@ -1,4 +1,4 @@
-"""Ink: stroke extraction in numpy, and the ink's keyframes in a real Meshcat recording."""
+"""Ink: the ink's keyframes in a real Meshcat recording (its strokes: tests/analysis)."""
 
 import base64
 import re
@@ -8,66 +8,10 @@ import numpy as np
 import pytest
 from pydrake.geometry import Meshcat, MeshcatParams
 
-from hemg_drake.viz.ink import CONTACT_THRESHOLD, add_ink_to_recording, in_contact, ink_strokes
+from hemg_drake.viz.ink import add_ink_to_recording
+from tooling.traces import pen_trace
 
 FPS = 64.0
-
-
-def _trace(pattern):
-    """Times 0, 0.01, ...; tip points (t, 2t, 0); contact from a string of 0/1."""
-    touching = np.array([c == "1" for c in pattern])
-    times = 0.01 * np.arange(len(pattern))
-    return times, np.column_stack([times, 2 * times, np.zeros_like(times)]), touching
-
-
-def test_strokes_are_the_runs_of_contact():
-    times, p_WP, touching = _trace("0011100101100011")
-    strokes = ink_strokes(times, p_WP, touching)
-    # The lone touching sample at index 7 leaves no line.
-    assert [len(s) for s in strokes] == [3, 2, 2]
-    np.testing.assert_array_equal(strokes[0], p_WP[2:5])
-    np.testing.assert_array_equal(strokes[1], p_WP[9:11])
-    np.testing.assert_array_equal(strokes[2], p_WP[14:16])
-    assert len(ink_strokes(times, p_WP, touching, min_points=1)) == 4
-    assert ink_strokes(times, p_WP, np.zeros(len(times), bool)) == []
-
-
-@pytest.mark.parametrize("min_points", [0, -2])
-def test_bad_min_points_is_refused(min_points):
-    with pytest.raises(ValueError, match="min_points must be >= 1"):
-        ink_strokes(*_trace("0110"), min_points=min_points)
-
-
-def test_in_contact_thresholds_the_force_norm():
-    f = np.array([[0, 0, 0], [0, 0, CONTACT_THRESHOLD * 1.01], [0.03, 0.03, 0.03], [0, 0, 0.04]])
-    np.testing.assert_array_equal(in_contact(f), [False, True, True, False])
-    np.testing.assert_array_equal(in_contact(f, threshold=0.0), [False, True, True, True])
-
-
-@pytest.mark.parametrize(
-    "change, message",
-    [
-        (dict(p_WP=np.zeros((5, 3))), r"p_WP must have shape \(6, 3\)"),
-        (dict(in_contact=np.ones(6)), "in_contact must be 6 booleans"),
-        (dict(times=np.array([0, 0.1, 0.1, 0.2, 0.3, 0.4])), "strictly increasing"),
-        (dict(p_WP=np.full((6, 3), np.nan)), "finite"),
-        (dict(times=np.zeros((6, 1))), r"times must have shape \(n,\)"),
-    ],
-)
-def test_bad_traces_are_refused(change, message):
-    times, p_WP, touching = _trace("011110")
-    arguments = dict(times=times, p_WP=p_WP, in_contact=touching) | change
-    with pytest.raises(ValueError, match=message):
-        ink_strokes(**arguments)
-
-
-def test_bad_forces_are_refused():
-    with pytest.raises(ValueError, match=r"f_WP must have shape \(n, 3\)"):
-        in_contact(np.zeros(3))
-    with pytest.raises(ValueError, match="NaN"):
-        in_contact(np.array([[0.0, np.nan, 1.0]]))
-    with pytest.raises(ValueError, match="threshold"):
-        in_contact(np.zeros((2, 3)), threshold=-1.0)
 
 
 def _animation_tracks(meshcat):
@@ -96,7 +40,7 @@ def meshcat():
 def test_ink_appears_piece_by_piece_in_the_recording(meshcat):
     # A long stroke (1000 samples) and a short one (30), at 100 Hz.
     pattern = "0" * 20 + "1" * 1000 + "0" * 50 + "1" * 30 + "0" * 20
-    times, p_WP, touching = _trace(pattern)
+    times, p_WP, touching = pen_trace(pattern)
     meshcat.StartRecording(frames_per_second=FPS)
     pieces = add_ink_to_recording(meshcat, times, p_WP, touching, height=0.09, max_pieces=60)
     meshcat.StopRecording()
@@ -125,7 +69,7 @@ def test_ink_appears_piece_by_piece_in_the_recording(meshcat):
 
 
 def test_ink_needs_enough_pieces(meshcat):
-    times, p_WP, touching = _trace("0110110110")
+    times, p_WP, touching = pen_trace("0110110110")
     with pytest.raises(ValueError, match="max_pieces"):
         add_ink_to_recording(meshcat, times, p_WP, touching, max_pieces=2)
     with pytest.raises(ValueError, match="height"):

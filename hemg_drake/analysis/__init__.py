@@ -1,0 +1,1 @@
+"""Analysis of logged runs: metrics, contact and stability, below the visualisation."""

@@ -1,0 +1,247 @@
+"""One trial of a sweep, run in a worker from plain data: its steps, its metrics and its
+``trial.json``; demonstrations shared between trials through the sweep's cache."""
+
+import contextlib
+import dataclasses as dc
+import hashlib
+import json
+import os
+import shutil
+import time
+from pathlib import Path
+
+from hemg_drake.fileio import write_text_atomic
+from hemg_drake.yaml_schema import first_line
+
+TRIAL_FILE = "trial.json"
+
+
+def _quiet(_line):
+    pass
+
+
+def flatten(prefix, data):
+    """Scalars of a nested dict as ``prefix.a.b`` -> value; a list of numbers as its mean."""
+    flat = {}
+    for name, value in data.items():
+        key = f"{prefix}.{name}"
+        if isinstance(value, dict):
+            flat.update(flatten(key, value))
+        elif isinstance(value, (bool, int, float, str)) or value is None:
+            flat[key] = value
+        elif isinstance(value, (list, tuple)):
+            numbers = [v for v in value if isinstance(v, (int, float)) and not isinstance(v, bool)]
+            if numbers and len(numbers) == len([v for v in value if v is not None]):
+                flat[key] = float(sum(numbers) / len(numbers))
+    return flat
+
+
+def demonstration_metrics(scenario, demos):
+    """What the demonstrations show of the teleoperation loop (the delay study's figures).
+
+    - ``tracking_error_m``: RMS over time of |p_WE - map(p_MS)|, the slave against the
+      master's position mapped into W *now* (a transport delay shows as lag), mean over
+      demonstrations.
+    - ``master_oscillation_mm``: RMS of the stylus position above 5 Hz (the operator's
+      plan moves below 2 Hz), mm; ``master_energy_peak_mj``: the stylus' peak kinetic
+      energy, mJ; ``master_hit_wall``: fraction of demonstrations whose stylus left its
+      workspace box.
+    - ``gain_lag_s``: the lag maximising the cross-correlation of the operator's muscle
+      activation and the gain K (0 to 0.5 s).
+    - cotter pin: ``pin_out``: fraction of demonstrations whose tool point rose 8 cm (the
+      pin comes out after its 3 mm detent, the grasp stretches 1 cm at most); drawing:
+      ``strokes`` (mean count) and ``three_strokes`` (fraction with exactly three).
+    """
+    import numpy as np
+    from scipy.signal import butter, sosfiltfilt
+
+    from hemg_drake.evaluation import strokes
+
+    mapping = scenario.workspace_mapping()
+    half_box = 0.5 * np.asarray(scenario.master.workspace_size)
+    record = {k: [] for k in ("tracking_error_m", "master_oscillation_mm", "master_energy_peak_mj",
+                              "master_hit_wall", "gain_lag_s")}  # fmt: skip
+    task = {"pin_out": [], "strokes": [], "three_strokes": []}
+    for demo in demos:
+        error = np.linalg.norm(demo.p_WE - mapping.master_to_slave(demo.p_MS), axis=1)
+        record["tracking_error_m"].append(float(np.sqrt(np.mean(error**2))))
+        rate = 1.0 / float(np.mean(np.diff(demo.time)))
+        if len(demo.time) > 15 and rate > 12.0:
+            sos = butter(2, 5.0, btype="high", fs=rate, output="sos")
+            fast = sosfiltfilt(sos, demo.p_MS, axis=0)
+            oscillation = 1e3 * float(np.sqrt(np.mean(np.sum(fast**2, axis=1))))
+        else:
+            oscillation = float("nan")
+        record["master_oscillation_mm"].append(oscillation)
+        v_MS = np.gradient(demo.p_MS, demo.time, axis=0)
+        energy = 0.5 * scenario.master.mass * np.sum(v_MS**2, axis=1)
+        record["master_energy_peak_mj"].append(1e3 * float(energy.max()))
+        record["master_hit_wall"].append(float(np.any(np.abs(demo.p_MS) > half_box)))
+        lag = _lag(demo.emg_time, demo.muscle_activation, demo.time, demo.gain)
+        record["gain_lag_s"].append(lag)
+        if scenario.task == "cotter_pin":
+            task["pin_out"].append(float(demo.p_WE[:, 2].max() - demo.p_WE[0, 2] >= 0.08))
+        else:
+            count = len(strokes(demo.time, demo.p_WE, demo.f_WE))
+            task["strokes"].append(float(count))
+            task["three_strokes"].append(float(count == 3))
+    record.update({k: v for k, v in task.items() if v})
+    return {name: float(np.mean(values)) for name, values in record.items()}
+
+
+def _lag(time_a, a, time_b, b, max_lag=0.5):
+    """Delay of ``b`` behind ``a`` (s) at the peak of their cross-correlation, on b's grid."""
+    import numpy as np
+
+    a = np.interp(time_b, time_a, a)
+    a, b = a - a.mean(), b - b.mean()
+    if a.std() == 0 or b.std() == 0:
+        return float("nan")
+    dt = float(np.mean(np.diff(time_b)))
+    lags = np.arange(0, int(max_lag / dt) + 1)
+    scores = [np.dot(a[: len(a) - n], b[n:]) / (len(a) - n) for n in lags]
+    return float(lags[int(np.argmax(scores))] * dt)
+
+
+@contextlib.contextmanager
+def _locked(path):
+    """An exclusive lock on ``path`` (a file), where the filesystem supports it."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no lock, at worst the work is done twice
+        yield
+        return
+    with open(path, "a") as handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX)
+        except OSError:
+            pass
+        yield
+
+
+def _cached_demonstrations(task, scenario, run):
+    """Copy the trial's demonstrations (and held-out ones) into ``run``, recording them in
+    the cache first if no other trial has."""
+    from hemg_drake import pipeline
+    from hemg_drake.scenario import parse_scenario
+
+    base = parse_scenario(task["scenario_text"], source=task["scenario_source"],
+                          overrides=task["base_overrides"])  # fmt: skip
+    # The learning and reproduction settings do not change a demonstration: the cached
+    # run holds the base scenario's, and learn/reproduce apply the trial's overrides.
+    shared = dc.replace(scenario, learning=base.learning, reproduction=base.reproduction)
+    key_text = shared.to_yaml() + f"\nheldout: {task['heldout']}\n"
+    key = hashlib.sha1(key_text.encode()).hexdigest()[:16]
+    cache = Path(task["cache"])
+    cache.mkdir(parents=True, exist_ok=True)
+    entry = cache / key
+    with _locked(cache / f".{key}.lock"):
+        if not (entry / "manifest.json").is_file():
+            tmp = cache / f".tmp-{key}-{os.getpid()}"
+            shutil.rmtree(tmp, ignore_errors=True)
+            try:
+                pipeline.demonstrate(shared, tmp, replays=False, progress=_quiet)
+                if task["heldout"]:
+                    _record_heldout(shared, task["heldout"], tmp / "heldout.npz")
+            except BaseException:
+                shutil.rmtree(tmp, ignore_errors=True)
+                raise
+            shutil.rmtree(entry, ignore_errors=True)
+            os.rename(tmp, entry)
+    shutil.copytree(entry, run)
+
+
+def _record_heldout(scenario, count, path):
+    from hemg_drake.diagrams.demonstration import record_demonstration
+    from hemg_drake.learning.demos import save_dataset
+
+    first = scenario.seed + scenario.num_demonstrations
+    demos = [record_demonstration(scenario, first + i) for i in range(count)]
+    save_dataset(path, demos, dict(scenario=scenario.to_yaml(), task=scenario.task,
+                                   log_period=scenario.log_period))  # fmt: skip
+
+
+def heldout_metrics(run):
+    """The reproduction in ``run`` against the held-out demonstrations: position RMSE
+    time-normalised and after DTW, against their mean (as Table II, on unseen data)."""
+    import numpy as np
+
+    from hemg_drake.diagrams.reproduction import ReproductionLog
+    from hemg_drake.learning.demos import load_dataset, observations
+    from hemg_drake.tasks import metrics
+
+    demos, _ = load_dataset(run / "heldout.npz")
+    with np.load(run / "reproduction.npz", allow_pickle=False) as archive:
+        log = ReproductionLog(**{name: archive[name] for name in archive.files})
+    data = observations(demos)
+    reproduced = log.observations()
+    plain = metrics.time_normalised_rmse(reproduced, data)
+    aligned = metrics.aligned_rmse(reproduced, metrics.mean_demonstration(data))
+    return {
+        "position_rmse_m": plain["position_rmse"],
+        "velocity_rmse_m_per_s": plain["velocity_rmse"],
+        "spatial_position_rmse_m": aligned["position_rmse"],
+        "spatial_velocity_rmse_m_per_s": aligned["velocity_rmse"],
+    }
+
+
+def _trial_metrics(task, run):
+    from hemg_drake import pipeline
+    from hemg_drake.scenario import parse_scenario
+
+    overrides = task["overrides"]
+    scenario = parse_scenario(task["scenario_text"], source=task["scenario_source"],
+                              overrides=overrides, overrides_source="override")  # fmt: skip
+    steps, result = task["steps"], {}
+    if "demonstrate" in steps:
+        _cached_demonstrations(task, scenario, run)
+        demos, _ = pipeline.load_demonstrations(run / "dataset.npz")
+        result.update(flatten("demonstration", demonstration_metrics(scenario, demos)))
+    if "learn" in steps:
+        model = pipeline.learn(run, overrides=overrides, progress=_quiet)
+        result["learn.n_iter"] = int(model.n_iter_)
+        result["learn.converged"] = bool(model.converged_)
+    if "reproduce" in steps:
+        reproduced = pipeline.reproduce(run, overrides=overrides, replay=False, progress=_quiet)
+        reproduced = {k: v for k, v in reproduced.items() if k not in ("start", "start_offset")}
+        result.update(flatten("reproduction", reproduced))
+    if "heldout" in steps:
+        result.update(flatten("heldout", heldout_metrics(run)))
+    return result
+
+
+def run_trial(task):
+    """Run one trial (a dict of plain data, see :func:`_task`) in this process.
+
+    Builds ``task["dir"]`` in a temporary folder beside it and renames it when done, so
+    a trial folder exists only complete. Any error is caught and recorded in one line.
+
+    Returns
+    -------
+    dict, the record written to ``trial.json``: id, labels, seed, overrides, status
+    ("done" or "failed"), error, elapsed_s, metrics.
+    """
+    began = time.perf_counter()
+    final = Path(task["dir"])
+    tmp = final.parent / f".tmp-{final.name}-{os.getpid()}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    record = dict(id=task["id"], labels=task["labels"], seed=task["seed"],
+                  overrides=task["overrides"], status="done", error="", metrics={})  # fmt: skip
+    try:
+        record["metrics"] = _trial_metrics(task, tmp / "run")
+    except Exception as error:  # noqa: BLE001 - a failed trial is a result, not a crash
+        record.update(status="failed", error=f"{type(error).__name__}: {first_line(error)}")
+    record["elapsed_s"] = time.perf_counter() - began
+    write_text_atomic(tmp / TRIAL_FILE, json.dumps(record, indent=2, default=_json_default) + "\n")
+    if final.exists():
+        shutil.rmtree(final)
+    os.rename(tmp, final)
+    return json.loads((final / TRIAL_FILE).read_text(encoding="utf-8"))
+
+
+def _json_default(value):
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return str(value)

@@ -1,0 +1,339 @@
+"""A take at the teleop page, and the run folder it is recorded into.
+
+:func:`run_take` runs the demonstration diagram with a
+:class:`~hemg_drake.teleop.browser.BrowserMaster` for one take (live at real time with the
+page of :class:`~hemg_drake.teleop.browser_page.TeleopPage`, or replayed from an inputs
+log); :func:`teleop` appends takes to a run folder's dataset (``hemg-drake teleop``).
+"""
+
+import dataclasses as dc
+import time
+
+import numpy as np
+from pydrake.math import RigidTransform
+from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
+
+from hemg_drake._validate import as_scalar
+from hemg_drake.teleop.browser import BrowserMaster
+from hemg_drake.teleop.browser_inputs import (
+    COLUMNS,
+    END_KEY,
+    KEYS,
+    InputsLog,
+    LoggedInputs,
+    MeshcatInputs,
+    load_inputs,
+    save_inputs,
+)
+from hemg_drake.teleop.browser_page import TeleopPage, start_meshcat
+
+# The page is refreshed, and the simulator advanced, in steps of this (s): 32 Hz.
+PAGE_PERIOD = 1 / 32
+
+
+@dc.dataclass(frozen=True, eq=False)
+class Take:
+    """One take: its demonstration, its raw inputs, and the built diagram."""
+
+    demonstration: object
+    inputs: InputsLog
+    built: object
+    master: BrowserMaster
+    page_updates: int
+    wall_seconds: float
+
+
+def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, realtime=True,
+             recorder=None, replay_path=None, progress=print, on_step=None,
+             scene=True):  # fmt: skip
+    """Run one take of the demonstration diagram with a :class:`BrowserMaster`.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    seed : int
+        Seeds the sEMG noise (and the unused operator plan).
+    source : "meshcat" or InputsLog
+        Live inputs from ``meshcat``'s page, or a log to re-drive (headless).
+    meshcat : Meshcat, optional
+        The live page (needed for ``source="meshcat"``): the arm, the page's controls and
+        :class:`TeleopPage`.
+    duration : float, optional
+        End after this many simulated seconds. With a log, its ``end_time`` is used.
+    realtime : bool
+        Pace the simulator at real time (``set_target_realtime_rate(1)``).
+    recorder : ReplayRecorder, optional; replay_path : path-like, optional
+        Record the take and write its HTML replay (with ink for drawing).
+    progress : callable taking one line (the master's messages).
+    on_step : callable, optional
+        Called as ``on_step(t)`` after each page period (tests script the page with it).
+    scene : bool
+        False leaves out the task's scene (the arm in free space).
+
+    Returns
+    -------
+    Take
+    """
+    from hemg_drake.diagrams.demonstration import (
+        build_demonstration_diagram,
+        demonstration_from_logs,
+    )
+    from hemg_drake.analysis.contact import in_contact
+    from hemg_drake.viz.ink import add_ink_to_recording
+
+    live = isinstance(source, str)
+    if live and source != "meshcat":
+        raise ValueError(f"source must be 'meshcat' or an InputsLog, got {source!r}")
+    if live and meshcat is None:
+        raise ValueError("live inputs need the meshcat whose page the person uses")
+    if not live:
+        duration = source.end_time
+    elif duration is not None:
+        duration = as_scalar("duration", duration)
+    operator = scenario.operator
+    holder = {}
+
+    def factory(*, scenario, mapping, p_MS_initial, seed):
+        inputs = (
+            MeshcatInputs(meshcat, p_MS_initial=p_MS_initial,
+                          workspace_size=scenario.master.workspace_size,
+                          activation=operator.rest_activation)  # fmt: skip
+            if live
+            else LoggedInputs(source.time, source.rows)
+        )
+        holder["inputs"] = inputs
+        holder["master"] = BrowserMaster(
+            source=inputs, p_MS_initial=p_MS_initial,
+            workspace_size=scenario.master.workspace_size,
+            hand_stiffness=operator.hand_stiffness, hand_damping=operator.hand_damping,
+            max_hand_force=operator.max_hand_force, initial_activation=operator.rest_activation,
+        )  # fmt: skip
+        return holder["master"]
+
+    built = build_demonstration_diagram(
+        scenario, seed=seed, meshcat=meshcat if live else None, recorder=recorder,
+        operator_factory=factory, scene=scene,
+    )  # fmt: skip
+    master = holder["master"]
+    page = None
+    if live:
+        from hemg_drake.robots.baxter import FLOOR_Z
+        from hemg_drake.viz.recording import frame_task
+
+        meshcat.SetCameraPose(*frame_task(scenario.task_plan().points))
+        meshcat.SetTransform("/Grid", RigidTransform([0.0, 0.0, FLOOR_Z]))
+        page = TeleopPage(meshcat, k_min=scenario.emg.k_min, k_max=scenario.emg.k_max)
+    diagram = built.diagram
+    simulator = Simulator(diagram)
+    ApplySimulatorConfig(scenario.simulator, simulator)
+    simulator.set_target_realtime_rate(1.0 if realtime else 0.0)
+    simulator.Initialize()
+    context = simulator.get_context()
+    station = built.station.diagram
+    gain_system = diagram.GetSubsystemByName("variable_gain")
+    gain_port = gain_system.get_gain_output_port()
+    if recorder is not None:
+        recorder.start()
+    began = time.perf_counter()
+    k, reason, t = 0, None, 0.0
+    while True:
+        k += 1
+        t = k * PAGE_PERIOD
+        if duration is not None and t >= duration:
+            t = duration
+        simulator.AdvanceTo(t)
+        for line in master.pop_messages():
+            progress(line)
+        if page is not None:
+            station_context = station.GetMyContextFromRoot(context)
+            p_WT = built.mapping.master_to_slave(master.GetOutputPort("p_MT").Eval(
+                master.GetMyContextFromRoot(context)))  # fmt: skip
+            page.update(
+                t,
+                station.GetOutputPort("p_WE").Eval(station_context),
+                station.GetOutputPort("f_WE").Eval(station_context),
+                gain_port.Eval(gain_system.GetMyContextFromRoot(context))[0],
+                True,
+                p_WT,
+            )  # fmt: skip
+        if on_step is not None:
+            on_step(t)
+        if duration is not None and t >= duration:
+            reason = "duration"
+            break
+        reason = master.end_reason()
+        if reason is not None and (live or t >= duration):
+            break
+    wall = time.perf_counter() - began
+    if page is not None:
+        page.update(t, np.zeros(3), np.zeros(3), scenario.emg.k_min, False)
+    demo = demonstration_from_logs(
+        built.logger.FindLog(context), built.emg_logger.FindLog(context), seed
+    )
+    if replay_path is not None:
+        if scenario.task == "drawing" and built.scene is not None:
+            add_ink_to_recording(recorder.meshcat, demo.time, demo.p_WE, in_contact(demo.f_WE),
+                                 height=built.scene.paper_height + 5e-4)  # fmt: skip
+        recorder.stop_and_export(replay_path)
+    times = np.array([row_t for row_t, _ in master.rows])
+    rows = np.array([row for _, row in master.rows]).reshape(-1, len(COLUMNS))
+    wall_times = np.asarray(holder["inputs"].wall_times) if live else source.wall_time
+    log = InputsLog(time=times, wall_time=np.asarray(wall_times, float), rows=rows, end_time=t,
+                    end_reason=reason if live else source.end_reason, seed=seed,
+                    scenario=scenario.to_yaml())  # fmt: skip
+    return Take(demo, log, built, master, page.updates if page else 0, wall)
+
+
+def _takes_hint(folder):
+    return f"hemg-drake teleop SCENARIO --out {folder.path} (or hemg-drake demonstrate)"
+
+
+# Keys a take does not read (its length is the person's; the count is demonstrate's):
+# scenarios that differ only there record compatible takes.
+TAKE_FREE_KEYS = ("duration", "num_demonstrations")
+
+
+def same_takes(yaml_a, yaml_b):
+    """Whether two scenarios (YAML texts) record the same kind of take: equal but for
+    :data:`TAKE_FREE_KEYS`."""
+    from hemg_drake.scenario import parse_scenario
+
+    def normal(text):
+        scenario = parse_scenario(text, source="a dataset's scenario")
+        return scenario.replaced(["duration=1.0", "num_demonstrations=1"]).to_yaml()
+
+    return yaml_a == yaml_b or normal(yaml_a) == normal(yaml_b)
+
+
+def existing_takes(scenario, out_dir):
+    """The demonstrations already in ``out_dir/dataset.npz`` and its metadata, checked.
+
+    Returns ``([], {})`` for a folder without a dataset. Raises ValueError if the dataset
+    was not finished by a demonstrate/teleop stage, or holds another scenario's takes.
+    """
+    from hemg_drake.learning.demos import load_dataset
+    from hemg_drake.run_folder import RunFolder
+
+    folder = RunFolder(out_dir, create=True)
+    if not folder.dataset.exists():
+        return [], {}
+    folder.check("demonstrate", folder.dataset, run_hint=_takes_hint(folder))
+    demos, metadata = load_dataset(folder.dataset)
+    if "scenario" not in metadata or not same_takes(metadata["scenario"], scenario.to_yaml()):
+        raise ValueError(
+            f"{folder.dataset}: holds demonstrations of another scenario (or other --set "
+            "values); give a new --out folder for this one"
+        )
+    return demos, metadata
+
+
+def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, replays=True,
+           progress=print, meshcat=None, on_step=None, realtime=True):  # fmt: skip
+    """Record one take from the browser (or re-drive one from its inputs log) and append it
+    to ``out_dir/dataset.npz``, as :func:`hemg_drake.pipeline.demonstrate` writes it.
+
+    The take's demonstration is appended to the dataset (its metadata names each one's
+    operator), with ``replay_<c>.html`` (when ``replays``) and its raw inputs
+    ``inputs_<c>.npz`` beside it, c its number in the dataset, and the figures redrawn; the
+    folder's manifest records the demonstrate stage again, so ``learn`` and ``reproduce``
+    take it; an older model and reproduction are removed (they no longer match). Takes
+    already there are kept.
+
+    Live (``replay_inputs`` None): without a ``meshcat``, one is started on ``port`` and
+    the first line given to ``progress`` is ``Meshcat: http://localhost:P``. The take
+    ends with the page's End take button or Escape, after ``duration`` simulated seconds,
+    or when the page has been closed for 2 s, and is saved in each case. Ctrl-C
+    (KeyboardInterrupt) discards it: nothing is written. With ``replay_inputs`` (a log
+    path): headless, as fast as it runs, the same demonstration bit for bit (the log's
+    seed; the scenario must be the log's).
+
+    Returns
+    -------
+    list of Path, the files written (dataset first).
+    """
+    from hemg_drake.learning.demos import save_dataset
+    from hemg_drake.pipeline import replay_recorder
+    from hemg_drake.placements import (
+        demonstration_scenario,
+        describe_placement,
+        has_placements,
+        task_frames,
+    )
+    from hemg_drake.run_folder import RunFolder
+    from hemg_drake.viz.figures import plot_demonstrations, plot_emg_envelopes, save_figure
+
+    demos, metadata = existing_takes(scenario, out_dir)
+    folder = RunFolder(out_dir, create=True)
+    c = len(demos) + 1
+    if replay_inputs is not None:
+        source = load_inputs(replay_inputs)
+        if not same_takes(source.scenario, scenario.to_yaml()):
+            raise ValueError(
+                f"{replay_inputs}: recorded with another scenario (or other --set values) "
+                "than the one given"
+            )
+        seed, operator_name = source.seed, f"browser (replayed from {replay_inputs})"
+    else:
+        source, seed, operator_name = "meshcat", scenario.seed + c - 1, "browser"
+        if meshcat is None:
+            meshcat = start_meshcat(port)
+            progress(f"Meshcat: http://localhost:{meshcat.port()}")
+        keys = ", ".join(f"{name}: {down}/{up}" for name, (down, up) in KEYS.items())
+        progress(
+            f"take {c} into {folder.path}/: keys {keys}; gamepad sticks and right trigger; "
+            f"End take or {END_KEY} ends it"
+            + (f" (or {duration:g} s)" if duration is not None else "")
+        )
+    # With scene.placements each take happens at its own seed's placement, as a simulated
+    # demonstration does (the same draw, so a re-driven log lands where it was recorded).
+    here = demonstration_scenario(scenario, seed)
+    if has_placements(scenario):
+        progress(f"take {c}: {describe_placement(here)}")
+    replay = folder / f"replay_{c}.html" if replays else None
+    title = f"{scenario.task.replace('_', ' ')}: teleoperated take {c}"
+    recorder = replay_recorder(here, title) if replays else None
+    take = run_take(
+        here, seed=seed, source=source, meshcat=meshcat, duration=duration,
+        realtime=realtime and replay_inputs is None, recorder=recorder, replay_path=replay,
+        progress=progress, on_step=on_step,
+    )  # fmt: skip
+    progress(
+        f"take {c}: {take.inputs.end_time:.2f} s ({take.inputs.end_reason}), "
+        f"{len(take.inputs.time)} input samples, in {take.wall_seconds:.1f} s of wall time"
+    )
+    inputs_path = folder / f"inputs_{c}.npz"
+    new_files = [p for p in (replay, inputs_path) if p is not None]
+    old_files = [
+        folder / name
+        for name in folder.manifest().get("demonstrate", {}).get("files", {})
+        if name.startswith(("replay_", "inputs_")) and (folder / name).is_file()
+    ]
+    # The model and reproductions were made from the old dataset: remove them; the takes
+    # already recorded stay (unlike a demonstrate stage, which starts the folder over).
+    folder.begin("learn")
+    try:
+        save_inputs(inputs_path, take.inputs)
+        demo = take.demonstration
+        if not demos or demos[0].frame_A is not None:
+            # Each demonstration carries the task frames where it was shown (an older
+            # dataset without them keeps none).
+            frame_A, frame_b = task_frames(here)
+            demo = dc.replace(demo, frame_A=frame_A, frame_b=frame_b)
+        demos = [*demos, demo]
+        operators = metadata.get("operators", ["simulated"] * (len(demos) - 1))
+        record = dict(
+            # The dataset keeps the scenario it was begun with (takes differ only in length).
+            scenario=metadata.get("scenario", scenario.to_yaml()), task=scenario.task,
+            log_period=scenario.log_period, operators=[*operators, operator_name],
+        )  # fmt: skip
+        save_dataset(folder.dataset, demos, record)
+    except BaseException:
+        for path in new_files:
+            path.unlink(missing_ok=True)
+        raise
+    figures = [folder / "demonstrations.png", folder / "fig6_emg.png"]
+    save_figure(plot_demonstrations(demos, task=scenario.task), figures[0])
+    save_figure(plot_emg_envelopes(demos[0].emg, per_channel=scenario.emg.per_channel), figures[1])
+    written = [folder.dataset, *sorted(set(old_files) - set(new_files)), *new_files, *figures]
+    folder.finish("demonstrate", written)
+    return written
