@@ -67,9 +67,9 @@ def FeedbackLaw_(T):
             - f_WE (mode "force")
             - p_WE (mode "position_error")
             - v_WE (mode "position_error")
-            - delayed (delay_steps > 0)
             - p_MS (mode "position_error")
             - v_MS (mode "position_error", or passivity "tdpa")
+            - delayed (delay_steps > 0)
             output_ports:
             - motor_force
 
