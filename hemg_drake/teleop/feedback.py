@@ -3,7 +3,7 @@ optionally after a transport delay and through a time-domain passivity controlle
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
-from pydrake.systems.framework import Context_, Diagram, DiagramBuilder, LeafSystem_
+from pydrake.systems.framework import BasicVector_, Context_, Diagram, DiagramBuilder, LeafSystem_
 from pydrake.systems.primitives import ConstantVectorSource, DiscreteTimeDelay, Multiplexer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
@@ -77,17 +77,21 @@ def FeedbackLaw_(T):
         channel has carried a sample (valid = 0) the law uses the slave's values at
         initialisation, held in the discrete state [rest; E] with the passivity
         observer's energy E (J), updated every ``period`` when the passivity controller is
-        on. Inputs in SI units, frames as :class:`ForceFeedback`. Double and AutoDiffXd.
+        on. The gains and the limit are a numeric parameter, [gain, K_pm, K_dm, peak_force]
+        (dimensionless, N/m, N s/m, N), so one built diagram can run several. Inputs in SI
+        units, frames as :class:`ForceFeedback`. Double and AutoDiffXd.
         """
 
         def _construct(self, *, mapping, period, config, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self._mapping, self._config = mapping, config
             self._mode, self._passivity = config.mode, config.passivity
-            self._gain = as_scalar("gain", config.gain, strict=False)
-            self._stiffness = as_scalar("stiffness", config.stiffness, strict=False)
-            self._damping = as_scalar("damping", config.damping, strict=False)
-            self._peak_force = as_scalar("peak_force", config.peak_force, strict=False)
+            # Gains and limit in the Context: [gain, K_pm (N/m), K_dm (N s/m), peak (N)].
+            gains = [
+                as_scalar(name, getattr(config, name), strict=False)
+                for name in ("gain", "stiffness", "damping", "peak_force")
+            ]
+            self._gains_index = self.DeclareNumericParameter(BasicVector_[T](gains))
             self._period = as_scalar("period", period)
             self._delay_steps = int(config.delay_steps)
             R = mapping.R_WM.matrix()
@@ -103,7 +107,7 @@ def FeedbackLaw_(T):
             width = 3 * len(self._slave_names)
             self._width = width
             self.stateful = self._delay_steps > 0 or self._passivity != "none"
-            prerequisites = {self.all_input_ports_ticket()}
+            prerequisites = {self.all_input_ports_ticket(), self.all_parameters_ticket()}
             if self._delay_steps > 0:
                 self._delayed = self.DeclareVectorInputPort("delayed", width + 1)
             if self.stateful:
@@ -147,12 +151,20 @@ def FeedbackLaw_(T):
                 return delayed[:-1]
             return self._state_values(context)[:-1]  # before the first sample: the slave at rest
 
+        def gains(self, context):
+            """[gain, K_pm, K_dm, peak_force] of ``context`` (its numeric parameter)."""
+            group = context.get_numeric_parameter(self._gains_index)
+            if isinstance(context, _DOUBLE_CONTEXT):
+                return group.value().tolist()
+            return group.CopyToVector().tolist()
+
         def _force(self, context, slave):
             """The saturated force from the slave's values and the master's now."""
+            gain, stiffness, damping, peak_force = self.gains(context)
             if self._mode == "force":
                 # gain R_WM^T f_WE / scale, row by row.
                 x, y, z = slave
-                factor = self._gain * self._inverse_scale
+                factor = gain * self._inverse_scale
                 force = [factor * (r0 * x + r1 * y + r2 * z) for r0, r1, r2 in self._RT_rows]
             else:
                 p_MS = _vector(self._inputs["p_MS"], context, "p_MS")
@@ -163,8 +175,8 @@ def FeedbackLaw_(T):
                 for (r0, r1, r2), p, v in zip(self._RT_rows, p_MS, v_MS):
                     error = (r0 * dp[0] + r1 * dp[1] + r2 * dp[2]) / self._scale - p
                     error_rate = (r0 * dv[0] + r1 * dv[1] + r2 * dv[2]) / self._scale - v
-                    force.append(self._stiffness * error + self._damping * error_rate)
-            return saturate_norm(force, self._peak_force)
+                    force.append(stiffness * error + damping * error_rate)
+            return saturate_norm(force, peak_force)
 
         def _passive_force(self, context):
             """(force, v_MS, E): the force after the passivity controller, if any."""
@@ -179,7 +191,7 @@ def FeedbackLaw_(T):
             v_MS = _vector(self._inputs["v_MS"], context, "v_MS")
             energy = self._state_values(context)[-1]
             force, _ = passivity_step(force, v_MS, energy, self._period)
-            return saturate_norm(force, self._peak_force), v_MS, energy
+            return saturate_norm(force, self.gains(context)[3]), v_MS, energy
 
         def _initialize(self, context, discrete_state):
             # Before the start the slave was at rest where it starts: the delay holds that.
@@ -250,7 +262,8 @@ class ForceFeedback(Diagram):
     master's port (:func:`passivity_step`, the energy in a discrete state updated every
     ``period``; in mode "force" it needs the ``v_MS`` input), applied after the
     saturation, whose result is saturated again; the observer sums the force actually
-    applied.
+    applied. The gains and the limit live in the Context (a numeric parameter of the law,
+    initially the config's): :meth:`set_gains` changes them in one context.
 
     Structure: [``Multiplexer`` (slave sample, constant 1) -> ``DiscreteTimeDelay``] ->
     :class:`FeedbackLaw` (a scalar-convertible LeafSystem: double and AutoDiffXd, every
@@ -309,6 +322,15 @@ class ForceFeedback(Diagram):
             builder.Connect(delay.get_output_port(), law.GetInputPort("delayed"))
         builder.ExportOutput(law.GetOutputPort("motor_force"), "motor_force")
         builder.BuildInto(self)
+
+    def set_gains(self, context, *, gain=None, stiffness=None, damping=None, peak_force=None):
+        """Change the gains or the limit in ``context`` (this diagram's): the numeric
+        parameter [gain, K_pm, K_dm, peak_force] of the law; None keeps a value."""
+        law_context = self.GetMutableSubsystemContext(self._law, context)
+        parameter = law_context.get_mutable_numeric_parameter(0)
+        for i, value in enumerate((gain, stiffness, damping, peak_force)):
+            if value is not None:
+                parameter.SetAtIndex(i, value)
 
     def energy(self, context):
         """The passivity observer's energy E (J) in ``context`` (this diagram's)."""

@@ -342,3 +342,22 @@ def test_spring_loop_clones_and_its_autodiff_update_is_the_finite_difference(
     ])  # fmt: skip
     assert jacobian.shape == (len(x0), len(x0))
     np.testing.assert_allclose(jacobian, numeric, rtol=1e-5, atol=1e-5)
+
+
+def test_gains_live_in_the_context(mapping):
+    # One built system, two contexts: the default gains, and K_pm = 20, K_dm = 0 set in the
+    # second; the force by hand in each (no saturation at a 100 N limit).
+    system = ForceFeedback(mapping=mapping, mode="position_error", peak_force=100.0)
+    p_WE, v_WE = np.array([0.75, -0.18, 0.33]), np.array([0.1, 0.0, -0.2])
+    p_MS, v_MS = np.array([0.01, -0.02, 0.0]), np.array([0.0, 0.05, 0.01])
+    e = mapping.slave_to_master(p_WE) - p_MS
+    edot = mapping.velocity_to_master(v_WE) - v_MS
+    forces = []
+    for gains in ({}, dict(stiffness=20.0, damping=0.0)):
+        context = system.CreateDefaultContext()
+        system.set_gains(context, **gains)
+        for name, value in (("p_WE", p_WE), ("v_WE", v_WE), ("p_MS", p_MS), ("v_MS", v_MS)):
+            system.GetInputPort(name).FixValue(context, value)
+        forces.append(system.GetOutputPort("motor_force").Eval(context))
+    np.testing.assert_allclose(forces[0], 50.0 * e + 50.0 * edot, rtol=1e-12)
+    np.testing.assert_allclose(forces[1], 20.0 * e, rtol=1e-12)
