@@ -162,21 +162,21 @@ def build_demonstration_diagram(
 
     if operator_factory is None:
         operator_system = SimulatedOperator(
-            plan=plan, mapping=mapping, **scenario.operator.model_parameters()
+            plan=scenario.task_plan(), mapping=mapping, config=scenario.operator
         )
     else:
         operator_system = operator_factory(
             scenario=scenario, mapping=mapping, p_MS_initial=p_MS_initial, seed=seed
         )
     operator = add("operator", operator_system)
-    master = add("master", HapticMaster(p_MS_initial=p_MS_initial, **dc.asdict(scenario.master)))
+    master = add("master", HapticMaster(config=scenario.master, p_MS_initial=p_MS_initial))
     workspace_map = add(
         "workspace_map",
         WorkspaceMap(
             mapping=mapping,
-            delay_steps=scenario.mapping.delay_steps,
             period=scenario.master.period,  # the channel's samples are the master's
             p_MS_initial=p_MS_initial,
+            config=scenario.mapping,
         ),
     )
     emg_source = add("emg_source", make_emg_source(scenario, seed))
@@ -192,7 +192,7 @@ def build_demonstration_diagram(
     variable_gain.set_name("variable_gain")
     force_feedback = add(
         "force_feedback",
-        ForceFeedback(mapping=mapping, period=scenario.master.period, **dc.asdict(scenario.feedback)),
+        ForceFeedback(mapping=mapping, period=scenario.master.period, config=scenario.feedback),
     )
 
     connect = builder.Connect
@@ -273,6 +273,15 @@ def demonstration_from_logs(log, emg_log, seed):
     )
 
 
+def seed_operator(built, root_context):
+    """Put the draws of ``built.seed`` into the simulated operator's Context (before
+    ``Simulator.Initialize``), so that it follows ``built.plan``; a no-op for another
+    operator (``operator_factory``)."""
+    operator = built.diagram.GetSubsystemByName("operator")
+    if hasattr(operator, "set_seed"):
+        operator.set_seed(operator.GetMyMutableContextFromRoot(root_context), built.seed)
+
+
 def run_demonstration(built, *, duration=None, replay_path=None):
     """Simulate a built demonstration diagram and read its logs.
 
@@ -290,6 +299,7 @@ def run_demonstration(built, *, duration=None, replay_path=None):
     Demonstration
     """
     simulator, duration = make_simulator(built, duration, replay_path)
+    seed_operator(built, simulator.get_mutable_context())
     simulator.Initialize()
     if built.recorder is not None:
         built.recorder.start()

@@ -271,7 +271,40 @@ class TaskPlan:
         -------
         TaskPlan
         """
-        seed = as_seed(seed)
+        return self.perturbed_by(
+            *self.perturbation_draws(seed),
+            timing_std=timing_std, path_std=path_std, effort_std=effort_std,
+        )  # fmt: skip
+
+    def perturbation_draws(self, seed):
+        """The draws (normals, uniforms) of :meth:`perturbed_by` that :meth:`perturbed` makes
+        from ``seed`` (``np.random.default_rng``), in the order it has always drawn them."""
+        rng = np.random.default_rng(as_seed(seed))
+        n_segments = len(self.kinds)
+        timing = rng.standard_normal(n_segments)
+        c = rng.standard_normal((3, 3))
+        phase = rng.random((2, 3))
+        effort = rng.standard_normal(n_segments)
+        return np.concatenate([timing, c.ravel(), effort]), phase.ravel()
+
+    def perturbation_sizes(self):
+        """(number of standard normal draws, number of uniform draws) of :meth:`perturbed_by`."""
+        return 2 * len(self.kinds) + 9, 6
+
+    def perturbed_by(self, normals, uniforms, *, timing_std, path_std, effort_std):
+        """:meth:`perturbed` from given draws (e.g. a Drake ``RandomSource``'s), not a seed.
+
+        Parameters
+        ----------
+        normals : array, shape (2 n_segments + 9,)
+            Standard normal draws: n_segments for the timing, 9 for the path's c (3 x 3,
+            row-major), n_segments for the effort.
+        uniforms : array, shape (6,)
+            Uniform draws in [0, 1): the two phases of each axis (2 x 3, row-major), as
+            fractions of 2 pi.
+        timing_std, path_std, effort_std
+            As :meth:`perturbed`. All draws zero: this plan unchanged.
+        """
         timing_std = as_scalar("timing_std", timing_std, strict=False)
         effort_std = as_scalar("effort_std", effort_std, strict=False)
         path_std = np.broadcast_to(_field_array("path_std", path_std), (3,))
@@ -279,14 +312,20 @@ class TaskPlan:
             raise ValueError(
                 f"path_std must be finite and >= 0 (a number or 3 numbers), got {path_std.tolist()}"
             )
-        rng = np.random.default_rng(seed)
         n_segments = len(self.kinds)
-        durations = np.diff(self.times) * np.exp(timing_std * rng.standard_normal(n_segments))
+        sizes = self.perturbation_sizes()
+        normals, uniforms = np.asarray(normals, float), np.asarray(uniforms, float)
+        if normals.shape != (sizes[0],) or uniforms.shape != (sizes[1],):
+            raise ValueError(
+                f"perturbed_by takes {sizes[0]} normal and {sizes[1]} uniform draws, got "
+                f"{normals.shape} and {uniforms.shape}"
+            )
+        durations = np.diff(self.times) * np.exp(timing_std * normals[:n_segments])
         times = self.times[0] + np.concatenate([[0.0], np.cumsum(durations)])
         u = ((self.times - self.times[0]) / (self.times[-1] - self.times[0]))[:, None]
-        c = rng.standard_normal((3, 3))
-        phase = rng.uniform(0.0, 2.0 * np.pi, (2, 3))
+        c = normals[n_segments : n_segments + 9].reshape(3, 3)
+        phase = 0.0 + 2.0 * np.pi * uniforms.reshape(2, 3)
         bend = c[0] + c[1] * np.sin(np.pi * u + phase[0]) + c[2] * np.sin(2 * np.pi * u + phase[1])
         points = self.points + path_std * bend / np.sqrt(2.0)
-        effort = self.effort * np.exp(effort_std * rng.standard_normal(n_segments))
+        effort = self.effort * np.exp(effort_std * normals[n_segments + 9 :])
         return TaskPlan(times, points, self.kinds, self.pen_down, effort)

@@ -11,10 +11,12 @@ controller. ``tests/teleop/test_feedback.py`` checks its physics and
 """
 
 import numpy as np
+from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Adder, ConstantVectorSource, MatrixGain
 
+from hemg_drake.teleop.config import FeedbackConfig, MappingConfig, MasterConfig, OperatorConfig
 from hemg_drake.teleop.feedback import ForceFeedback
 from hemg_drake.teleop.mapping import WorkspaceMap, WorkspaceMapping
 from hemg_drake.teleop.master import HapticMaster
@@ -25,8 +27,8 @@ def build_delayed_spring_loop(
     passivity,
     *,
     environment_stiffness=500.0,
-    hand_stiffness=300.0,
-    hand_damping=5.0,
+    hand_stiffness=OperatorConfig.hand_stiffness,
+    hand_damping=OperatorConfig.hand_damping,
     scale=2.0,
     p_MS_initial=(0.005, 0.0, 0.0),
 ):
@@ -41,7 +43,8 @@ def build_delayed_spring_loop(
     environment_stiffness : float
         The slave's spring in W (N/m).
     hand_stiffness, hand_damping : float
-        The hand holding the stylus at M's origin (N/m, N s/m).
+        The hand holding the stylus at M's origin (N/m, N s/m); by default the simulated
+        operator's (OperatorConfig).
     scale : float
         The workspace map's scale (slave motion per master motion).
     p_MS_initial : 3 floats, m
@@ -50,13 +53,20 @@ def build_delayed_spring_loop(
     Returns
     -------
     (diagram, master, feedback): the built Diagram, its HapticMaster and ForceFeedback.
+    Drake's systems and scalar-convertible ones only: the diagram clones and converts to
+    AutoDiffXd.
     """
     mapping = WorkspaceMapping(scale=scale)
+    master_config = MasterConfig()
+    period = master_config.period
     builder = DiagramBuilder()
-    master = builder.AddSystem(HapticMaster(p_MS_initial=p_MS_initial))
-    channel = builder.AddSystem(WorkspaceMap(mapping=mapping, delay_steps=delay_steps))
+    master = builder.AddSystem(HapticMaster(config=master_config, p_MS_initial=p_MS_initial))
+    channel = builder.AddSystem(
+        WorkspaceMap(mapping=mapping, period=period, config=MappingConfig(delay_steps=delay_steps))
+    )
+    feedback_config = FeedbackConfig(delay_steps=delay_steps, passivity=passivity, peak_force=1e3)
     feedback = builder.AddSystem(
-        ForceFeedback(mapping=mapping, delay_steps=delay_steps, passivity=passivity, peak_force=1e3)
+        ForceFeedback(mapping=mapping, period=period, config=feedback_config)
     )
     for name in ("p_MS", "v_MS"):
         builder.Connect(master.GetOutputPort(name), channel.GetInputPort(name))
@@ -113,5 +123,45 @@ def simulate_delayed_spring_loop(
         p_MS = master.GetOutputPort("p_MS").Eval(master.GetMyContextFromRoot(context))
         x.append(abs(p_MS[0]))
         if feedback.stateful:
-            energy.append(feedback.energy(feedback.GetMyContextFromRoot(context)))
+            energy.append(float(feedback.energy(feedback.GetMyContextFromRoot(context))))
     return np.array(x), np.array(energy)
+
+
+def discrete_state(context):
+    """Every discrete state group of ``context`` (a diagram's), concatenated."""
+    values = context.get_discrete_state()
+    return np.concatenate([values.get_vector(i).CopyToVector() for i in range(values.num_groups())])
+
+
+def set_discrete_state(context, x):
+    """Set every discrete state group of ``context`` from the concatenation ``x``."""
+    values = context.get_mutable_discrete_state()
+    start = 0
+    for i in range(values.num_groups()):
+        group = values.get_mutable_vector(i)
+        group.SetFromVector(x[start : start + group.size()])
+        start += group.size()
+
+
+def discrete_update_jacobian(diagram, context):
+    """A = d x[k+1] / d x[k] of a diagram's periodic discrete update at ``context``'s state.
+
+    Drake's ``Linearize`` takes a discrete system with one state group only; a diagram of
+    several discrete systems has one group each. This converts the diagram to AutoDiffXd
+    (every system of the loop converts), seeds the concatenated state with the identity and
+    differentiates ``EvalUniquePeriodicDiscreteUpdate`` (all updates share one period).
+    Inputs of the diagram, if any, must be fixed in ``context``; they are held constant.
+
+    Returns
+    -------
+    array, shape (n, n), n the number of discrete states, in :func:`discrete_state`'s order.
+    """
+    loop = diagram.ToAutoDiffXd()
+    ad_context = loop.CreateDefaultContext()
+    ad_context.SetTimeStateAndParametersFrom(context)
+    set_discrete_state(ad_context, InitializeAutoDiff(discrete_state(context)).ravel())
+    values = loop.EvalUniquePeriodicDiscreteUpdate(ad_context)
+    updated = np.concatenate(
+        [values.get_vector(i).CopyToVector() for i in range(values.num_groups())]
+    )
+    return ExtractGradient(updated)

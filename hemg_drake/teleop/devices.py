@@ -17,10 +17,12 @@ import threading
 import time
 
 import numpy as np
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import DiscreteDerivative, FirstOrderLowPassFilter, Multiplexer
 
 from hemg_drake._validate import as_scalar, as_vector
-from hemg_drake.teleop.master import TOUCH_X_PEAK_FORCE
+from hemg_drake.teleop.config import MasterConfig
+from hemg_drake.teleop.master import TOUCH_X_PEAK_FORCE, saturate_norm
 
 # OpenHaptics reports positions in millimetres.
 MM = 1e-3
@@ -53,15 +55,71 @@ class MasterDevice(abc.ABC):
         """Release the device (zero force first)."""
 
 
-def saturate_norm(force, limit):
-    """``force`` scaled down to norm ``limit`` if longer (its direction kept)."""
-    norm = math.sqrt(sum(f * f for f in force))
-    if norm <= limit:
-        return [float(f) for f in force]
-    return [float(f) * limit / norm for f in force]
+class _DeviceSampler(LeafSystem):
+    """The device's sampler inside :class:`DeviceMaster`: sends ``motor_force``, reads the tip.
+
+    .. pydrake_system::
+
+        name: _DeviceSampler
+        input_ports:
+        - motor_force
+        output_ports:
+        - p_MS
+        - v_MS (the device's own velocity, when it gives one)
+
+    At initialisation it reads the device; then every ``period`` (offset 0) it sends
+    ``motor_force`` (N, M) saturated in norm at ``max_force`` to the device and reads it
+    again: ``device.position()`` (m, M) and, for a device with its own velocity,
+    ``device.velocity()`` (m/s), into its discrete state. Not
+    scalar-convertible: it drives one physical device (a clone would drive it twice).
+    """
+
+    def __init__(self, device, period, p_MS_initial, max_force, with_velocity):
+        LeafSystem.__init__(self)
+        self._device = device
+        self._max_force = max_force
+        self._with_velocity = with_velocity
+        self._motor_force_input = self.DeclareVectorInputPort("motor_force", 3)
+        self._p_index = self.DeclareDiscreteState(p_MS_initial)
+        self.DeclareStateOutputPort("p_MS", self._p_index)
+        if with_velocity:
+            self._v_index = self.DeclareDiscreteState(np.zeros(3))
+            self.DeclareStateOutputPort("v_MS", self._v_index)
+        self.DeclareInitializationDiscreteUpdateEvent(self._read)
+        self.DeclarePeriodicDiscreteUpdateEvent(
+            period_sec=period, offset_sec=0.0, update=self._update
+        )
+
+    @staticmethod
+    def _finite(name, values):
+        values = np.asarray(values, dtype=float)
+        if values.shape != (3,) or not np.all(np.isfinite(values)):
+            raise ValueError(
+                f"DeviceMaster: device.{name}() must return 3 finite values, got {values!r}"
+            )
+        return values
+
+    def _update(self, context, discrete_state):
+        force = self._motor_force_input.Eval(context).tolist()
+        if not all(math.isfinite(f) for f in force):
+            raise ValueError(f"DeviceMaster: motor_force must be finite, got {force}")
+        self._device.apply_force(saturate_norm(force, self._max_force))
+        self._read(context, discrete_state)
+
+    def _read(self, context, discrete_state):
+        discrete_state.set_value(self._p_index, self._finite("position", self._device.position()))
+        if self._with_velocity:
+            velocity = self._finite("velocity", self._device.velocity())
+            discrete_state.set_value(self._v_index, velocity)
 
 
-class DeviceMaster(LeafSystem):
+def _has_own_velocity(device):
+    """Whether ``device`` overrides :meth:`MasterDevice.velocity` (or, duck-typed, has one)."""
+    method = getattr(type(device), "velocity", None)
+    return callable(method) and method is not MasterDevice.velocity
+
+
+class DeviceMaster(Diagram):
     """A physical master device in a diagram, in place of the ``HapticMaster``.
 
     .. pydrake_system::
@@ -74,18 +132,18 @@ class DeviceMaster(LeafSystem):
         - p_MS
         - v_MS
 
-    Eq. 19's master side is the device itself: this system only samples it. At each
-    periodic discrete update (every ``period``, offset 0) it sends ``motor_force`` (3, N,
-    M; saturated in norm at ``max_force``) to the device, then reads the tip position
-    ``p_MS`` (3, m, M). ``v_MS`` (3, m/s) is the device's own velocity when it gives one,
-    else the backward difference of successive positions through a first-order low-pass
-    filter of time constant ``velocity_time_constant`` (exact discretisation:
-    v_k = v_{k-1} + a ((p_k - p_{k-1}) / period - v_{k-1}), a = 1 - exp(-period / tau);
-    tau = 0 gives the raw difference), zero at the first sample. ``state`` is
-    [p_MS; v_MS]. Outputs depend on the state only, as the ``HapticMaster``'s do, so the
-    force feedback loop has no algebraic loop. Before the first update the outputs are
-    ``p_MS_initial`` at rest. A non-finite force or position raises ValueError (and the
-    force is not sent).
+    Eq. 19's master side is the device itself: this system only samples it. It reads the
+    tip position ``p_MS`` (3, m, M) at initialisation, and at each periodic discrete
+    update (every ``period``, offset 0) it sends ``motor_force`` (3, N, M; saturated in
+    norm at ``max_force``) to the device, then reads the tip again. ``v_MS`` (3, m/s) is the device's own velocity when its class
+    overrides :meth:`MasterDevice.velocity`, else Drake's ``DiscreteDerivative`` of the
+    sampled positions (zero for its first two samples) through Drake's continuous
+    ``FirstOrderLowPassFilter`` of time constant ``velocity_time_constant`` (0: the raw
+    difference, no filter). ``state`` is [p_MS; v_MS] (a ``Multiplexer``). The outputs
+    depend on state only, as the ``HapticMaster``'s do, so the force feedback loop has no
+    algebraic loop. Before initialisation ``p_MS`` is ``p_MS_initial``, ``v_MS`` zero. A
+    non-finite force or position raises ValueError (and the force is not sent). The
+    filter's state is continuous: the simulator integrates it between samples.
 
     Run the simulator at real-time rate (``set_target_realtime_rate(1)``).
 
@@ -105,79 +163,59 @@ class DeviceMaster(LeafSystem):
         self,
         *,
         device,
-        period=1e-3,
+        period=MasterConfig.period,
         p_MS_initial=(0.0, 0.0, 0.0),
         max_force=TOUCH_X_PEAK_FORCE,
         velocity_time_constant=5e-3,
     ):
-        LeafSystem.__init__(self)
+        Diagram.__init__(self)
         for name in ("position", "apply_force"):
             if not callable(getattr(device, name, None)):
                 raise ValueError(f"device must have a {name}() method (see MasterDevice)")
-        self._device = device
-        self._velocity = getattr(device, "velocity", None)
-        self._period = as_scalar("period", period)
-        self._max_force = as_scalar("max_force", max_force)
+        period = as_scalar("period", period)
         tau = as_scalar("velocity_time_constant", velocity_time_constant, strict=False)
-        self._alpha = 1.0 if tau == 0 else 1.0 - math.exp(-self._period / tau)
-        p_initial = as_vector("p_MS_initial", p_MS_initial, 3)
-        self._motor_force_input = self.DeclareVectorInputPort("motor_force", 3)
-        self._p_index = self.DeclareDiscreteState(p_initial)
-        self._v_index = self.DeclareDiscreteState(np.zeros(3))
-        self._count_index = self.DeclareDiscreteState(1)
-        self.DeclarePeriodicDiscreteUpdateEvent(
-            period_sec=self._period, offset_sec=0.0, update=self._update
+        with_velocity = _has_own_velocity(device)
+        builder = DiagramBuilder()
+        sampler = builder.AddNamedSystem(
+            "sampler",
+            _DeviceSampler(
+                device, period, as_vector("p_MS_initial", p_MS_initial, 3),
+                as_scalar("max_force", max_force), with_velocity,
+            ),
+        )  # fmt: skip
+        p_MS = sampler.GetOutputPort("p_MS")
+        if with_velocity:
+            v_MS = sampler.GetOutputPort("v_MS")
+        else:
+            derivative = builder.AddNamedSystem("derivative", DiscreteDerivative(3, period))
+            builder.Connect(p_MS, derivative.get_input_port())
+            v_MS = derivative.get_output_port()
+            if tau > 0:
+                low_pass = builder.AddNamedSystem("low_pass", FirstOrderLowPassFilter(tau, 3))
+                builder.Connect(v_MS, low_pass.get_input_port())
+                v_MS = low_pass.get_output_port()
+        join = builder.AddNamedSystem("join", Multiplexer([3, 3]))
+        builder.Connect(p_MS, join.get_input_port(0))
+        builder.Connect(v_MS, join.get_input_port(1))
+        self._motor_force_input = builder.ExportInput(
+            sampler.GetInputPort("motor_force"), "motor_force"
         )
-        self._state_output = self.DeclareVectorOutputPort(
-            "state", 6, self._calc_state, prerequisites_of_calc={self.xd_ticket()}
-        )
-        self._p_MS_output = self.DeclareStateOutputPort("p_MS", self._p_index)
-        self._v_MS_output = self.DeclareStateOutputPort("v_MS", self._v_index)
+        builder.ExportOutput(join.get_output_port(), "state")
+        builder.ExportOutput(p_MS, "p_MS")
+        builder.ExportOutput(v_MS, "v_MS")
+        builder.BuildInto(self)
 
     def get_motor_force_input_port(self):
-        return self._motor_force_input
+        return self.GetInputPort("motor_force")
 
     def get_p_MS_output_port(self):
-        return self._p_MS_output
+        return self.GetOutputPort("p_MS")
 
     def get_v_MS_output_port(self):
-        return self._v_MS_output
+        return self.GetOutputPort("v_MS")
 
     def get_state_output_port(self):
-        return self._state_output
-
-    def _update(self, context, discrete_state):
-        force = self._motor_force_input.Eval(context).tolist()
-        if not all(math.isfinite(f) for f in force):
-            raise ValueError(f"DeviceMaster: motor_force must be finite, got {force}")
-        self._device.apply_force(saturate_norm(force, self._max_force))
-        p = np.asarray(self._device.position(), dtype=float)
-        if p.shape != (3,) or not np.all(np.isfinite(p)):
-            raise ValueError(
-                f"DeviceMaster: device.position() must return 3 finite values (m), got {p!r}"
-            )
-        count = int(context.get_discrete_state(self._count_index).GetAtIndex(0))
-        v = None if self._velocity is None else self._velocity()
-        if v is not None:
-            v = np.asarray(v, dtype=float)
-            if v.shape != (3,) or not np.all(np.isfinite(v)):
-                raise ValueError(
-                    f"DeviceMaster: device.velocity() must return 3 finite values, got {v!r}"
-                )
-        elif count == 0:
-            v = np.zeros(3)
-        else:
-            p_prev = context.get_discrete_state(self._p_index).get_value()
-            v_prev = context.get_discrete_state(self._v_index).get_value()
-            v = v_prev + self._alpha * ((p - p_prev) / self._period - v_prev)
-        discrete_state.set_value(self._p_index, p)
-        discrete_state.set_value(self._v_index, v)
-        discrete_state.set_value(self._count_index, [count + 1])
-
-    def _calc_state(self, context, output):
-        p = context.get_discrete_state(self._p_index).get_value()
-        v = context.get_discrete_state(self._v_index).get_value()
-        output.SetFromVector(np.concatenate([p, v]))
+        return self.GetOutputPort("state")
 
 
 def _import_pyopenhaptics():

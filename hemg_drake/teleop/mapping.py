@@ -4,10 +4,11 @@ import dataclasses as dc
 
 import numpy as np
 from pydrake.math import RotationMatrix
-from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import AffineSystem, DiscreteTimeDelay, Multiplexer
+from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.primitives import AffineSystem, Demultiplexer, DiscreteTimeDelay, Multiplexer
 
-from hemg_drake._validate import all_finite, as_scalar, as_vector
+from hemg_drake._validate import as_scalar, as_vector
+from hemg_drake.teleop.config import MappingConfig
 
 # The operator stands behind the robot and faces the way it faces, so the device's
 # right (+x_M) is the robot's right (-y_W), up (+y_M) is up (+z_W), and towards the
@@ -57,10 +58,6 @@ class WorkspaceMapping:
         object.__setattr__(self, "R_WM", RotationMatrix(R))
         object.__setattr__(self, "_R", R)  # numpy copy: the maps run at 1 kHz
         object.__setattr__(self, "p_WMo", as_vector("p_WMo", self.p_WMo, 3))
-        # Plain-float copies for the *_floats maps, which run once per 1 kHz sample.
-        object.__setattr__(self, "_R_rows", R.tolist())
-        object.__setattr__(self, "_RT_rows", R.T.tolist())
-        object.__setattr__(self, "_p_WMo_list", self.p_WMo.tolist())
 
     def _rotate_to_world(self, vectors_M):
         return np.asarray(vectors_M, dtype=float) @ self._R.T
@@ -88,91 +85,17 @@ class WorkspaceMapping:
         """Slave force in W (N) -> force felt on the stylus, in M (N): R_WM^T f_W / scale."""
         return self._rotate_to_master(f_W) / self.scale
 
-    def master_to_slave_floats(self, p_MS):
-        """:meth:`master_to_slave` on a list of 3 floats, returning one (equal to rounding).
-
-        Plain floats: at 1 kHz numpy's per-call overhead on 3-vectors costs more than the
-        arithmetic.
-        """
-        x, y, z = p_MS
-        scale = self.scale
-        return [
-            o + scale * (r0 * x + r1 * y + r2 * z)
-            for o, (r0, r1, r2) in zip(self._p_WMo_list, self._R_rows)
-        ]
-
-    def velocity_to_slave_floats(self, v_MS):
-        """:meth:`velocity_to_slave` on a list of 3 floats, returning one."""
-        x, y, z = v_MS
-        scale = self.scale
-        return [scale * (r0 * x + r1 * y + r2 * z) for r0, r1, r2 in self._R_rows]
-
-    def force_to_master_floats(self, f_W, gain=1.0):
-        """``gain`` times :meth:`force_to_master` on a list of 3 floats, returning one."""
-        x, y, z = f_W
-        factor = gain / self.scale
-        return [factor * (r0 * x + r1 * y + r2 * z) for r0, r1, r2 in self._RT_rows]
-
     def force_to_slave(self, f_M):
         """Stylus force in M (N) -> the slave force in W that maps onto it (N)."""
         return self.scale * self._rotate_to_world(f_M)
 
 
-class _MasterToSlave(LeafSystem):
-    """The map of one stylus sample, inside :class:`WorkspaceMap` (memoryless).
-
-    .. pydrake_system::
-
-        name: _MasterToSlave
-        input_ports:
-        - p_MS (no delay)
-        - v_MS (no delay)
-        - sample (delayed)
-        output_ports:
-        - p_WE_desired
-        - v_WE_desired
-
-    Inputs ``p_MS`` and ``v_MS`` (no delay), or ``sample``, the delayed 6-vector
-    [p_MS - p_MS_rest; v_MS] (the delay's zero state is then the rest pose). Outputs by
-    :class:`WorkspaceMapping`, direct feedthrough.
-    """
-
-    def __init__(self, mapping, p_MS_rest=None):
-        LeafSystem.__init__(self)
-        self.mapping = mapping
-        if p_MS_rest is None:
-            self._p_MS_rest = None
-            self._p_MS_input = self.DeclareVectorInputPort("p_MS", 3)
-            self._v_MS_input = self.DeclareVectorInputPort("v_MS", 3)
-        else:
-            self._p_MS_rest = [float(value) for value in p_MS_rest]
-            self._sample_input = self.DeclareVectorInputPort("sample", 6)
-        inputs = {self.all_input_ports_ticket()}
-        self.DeclareVectorOutputPort(
-            "p_WE_desired", 3, self._calc_p_WE, prerequisites_of_calc=inputs
-        )
-        self.DeclareVectorOutputPort(
-            "v_WE_desired", 3, self._calc_v_WE, prerequisites_of_calc=inputs
-        )
-
-    def _floats(self, context, name):
-        if self._p_MS_rest is None:
-            port = self._p_MS_input if name == "p_MS" else self._v_MS_input
-            values = port.Eval(context).tolist()
-        elif name == "p_MS":
-            offset = self._sample_input.Eval(context).tolist()[:3]
-            values = [o + r for o, r in zip(offset, self._p_MS_rest)]
-        else:
-            values = self._sample_input.Eval(context).tolist()[3:]
-        if not all_finite(values):
-            raise ValueError(f"{name} must be finite, got {values}")
-        return values
-
-    def _calc_p_WE(self, context, output):
-        output.SetFromVector(self.mapping.master_to_slave_floats(self._floats(context, "p_MS")))
-
-    def _calc_v_WE(self, context, output):
-        output.SetFromVector(self.mapping.velocity_to_slave_floats(self._floats(context, "v_MS")))
+def _stateless_affine(D, y0):
+    """Drake's AffineSystem y = D u + y0 without state (A, B, f0 and C empty)."""
+    m, n = D.shape
+    return AffineSystem(
+        np.zeros((0, 0)), np.zeros((0, n)), np.zeros(0), np.zeros((m, 0)), D, y0
+    )
 
 
 class WorkspaceMap(Diagram):
@@ -190,59 +113,74 @@ class WorkspaceMap(Diagram):
 
     Ports: ``p_MS`` (3, m) and ``v_MS`` (3, m/s) the stylus tip in M; ``p_WE_desired``
     (3, m) and ``v_WE_desired`` (3, m/s) the slave end-effector target in W, by
-    :class:`WorkspaceMapping` (``mapping``). A NaN or infinite input raises ValueError when
-    it reaches the map (after the delay, if any).
+    :class:`WorkspaceMapping` (``mapping``): [p_WE; v_WE] = D [p_MS; v_MS] + [p_WMo; 0],
+    D = scale diag(R_WM, R_WM), a Drake ``AffineSystem`` without state.
 
-    Timing: with ``delay_steps`` = 0 (default) the map is memoryless (direct feedthrough).
-    With ``delay_steps`` = n > 0 it models a constant transport delay of the teleoperation
-    channel with Drake's ``DiscreteTimeDelay`` (period ``period``, n - 1 steps: it samples
-    and holds first, one more period on a signal held on the same grid). For an input held
-    between sample instants on that grid (the
+    Timing: with ``config.delay_steps`` = 0 (default) the map is memoryless (direct
+    feedthrough). With ``config.delay_steps`` = n > 0 it models a constant transport delay
+    of the teleoperation channel with Drake's ``DiscreteTimeDelay`` (period ``period``,
+    n - 1 steps: it samples and holds first, one more period on a signal held on the same
+    grid). For an input held between sample instants on that grid (the
     :class:`~hemg_drake.teleop.master.HapticMaster`'s outputs), the output at time t is the
     mapped input at t - n * period; until the n-th sample (at t = (n - 1) period) it is the
     map of ``p_MS_initial`` at rest. Drake's delay starts at zero, so it carries the
-    offset from that rest pose, [p_MS - p_MS_initial; v_MS] (exact for a zero
-    ``p_MS_initial``, otherwise to one rounding of the offset).
+    offset from that rest pose, u - [p_MS_initial; 0], which is added back before the map
+    (exact for a zero ``p_MS_initial``, otherwise to one rounding).
 
-    Structure (a small Diagram): ``Multiplexer`` -> ``AffineSystem`` (the offset) ->
-    ``DiscreteTimeDelay`` -> the map, a LeafSystem evaluated when its outputs are read;
-    without delay, the map alone. Measured against the FIFO of Python discrete state that
-    it replaced (``benchmarks/bench_teleop.py``): see ``docs/teleop.md``.
+    Structure (Drake's systems only, so it clones and converts to AutoDiffXd):
+    ``Multiplexer`` -> [``AffineSystem`` (the offset) -> ``DiscreteTimeDelay`` ->
+    ``AffineSystem`` (the rest pose back)] -> ``AffineSystem`` (the map) -> ``Demultiplexer``.
+
+    Parameters
+    ----------
+    mapping : WorkspaceMapping
+        Scale, R_WM and p_WMo (the scenario places it with the scene).
+    period : float
+        Sample period of the delay (s): the master's.
+    p_MS_initial : array, shape (3,)
+        The stylus's rest position in M before the start (m).
+    config : MappingConfig
+        Its ``delay_steps`` (the rest of the map is in ``mapping``).
     """
 
-    def __init__(self, *, mapping, delay_steps=0, period=1e-3, p_MS_initial=(0.0, 0.0, 0.0)):
+    def __init__(self, *, mapping, period, p_MS_initial=(0.0, 0.0, 0.0), config=MappingConfig()):
         Diagram.__init__(self)
         if not isinstance(mapping, WorkspaceMapping):
             raise ValueError(f"mapping must be a WorkspaceMapping, got {type(mapping).__name__}")
+        delay_steps = config.delay_steps
         try:
             steps = int(delay_steps)
         except (TypeError, ValueError, OverflowError):  # None, "two", NaN, inf
             steps = -1
-        if steps != delay_steps or steps < 0:
+        if steps != delay_steps or steps < 0 or isinstance(delay_steps, bool):
             raise ValueError(f"delay_steps must be a non-negative integer, got {delay_steps!r}")
         self.mapping = mapping
         self.delay_steps = steps
+        R = mapping.scale * mapping.R_WM.matrix()
+        D = np.block([[R, np.zeros((3, 3))], [np.zeros((3, 3)), R]])
+        y0 = np.concatenate([mapping.p_WMo, np.zeros(3)])
         builder = DiagramBuilder()
-        if steps == 0:
-            to_slave = builder.AddNamedSystem("map", _MasterToSlave(mapping))
-            for name in ("p_MS", "v_MS"):
-                builder.ExportInput(to_slave.GetInputPort(name), name)
-        else:
-            p_rest = as_vector("p_MS_initial", p_MS_initial, 3)
-            join = builder.AddNamedSystem("join", Multiplexer([3, 3]))
-            # y = u - [p_MS_initial; 0], without state (A, B, f0 and C are empty).
-            no_state = (np.zeros((0, 0)), np.zeros((0, 6)), np.zeros(0), np.zeros((6, 0)))
-            shift = np.concatenate([-p_rest, np.zeros(3)])
-            offset = builder.AddNamedSystem("offset", AffineSystem(*no_state, np.eye(6), shift))
+        join = builder.AddNamedSystem("join", Multiplexer([3, 3]))
+        signal = join.get_output_port()
+        if steps > 0:
+            rest = np.concatenate([as_vector("p_MS_initial", p_MS_initial, 3), np.zeros(3)])
+            offset = builder.AddNamedSystem("offset", _stateless_affine(np.eye(6), -rest))
             delay = builder.AddNamedSystem(
                 "delay", DiscreteTimeDelay(as_scalar("period", period), steps - 1, 6)
             )
-            to_slave = builder.AddNamedSystem("map", _MasterToSlave(mapping, p_rest))
-            builder.Connect(join.get_output_port(), offset.get_input_port())
+            # The rest pose added back before the map (not folded into its constant), so
+            # the map sees the same numbers as without a delay: bytes as before.
+            restore = builder.AddNamedSystem("restore", _stateless_affine(np.eye(6), rest))
+            builder.Connect(signal, offset.get_input_port())
             builder.Connect(offset.get_output_port(), delay.get_input_port())
-            builder.Connect(delay.get_output_port(), to_slave.GetInputPort("sample"))
-            builder.ExportInput(join.get_input_port(0), "p_MS")
-            builder.ExportInput(join.get_input_port(1), "v_MS")
-        for name in ("p_WE_desired", "v_WE_desired"):
-            builder.ExportOutput(to_slave.GetOutputPort(name), name)
+            builder.Connect(delay.get_output_port(), restore.get_input_port())
+            signal = restore.get_output_port()
+        to_slave = builder.AddNamedSystem("map", _stateless_affine(D, y0))
+        split = builder.AddNamedSystem("split", Demultiplexer([3, 3]))
+        builder.Connect(signal, to_slave.get_input_port())
+        builder.Connect(to_slave.get_output_port(), split.get_input_port())
+        builder.ExportInput(join.get_input_port(0), "p_MS")
+        builder.ExportInput(join.get_input_port(1), "v_MS")
+        builder.ExportOutput(split.get_output_port(0), "p_WE_desired")
+        builder.ExportOutput(split.get_output_port(1), "v_WE_desired")
         builder.BuildInto(self)

@@ -3,18 +3,31 @@
 import math
 
 import numpy as np
-from pydrake.systems.framework import LeafSystem
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.common import RandomDistribution
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import Context_, Diagram, DiagramBuilder, LeafSystem_
+from pydrake.systems.primitives import RandomSource
+from pydrake.systems.scalar_conversion import TemplateSystem
 
-from hemg_drake.tasks.plan import TaskPlan
 from hemg_drake._validate import all_finite, as_scalar
+from hemg_drake.tasks.plan import TaskPlan
+from hemg_drake.teleop.config import OperatorConfig
 from hemg_drake.teleop.mapping import WorkspaceMapping
 from hemg_drake.teleop.master import saturate_norm
 
-# The hand's default impedance and force limit (OperatorModel's parameters explain them);
-# the browser's virtual hand takes the same.
-HAND_STIFFNESS = 300.0  # N/m
-HAND_DAMPING = 5.0  # N s/m
-MAX_HAND_FORCE = 15.0  # N
+# The hand's impedance and force limit are OperatorConfig's; these names are for the
+# browser's virtual hand, which takes the same.
+HAND_STIFFNESS = OperatorConfig().hand_stiffness  # N/m
+HAND_DAMPING = OperatorConfig().hand_damping  # N s/m
+MAX_HAND_FORCE = OperatorConfig().max_hand_force  # N
+
+# The variability's draws are sampled once, at initialisation: the random sources' own
+# sampling interval is longer than any run.
+_DRAW_INTERVAL = 1e9  # s
+
+# Resolved once: a template lookup per call would cost microseconds at 1 kHz.
+_DOUBLE_CONTEXT = Context_[float]
 
 
 def hand_impedance_force(p_target, v_target, p_MS, v_MS, *, stiffness, damping, max_force):
@@ -23,14 +36,14 @@ def hand_impedance_force(p_target, v_target, p_MS, v_MS, *, stiffness, damping, 
 
     Parameters
     ----------
-    p_target, v_target : 3 floats each, m and m/s, where the hand heads for, in M.
-    p_MS, v_MS : 3 floats each, m and m/s, the stylus tip in M.
+    p_target, v_target : 3 scalars each, m and m/s, where the hand heads for, in M.
+    p_MS, v_MS : 3 scalars each (floats or AutoDiffXd), m and m/s, the stylus tip in M.
     stiffness, damping : float, K_h (N/m) and D_h (N s/m).
     max_force : float, N.
 
     Returns
     -------
-    list of 3 floats, N, in M. Plain floats: this runs at the master's 1 kHz.
+    list of 3 scalars, N, in M. Plain Python arithmetic: this runs at the master's 1 kHz.
     """
     force = [
         stiffness * (pt - p) + damping * (vt - v)
@@ -39,118 +52,168 @@ def hand_impedance_force(p_target, v_target, p_MS, v_MS, *, stiffness, damping, 
     return saturate_norm(force, max_force)
 
 
-class OperatorModel:
-    """The operator's hand and muscle laws: the numpy twin of :class:`SimulatedOperator`.
-
-    Hand: an impedance towards the plan mapped into the master frame M,
-    F_h = K_h (p_MSplan(t) - p_MS) + D_h (v_MSplan(t) - v_MS), saturated in norm.
-    Muscle: a first-order activation a towards the target
-    a* = clip(a_rest + effort (a_level - a_rest) + g_cc |f_felt|, 0, 1), where a_level is the
-    free or forceful level of the plan's current segment (a_rest before and after the plan),
-    effort the segment's effort scale, and g_cc |f_felt| the co-contraction with which a
-    human stiffens the arm against a felt force.
-
-    Parameters
-    ----------
-    plan : TaskPlan
-        What the operator wants the slave to do (world frame).
-    mapping : WorkspaceMapping
-        Used backwards, to find where the stylus must be for the slave to be on the plan.
-    hand_stiffness : float
-        K_h (N/m). The relaxed human arm's endpoint stiffness is of the order of a few
-        hundred N/m (Mussa-Ivaldi, Hogan and Bizzi 1985); 300 sits in the 200-400 range.
-    hand_damping : float
-        D_h (N s/m); 5 gives the 45 g tip a damping ratio near 0.7 with 300 N/m.
-    max_hand_force : float
-        Saturation of the hand force's norm (N); 15 N is a firm pinch-and-push on a stylus.
-    rest_activation, free_activation, forceful_activation : float
-        Activation levels in [0, 1]: relaxed, moving freely, working against the task.
-    co_contraction_gain : float
-        Activation added per newton of felt force (1/N).
-    activation_time_constant : float
-        Muscle activation time constant (s); 30-50 ms is typical of activation dynamics.
-    period : float
-        Sample period of the activation (s): the MYO's 1/200 s, the rate at which the sEMG
-        source reads it (a faster update would be computed and never seen).
-    """
-
-    def __init__(
-        self,
-        *,
-        plan,
-        mapping,
-        hand_stiffness=HAND_STIFFNESS,
-        hand_damping=HAND_DAMPING,
-        max_hand_force=MAX_HAND_FORCE,
-        rest_activation=0.05,
-        free_activation=0.2,
-        forceful_activation=0.7,
-        co_contraction_gain=0.05,
-        activation_time_constant=0.04,
-        period=0.005,
-    ):
-        if not isinstance(plan, TaskPlan):
-            raise ValueError(f"plan must be a TaskPlan, got {type(plan).__name__}")
-        if not isinstance(mapping, WorkspaceMapping):
-            raise ValueError(f"mapping must be a WorkspaceMapping, got {type(mapping).__name__}")
-        self.plan = plan
-        self.mapping = mapping
-        # The plan mapped into M once (the map is affine), rather than every sample.
-        self._plan_M = plan.in_frame(mapping.slave_to_master(plan.points))
-        self.hand_stiffness = as_scalar("hand_stiffness", hand_stiffness, strict=False)
-        self.hand_damping = as_scalar("hand_damping", hand_damping, strict=False)
-        self.max_hand_force = as_scalar("max_hand_force", max_hand_force, strict=False)
-        self.levels = {}
-        for name, level in (
-            ("rest", rest_activation),
-            ("free", free_activation),
-            ("forceful", forceful_activation),
-        ):
-            level = as_scalar(f"{name}_activation", level, strict=False)
-            if level > 1.0:
-                raise ValueError(f"{name}_activation must be in [0, 1], got {level}")
-            self.levels[name] = level
-        self.co_contraction_gain = as_scalar(
-            "co_contraction_gain", co_contraction_gain, strict=False
-        )
-        self.activation_time_constant = as_scalar(
-            "activation_time_constant", activation_time_constant
-        )
-        self.period = as_scalar("period", period)
-        # Exact discretisation of a' = (a* - a) / tau with a* held over the period.
-        self._decay = math.exp(-self.period / self.activation_time_constant)
-
-    def hand_force(self, t, p_MS, v_MS):
-        """Force (N, in M, shape (3,)) the hand puts on the stylus at time t (s)."""
-        return np.array(self.hand_force_floats(t, list(p_MS), list(v_MS)))
-
-    def hand_force_floats(self, t, p_MS, v_MS):
-        """:meth:`hand_force` with ``p_MS``, ``v_MS`` and the result as lists of 3 floats."""
-        p_target, v_target = self._plan_M.position_velocity_floats(t)
-        return hand_impedance_force(
-            p_target, v_target, p_MS, v_MS, stiffness=self.hand_stiffness,
-            damping=self.hand_damping, max_force=self.max_hand_force,
-        )  # fmt: skip
-
-    def activation_target(self, t, feedback_force):
-        """Activation a* the muscles head for at time t (s) feeling ``feedback_force`` (N)."""
-        rest = self.levels["rest"]
-        if self.plan.start_time <= t <= self.plan.end_time:
-            segment = self.plan.segment(t)
-            level = rest + segment.effort * (self.levels[segment.kind] - rest)
-        else:
-            level = rest
-        x, y, z = feedback_force
-        felt = self.co_contraction_gain * math.sqrt(x * x + y * y + z * z)
-        return min(max(level + felt, 0.0), 1.0)
-
-    def activation_step(self, t, activation, feedback_force):
-        """Activation one period after time t (s), from ``activation`` at t."""
-        target = self.activation_target(t, feedback_force)
-        return target + (activation - target) * self._decay
+def _checked(config):
+    """OperatorConfig's model settings as checked floats (ValueError naming the field)."""
+    if not isinstance(config, OperatorConfig):
+        raise ValueError(f"config must be an OperatorConfig, got {type(config).__name__}")
+    values = {}
+    for name in ("hand_stiffness", "hand_damping", "max_hand_force", "co_contraction_gain",
+                 "timing_std", "effort_std"):  # fmt: skip
+        values[name] = as_scalar(name, getattr(config, name), strict=False)
+    for name in ("activation_time_constant", "period"):
+        values[name] = as_scalar(name, getattr(config, name))
+    for name in ("rest", "free", "forceful"):
+        level = as_scalar(f"{name}_activation", getattr(config, f"{name}_activation"),
+                          strict=False)  # fmt: skip
+        if level > 1.0:
+            raise ValueError(f"{name}_activation must be in [0, 1], got {level}")
+        values[name] = level
+    return values
 
 
-class SimulatedOperator(LeafSystem):
+@TemplateSystem.define("OperatorLaw_", T_list=[float, AutoDiffXd])
+def OperatorLaw_(T):
+    class Impl(LeafSystem_[T]):
+        """The operator's hand and muscle laws inside :class:`SimulatedOperator` (see there).
+
+        .. pydrake_system::
+
+            name: OperatorLaw
+            input_ports:
+            - p_MS
+            - v_MS
+            - feedback_force
+            - normals
+            - uniforms
+            output_ports:
+            - hand_force
+            - activation
+
+        ``normals`` and ``uniforms`` are the draws of the plan's variability
+        (:meth:`TaskPlan.perturbed_by`), read once by an initialisation event into the
+        abstract state: the perturbed plan in W and in M (before initialisation: the plan
+        of zero draws, the unperturbed one). Double and AutoDiffXd (for Clone; the plan is
+        a function of time only, so the hand force is differentiable in p_MS, v_MS).
+        """
+
+        def _construct(self, *, plan, mapping, config, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            if not isinstance(plan, TaskPlan):
+                raise ValueError(f"plan must be a TaskPlan, got {type(plan).__name__}")
+            if not isinstance(mapping, WorkspaceMapping):
+                raise ValueError(
+                    f"mapping must be a WorkspaceMapping, got {type(mapping).__name__}"
+                )
+            self._plan, self._mapping, self._config = plan, mapping, config
+            values = _checked(config)
+            self._values = values
+            self._path_std = list(config.path_std)
+            # Exact discretisation of a' = (a* - a) / tau with a* held over the period.
+            self._decay = math.exp(-values["period"] / values["activation_time_constant"])
+            n_normals, n_uniforms = plan.perturbation_sizes()
+            self._p_MS_input = self.DeclareVectorInputPort("p_MS", 3)
+            self._v_MS_input = self.DeclareVectorInputPort("v_MS", 3)
+            self._feedback_force_input = self.DeclareVectorInputPort("feedback_force", 3)
+            self._normals_input = self.DeclareVectorInputPort("normals", n_normals)
+            self._uniforms_input = self.DeclareVectorInputPort("uniforms", n_uniforms)
+            nominal = self._plans(np.zeros(n_normals), np.zeros(n_uniforms))
+            self._plans_index = self.DeclareAbstractState(AbstractValue.Make(nominal))
+            self.DeclareInitializationUnrestrictedUpdateEvent(self._draw)
+            self._activation_index = self.DeclareDiscreteState([values["rest"]])
+            self.DeclarePeriodicDiscreteUpdateEvent(
+                period_sec=values["period"], offset_sec=0.0, update=self._update
+            )
+            self.DeclareVectorOutputPort(
+                "hand_force", 3, self._calc_hand_force,
+                prerequisites_of_calc={
+                    self.time_ticket(), self._p_MS_input.ticket(), self._v_MS_input.ticket(),
+                    self.abstract_state_ticket(self._plans_index),
+                },
+            )  # fmt: skip
+            self.DeclareStateOutputPort("activation", self._activation_index)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(
+                self, plan=other._plan, mapping=other._mapping, config=other._config,
+                converter=converter,
+            )  # fmt: skip
+
+        def _plans(self, normals, uniforms):
+            """(plan in W, plan in M) perturbed by the draws."""
+            values = self._values
+            plan = self._plan.perturbed_by(
+                normals, uniforms, timing_std=values["timing_std"], path_std=self._path_std,
+                effort_std=values["effort_std"],
+            )  # fmt: skip
+            # The plan mapped into M once (the map is affine), rather than every sample.
+            return plan, plan.in_frame(self._mapping.slave_to_master(plan.points))
+
+        def _draw(self, context, state):
+            normals = self._normals_input.Eval(context)
+            uniforms = self._uniforms_input.Eval(context)
+            if not isinstance(context, _DOUBLE_CONTEXT):
+                normals = np.array([x.value() for x in normals])
+                uniforms = np.array([x.value() for x in uniforms])
+            plans = self._plans(normals, uniforms)
+            state.get_mutable_abstract_state(self._plans_index).set_value(plans)
+
+        def plan(self, context):
+            """The perturbed plan in W that this context's operator follows."""
+            return context.get_abstract_state(self._plans_index).get_value()[0]
+
+        def _input(self, context, name, port):
+            values = port.Eval(context).tolist()
+            if isinstance(context, _DOUBLE_CONTEXT) and not all_finite(values):
+                raise ValueError(f"{name} must be finite, got {values}")
+            return values
+
+        def _calc_hand_force(self, context, output):
+            p_MS = self._input(context, "p_MS", self._p_MS_input)
+            v_MS = self._input(context, "v_MS", self._v_MS_input)
+            plan_M = context.get_abstract_state(self._plans_index).get_value()[1]
+            t = context.get_time()
+            p_target, v_target = plan_M.position_velocity_floats(
+                t if isinstance(t, float) else t.value()
+            )
+            values = self._values
+            output.SetFromVector(np.array(hand_impedance_force(
+                p_target, v_target, p_MS, v_MS, stiffness=values["hand_stiffness"],
+                damping=values["hand_damping"], max_force=values["max_hand_force"],
+            )))  # fmt: skip
+
+        def activation_target(self, context, t, feedback_force):
+            """a* = clip(a_rest + effort (a_level - a_rest) + g_cc |f_felt|, 0, 1)."""
+            values = self._values
+            plan = self.plan(context)
+            rest = values["rest"]
+            if plan.start_time <= t <= plan.end_time:
+                segment = plan.segment(t)
+                level = rest + segment.effort * (values[segment.kind] - rest)
+            else:
+                level = rest
+            x, y, z = feedback_force
+            squared = x * x + y * y + z * z
+            norm = math.sqrt(squared) if isinstance(squared, float) else squared.sqrt()
+            target = level + values["co_contraction_gain"] * norm
+            return min(max(target, 0.0), 1.0)
+
+        def _update(self, context, discrete_state):
+            felt = self._input(context, "feedback_force", self._feedback_force_input)
+            t = context.get_time()
+            t = t if isinstance(t, float) else t.value()
+            activation = context.get_discrete_state(self._activation_index).GetAtIndex(0)
+            target = self.activation_target(context, t, felt)
+            discrete_state.get_mutable_vector(self._activation_index).SetAtIndex(
+                0, target + (activation - target) * self._decay
+            )
+
+    return Impl
+
+
+OperatorLaw = OperatorLaw_[None]
+
+
+class SimulatedOperator(Diagram):
     """A human stand-in: hand force on the stylus and muscle activation, from a task plan.
 
     .. pydrake_system::
@@ -164,59 +227,75 @@ class SimulatedOperator(LeafSystem):
         - hand_force
         - activation
 
-    The laws and parameters are those of :class:`OperatorModel` (same keyword arguments).
-    Ports: ``p_MS`` (3, m), ``v_MS`` (3, m/s) the stylus tip in M; ``feedback_force``
-    (3, N, in M) the force the hand feels from the device motors (the HapticMaster's
-    ``motor_force`` input); ``hand_force`` (3, N, in M) for the HapticMaster's
-    ``hand_force``; ``activation`` (1, in [0, 1]) for the synthetic EMG source.
+    Hand: an impedance towards the plan mapped into the master frame M (eq. 19's F_h),
+    F_h = K_h (p_MSplan(t) - p_MS) + D_h (v_MSplan(t) - v_MS), saturated in norm at
+    ``config.max_hand_force`` (:func:`hand_impedance_force`). Muscle: a first-order
+    activation a towards a* = clip(a_rest + effort (a_level - a_rest) + g_cc |f_felt|, 0, 1),
+    a_level the free or forceful level of the plan's current segment (a_rest before and
+    after the plan), effort the segment's effort scale, g_cc |f_felt| the co-contraction
+    with which a human stiffens the arm against a felt force.
 
-    Timing: the hand is a continuous impedance, so ``hand_force`` is a direct feedthrough
-    of ``p_MS``, ``v_MS`` and the time (not of ``feedback_force``); the discrete
-    HapticMaster samples it without an extra delay. The activation is discrete state,
-    updated every ``period`` (5 ms) by the exact discretisation of the first-order muscle
-    lag, and starts at the rest level. Human variability comes from the plan: give each
-    demonstration its own ``plan.perturbed(seed)``. Start the HapticMaster at the plan's
-    first point mapped into M (``mapping.slave_to_master(plan.points[0])``) to avoid an
-    initial jerk, and keep the mapped plan inside the master's workspace. NaN inputs raise
-    ValueError.
+    Ports: ``p_MS`` (3, m), ``v_MS`` (3, m/s) the stylus tip in M; ``feedback_force``
+    (3, N, in M) the force the hand feels from the device motors; ``hand_force`` (3, N, in
+    M) for the HapticMaster's ``hand_force``; ``activation`` (1, in [0, 1]) for the
+    synthetic EMG source.
+
+    Timing: ``hand_force`` is a direct feedthrough of ``p_MS``, ``v_MS`` and the time (not
+    of ``feedback_force``); the activation is discrete state, updated every
+    ``config.period`` (5 ms) by the exact discretisation of the first-order muscle lag,
+    from the rest level. NaN inputs raise ValueError.
+
+    Variability in the Context: the operator follows ``plan.perturbed_by(draws)``
+    (timing, path offset, effort; spreads ``config.timing_std``, ``path_std``,
+    ``effort_std``), the draws held by two Drake ``RandomSource`` systems (standard normal
+    and uniform) and read at initialisation. So one built diagram runs many seeds:
+    ``diagram.SetRandomContext(context, RandomGenerator(seed))`` (as
+    ``MonteCarloSimulation`` does) draws a new plan, and :meth:`set_seed` puts the draws of
+    ``plan.perturbed(seed)`` (numpy's) in a context instead. Both before
+    ``Simulator.Initialize``. Start the HapticMaster at the plan's first point mapped into
+    M to avoid an initial jerk, and keep the mapped plan inside the master's workspace.
+
+    Parameters
+    ----------
+    plan : TaskPlan
+        The task's nominal plan (world frame).
+    mapping : WorkspaceMapping
+        Used backwards, to find where the stylus must be for the slave to be on the plan.
+    config : OperatorConfig
+        Hand impedance (N/m, N s/m) and force limit (N), activation levels, co-contraction
+        gain (1/N), time constant (s), period (s), and the variability's spreads.
     """
 
-    def __init__(self, **model_parameters):
-        LeafSystem.__init__(self)
-        self.model = OperatorModel(**model_parameters)
-        self._p_MS_input = self.DeclareVectorInputPort("p_MS", 3)
-        self._v_MS_input = self.DeclareVectorInputPort("v_MS", 3)
-        self._feedback_force_input = self.DeclareVectorInputPort("feedback_force", 3)
-        activation_index = self.DeclareDiscreteState([self.model.levels["rest"]])
-        self.DeclarePeriodicDiscreteUpdateEvent(
-            period_sec=self.model.period, offset_sec=0.0, update=self._update
+    def __init__(self, *, plan, mapping, config=OperatorConfig()):
+        Diagram.__init__(self)
+        builder = DiagramBuilder()
+        law = builder.AddNamedSystem(
+            "law", OperatorLaw(plan=plan, mapping=mapping, config=config)
         )
-        self._hand_force_output = self.DeclareVectorOutputPort(
-            "hand_force",
-            3,
-            self._calc_hand_force,
-            prerequisites_of_calc={
-                self.time_ticket(),
-                self._p_MS_input.ticket(),
-                self._v_MS_input.ticket(),
-            },
+        self._law = law
+        self.plan_nominal = plan
+        n_normals, n_uniforms = plan.perturbation_sizes()
+        normals = builder.AddNamedSystem(
+            "normals", RandomSource(RandomDistribution.kGaussian, n_normals, _DRAW_INTERVAL)
         )
-        self._activation_output = self.DeclareStateOutputPort("activation", activation_index)
-
-    def _input_floats(self, context, name, port):
-        values = port.Eval(context).tolist()
-        if not all_finite(values):
-            raise ValueError(f"{name} must be finite, got {values}")
-        return values
-
-    def _calc_hand_force(self, context, output):
-        p_MS = self._input_floats(context, "p_MS", self._p_MS_input)
-        v_MS = self._input_floats(context, "v_MS", self._v_MS_input)
-        output.SetFromVector(self.model.hand_force_floats(context.get_time(), p_MS, v_MS))
-
-    def _update(self, context, discrete_state):
-        feedback_force = self._input_floats(context, "feedback_force", self._feedback_force_input)
-        activation = context.get_discrete_state_vector().GetAtIndex(0)
-        discrete_state.set_value(
-            [self.model.activation_step(context.get_time(), activation, feedback_force)]
+        uniforms = builder.AddNamedSystem(
+            "uniforms", RandomSource(RandomDistribution.kUniform, n_uniforms, _DRAW_INTERVAL)
         )
+        self._sources = (normals, uniforms)
+        builder.Connect(normals.get_output_port(), law.GetInputPort("normals"))
+        builder.Connect(uniforms.get_output_port(), law.GetInputPort("uniforms"))
+        for name in ("p_MS", "v_MS", "feedback_force"):
+            builder.ExportInput(law.GetInputPort(name), name)
+        for name in ("hand_force", "activation"):
+            builder.ExportOutput(law.GetOutputPort(name), name)
+        builder.BuildInto(self)
+
+    def set_seed(self, context, seed):
+        """Draw the variability of ``plan.perturbed(seed)`` into ``context`` (this diagram's
+        context, before ``Simulator.Initialize``): the same seed gives main's plan."""
+        for source, draws in zip(self._sources, self.plan_nominal.perturbation_draws(seed)):
+            self.GetMutableSubsystemContext(source, context).SetDiscreteState(draws)
+
+    def plan(self, context):
+        """The perturbed plan in W that the operator follows in ``context`` (initialised)."""
+        return self._law.plan(self.GetSubsystemContext(self._law, context))

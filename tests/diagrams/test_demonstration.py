@@ -14,6 +14,7 @@ from hemg_drake.diagrams.demonstration import (
     demonstration_from_logs,
     record_demonstration,
     run_demonstration,
+    seed_operator,
 )
 from hemg_drake.emg.envelope import moving_rms
 from hemg_drake.emg.gain import VariableGain
@@ -47,6 +48,7 @@ def simulate(scenario, seed, **kwargs):
     """Build and run one demonstration; also the plant's context at the end."""
     built = build_demonstration_diagram(scenario, seed=seed, **kwargs)
     simulator = Simulator(built.diagram)
+    seed_operator(built, simulator.get_mutable_context())
     simulator.AdvanceTo(scenario.duration)
     root = simulator.get_context()
     demo = demonstration_from_logs(
@@ -105,6 +107,7 @@ def test_logged_reference_is_what_the_clik_received_after_the_delay():
     # (a logger sees its ports as a context after AdvanceTo(t) does: before t's updates).
     again = build_demonstration_diagram(scenario, seed=3, scene=False)
     simulator = Simulator(again.diagram)
+    seed_operator(again, simulator.get_mutable_context())
     simulator.AdvanceTo(0.6)
     root = simulator.get_context()
     clik = again.station.diagram.GetSubsystemByName("clik")
@@ -275,6 +278,7 @@ def test_position_error_feedback_pulls_the_stylus_back_to_a_held_slave(pin_scena
     )
     built = build_demonstration_diagram(scenario, seed=1)
     simulator = Simulator(built.diagram)
+    seed_operator(built, simulator.get_mutable_context())
     simulator.AdvanceTo(scenario.duration)
     root = simulator.get_context()
     assert not built.scene.pin_out(built.plant.GetMyContextFromRoot(root))

@@ -1,4 +1,10 @@
-"""HsmmGmrReproducer, HsmmLqrReproducer and TrackingForce in Drake diagrams."""
+"""HsmmGmrReproducer, HsmmLqrReproducer and TrackingForce in Drake diagrams.
+
+The comparisons with ``reproduce`` are wiring tests (it runs the same policy step offline);
+the maths is pinned by references that share no code with it: eq. 18 on the system's own
+outputs, the cross-track attractor pulling onto the demonstrated path, eq. 23 by hand, and
+``test_reproducer_reference.py``'s closed forms.
+"""
 
 import numpy as np
 import pytest
@@ -74,6 +80,91 @@ def test_reproducer_reads_the_measured_position(path_task):
     assert np.linalg.norm(log["r", "xdot_star"][-1] - path_task.mean[100, 3:6]) < np.linalg.norm(
         log["r", "xdot_star"][-1] - path_task.mean[0, 3:6]
     )
+
+
+def distance_to_path(points, path):
+    """Distance (m) of each point, shape (n, 3), to the nearest sample of ``path`` (m, 3)."""
+    return np.min(np.linalg.norm(points[:, None, :] - path[None, :, :], axis=2), axis=1)
+
+
+@pytest.mark.parametrize("kappa", [0.0, 5.0])
+def test_eq_18_integrates_the_velocity_it_outputs(path_task, kappa):
+    # x*_{k+1} = x*_k + dt xdot*_k (eq. 18), checked on the system's own outputs alone: row k
+    # holds x*_{k+1} and xdot*_k (the update at k dt), x*_0 the start.
+    start, n_steps = path_task.mean[0, :3] + [0.0, 0.01, 0.0], 120
+    builder = DiagramBuilder()
+    reproducer = builder.AddSystem(
+        HsmmGmrReproducer(model=path_task.model, start=start, restoring_gain=kappa)
+    )
+    builder.Connect(reproducer.GetOutputPort("x_star"), reproducer.GetInputPort("p_WE"))
+    log = run(builder.Build(), {"r": reproducer}, n_steps)
+    x_star = np.vstack([start, log["r", "x_star"]])
+    np.testing.assert_allclose(np.diff(x_star, axis=0), DT * log["r", "xdot_star"], atol=1e-15)
+    # And the reference goes the demonstrated way: nearer the demonstrations' point of 1.2 s
+    # than where it started.
+    here = path_task.mean[n_steps, :3]
+    assert np.linalg.norm(x_star[-1] - here) < 0.5 * np.linalg.norm(start - here)
+
+
+def test_cross_track_attractor_pulls_back_onto_the_path(path_task):
+    # From 1 cm beside the demonstrated path, kappa = 5 1/s pulls the reference back across
+    # it (an offset decays as exp(-kappa t): to 1/e in 0.2 s); without it the offset stays.
+    start = path_task.mean[0, :3] + [0.0, 0.01, 0.0]
+    path = path_task.mean[:, :3]
+
+    def offsets(kappa):
+        builder = DiagramBuilder()
+        reproducer = builder.AddSystem(
+            HsmmGmrReproducer(model=path_task.model, start=start, restoring_gain=kappa)
+        )
+        builder.Connect(reproducer.GetOutputPort("x_star"), reproducer.GetInputPort("p_WE"))
+        log = run(builder.Build(), {"r": reproducer}, 60)
+        return distance_to_path(log["r", "x_star"], path)
+
+    initial = distance_to_path(start[None, :], path)[0]
+    free, pulled = offsets(0.0), offsets(5.0)
+    assert initial > 0.008
+    assert pulled[-1] < 0.35 * initial  # exp(-5 x 0.6) = 0.05, with the path's own slack
+    assert pulled[-1] < 0.5 * free[-1]
+
+
+def test_reproducers_and_tracking_force_clone_and_simulate_alike(path_task):
+    # Clone() is a double -> double scalar conversion: two simulators, bit-identical logs.
+    start, goal = path_task.mean[0, :3], path_task.mean[-1, :3]
+    builder = DiagramBuilder()
+    gmr = builder.AddNamedSystem("gmr", HsmmGmrReproducer(model=path_task.model, start=start))
+    lqr = builder.AddNamedSystem(
+        "lqr", HsmmLqrReproducer(model=path_task.model, start=start, weighting="temporal")
+    )
+    force = builder.AddNamedSystem("force", TrackingForce(kp=50.0, kd=5.0))
+    goal_source = builder.AddSystem(ConstantVectorSource(goal))
+    builder.Connect(gmr.GetOutputPort("x_star"), gmr.GetInputPort("p_WE"))
+    builder.Connect(gmr.GetOutputPort("x_star"), lqr.GetInputPort("p_WE"))
+    builder.Connect(lqr.GetOutputPort("x_star"), force.GetInputPort("x_star"))
+    builder.Connect(lqr.GetOutputPort("xdot_star"), force.GetInputPort("xdot_star"))
+    builder.Connect(goal_source.get_output_port(), force.GetInputPort("x_goal"))
+    builder.ExportOutput(force.GetOutputPort("F_tr"), "F_tr")
+    diagram = builder.Build()
+    results = []
+    for system in (diagram, diagram.Clone()):
+        simulator = Simulator(system)
+        simulator.AdvanceTo(0.305)
+        results.append(system.GetOutputPort("F_tr").Eval(simulator.get_context()).copy())
+    assert np.any(results[0] != 0.0)
+    np.testing.assert_array_equal(results[0], results[1])
+
+
+def test_tracking_force_converts_to_autodiff_with_the_eq_23_jacobian():
+    from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
+
+    system = TrackingForce(kp=[10.0, 20.0, 30.0], kd=2.0).ToAutoDiffXd()
+    context = system.CreateDefaultContext()
+    values = InitializeAutoDiff(np.arange(9.0)).ravel()
+    for i, name in enumerate(("x_star", "xdot_star", "x_goal")):
+        system.GetInputPort(name).FixValue(context, values[3 * i : 3 * i + 3])
+    jacobian = ExtractGradient(system.GetOutputPort("F_tr").Eval(context))
+    K_p, K_d = np.diag([10.0, 20.0, 30.0]), 2.0 * np.eye(3)
+    np.testing.assert_array_equal(jacobian, np.hstack([-K_p, K_d, K_p]))
 
 
 def test_ports_and_initial_outputs(path_task):

@@ -44,6 +44,7 @@ def _run(device, n_steps, force=(0.0, 0.0, 0.0), **kwargs):
         for name in ("p_MS", "v_MS", "state")
     }
     simulator = Simulator(builder.Build())
+    simulator.get_mutable_integrator().set_target_accuracy(1e-10)  # the filter's state
     simulator.AdvanceTo(n_steps * PERIOD - PERIOD / 2)
     context = simulator.get_context()
     # A logger at t_k sees the state before the update at t_k: shift by one sample.
@@ -55,18 +56,26 @@ def test_positions_pass_through_and_velocity_is_the_filtered_difference():
     device = RampDevice(p0, velocity)
     out = _run(device, 30, velocity_time_constant=tau)
     k = np.arange(len(out["p_MS"]))  # updates 0 .. 28 seen
-    np.testing.assert_allclose(out["p_MS"], p0 + np.outer(k * PERIOD, velocity), atol=1e-15)
-    # First-order filter of a constant difference v, from 0: v (1 - (1 - a)^k).
-    a = 1.0 - math.exp(-PERIOD / tau)
-    expected = np.outer(1.0 - (1.0 - a) ** k, velocity)
-    np.testing.assert_allclose(out["v_MS"], expected, rtol=1e-9, atol=1e-12)
+    # The device is read at initialisation (p0), then once per update.
+    np.testing.assert_allclose(
+        out["p_MS"], p0 + np.outer((k + 1) * PERIOD, velocity), atol=1e-15
+    )
+    # Drake's DiscreteDerivative of the sampled positions is v from its second sample (at
+    # t = T; zero before), and the continuous low-pass filter's step response from there is
+    # v (1 - exp(-(t - T) / tau)); row k is read at t = (k + 1) T.
+    t = (k + 1) * PERIOD
+    expected = np.outer(np.where(t > PERIOD, 1.0 - np.exp(-(t - PERIOD) / tau), 0.0),
+                        velocity)  # fmt: skip
+    np.testing.assert_allclose(out["v_MS"], expected, rtol=1e-7, atol=1e-12)
+    assert np.linalg.norm(out["v_MS"][-1] - velocity) < 0.01 * np.linalg.norm(velocity)
     np.testing.assert_allclose(out["state"], np.hstack([out["p_MS"], out["v_MS"]]))
 
 
 def test_raw_difference_and_device_velocity():
     velocity = np.array([0.2, -0.1, 0.0])
     out = _run(RampDevice([0, 0, 0], velocity), 5, velocity_time_constant=0.0)
-    np.testing.assert_allclose(out["v_MS"][1:], np.tile(velocity, (3, 1)), rtol=1e-9)
+    np.testing.assert_array_equal(out["v_MS"][:1], np.zeros((1, 3)))  # suppressed at first
+    np.testing.assert_allclose(out["v_MS"][2:], np.tile(velocity, (2, 1)), rtol=1e-9)
 
     class WithVelocity(RampDevice):
         def velocity(self):
@@ -80,7 +89,7 @@ def test_force_is_sent_saturated_in_norm_keeping_its_direction():
     device = RampDevice([0, 0, 0], [0, 0, 0])
     _run(device, 3, force=(6.0, 0.0, 8.0))  # norm 10 N > 7.9 N
     np.testing.assert_allclose(device.forces[0], [6.0 * 0.79, 0.0, 8.0 * 0.79], rtol=1e-12)
-    assert len(device.forces) == device.calls  # one command per sample
+    assert device.calls == len(device.forces) + 1  # read at start, then once per command
 
 
 def test_bad_device_and_bad_values_are_named():
@@ -105,8 +114,8 @@ def test_device_master_closes_the_teleoperation_loop_like_the_haptic_master():
     device = RampDevice([0.0, 0.01, 0.0], [0.0, 0.0, 0.0])
     builder = DiagramBuilder()
     master = builder.AddSystem(DeviceMaster(device=device))
-    to_slave = builder.AddSystem(WorkspaceMap(mapping=mapping))
-    feedback = builder.AddSystem(ForceFeedback(mapping=mapping))
+    to_slave = builder.AddSystem(WorkspaceMap(mapping=mapping, period=PERIOD))
+    feedback = builder.AddSystem(ForceFeedback(mapping=mapping, period=PERIOD))
     for name in ("p_MS", "v_MS"):
         builder.Connect(master.GetOutputPort(name), to_slave.GetInputPort(name))
     builder.Connect(feedback.GetOutputPort("motor_force"), master.GetInputPort("motor_force"))

@@ -8,10 +8,16 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 from scipy.linalg import expm
 
+from hemg_drake.teleop.config import FeedbackConfig
 from hemg_drake.teleop.delay_loop import simulate_delayed_spring_loop
-from hemg_drake.teleop.feedback import ForceFeedback
+from hemg_drake.teleop.feedback import ForceFeedback as _ForceFeedback
 from hemg_drake.teleop.mapping import WorkspaceMapping
 from hemg_drake.teleop.master import HapticMaster
+
+
+def ForceFeedback(*, mapping, period=1e-3, **settings):
+    """The system with FeedbackConfig's defaults but ``settings``."""
+    return _ForceFeedback(mapping=mapping, period=period, config=FeedbackConfig(**settings))
 
 
 @pytest.fixture
@@ -272,3 +278,86 @@ def test_passivity_without_the_stylus_velocity_is_named(mapping):
     system.GetInputPort("f_WE").FixValue(context, np.zeros(3))
     with pytest.raises(ValueError, match="connect the master's v_MS"):
         system.GetOutputPort("motor_force").Eval(context)
+
+
+# --- scalar conversion: clone, AutoDiffXd ------------------------------------------------
+
+
+@pytest.mark.parametrize("mode", ["force", "position_error"])
+def test_feedback_converts_to_autodiff_with_the_law_jacobian(mapping, mode):
+    from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
+
+    system = ForceFeedback(mapping=mapping, mode=mode, gain=2.0, peak_force=1e3).ToAutoDiffXd()
+    context = system.CreateDefaultContext()
+    names = [system.get_input_port(i).get_name() for i in range(system.num_input_ports())]
+    values = InitializeAutoDiff(np.linspace(0.01, 0.1, 3 * len(names))).ravel()
+    for i, name in enumerate(names):
+        system.GetInputPort(name).FixValue(context, values[3 * i : 3 * i + 3])
+    jacobian = ExtractGradient(system.GetOutputPort("motor_force").Eval(context))
+    RT = mapping.R_WM.matrix().T / 3.0  # scale 3
+    if mode == "force":
+        np.testing.assert_allclose(jacobian, 2.0 * RT, rtol=1e-14)
+    else:  # [p_WE, v_WE, p_MS, v_MS]: 50 R^T / s, 50 R^T / s, -50 I, -50 I
+        I = np.eye(3)
+        expected = np.hstack([50.0 * RT, 50.0 * RT, -50.0 * I, -50.0 * I])
+        np.testing.assert_allclose(jacobian, expected, rtol=1e-14, atol=1e-14)
+
+
+@pytest.mark.parametrize("delay_steps, passivity", [(0, "none"), (3, "none"), (3, "tdpa")])
+def test_spring_loop_clones_and_its_autodiff_update_is_the_finite_difference(
+    delay_steps, passivity
+):
+    # The free-space loop of the delay study (master, map, spring, feedback, delays).
+    from hemg_drake.teleop.delay_loop import (
+        build_delayed_spring_loop,
+        discrete_state as get_state,
+        discrete_update_jacobian,
+        set_discrete_state as set_state,
+    )
+
+    diagram, _, _ = build_delayed_spring_loop(delay_steps, passivity)
+    # Clone: two simulators, bit-identical states.
+    states = []
+    for system in (diagram, diagram.Clone()):
+        simulator = Simulator(system)
+        simulator.AdvanceTo(0.0505)
+        states.append(get_state(simulator.get_context()))
+    np.testing.assert_array_equal(states[0], states[1])
+    # The AutoDiffXd loop's discrete update, differentiated at that state, against central
+    # finite differences of the double loop's update (an independent differentiation).
+    x0 = states[0]
+    float_context = diagram.CreateDefaultContext()
+
+    def update(x):
+        set_state(float_context, x)
+        values = diagram.EvalUniquePeriodicDiscreteUpdate(float_context)
+        return np.concatenate([values.get_vector(i).CopyToVector()
+                               for i in range(values.num_groups())])  # fmt: skip
+
+    set_state(float_context, x0)
+    jacobian = discrete_update_jacobian(diagram, float_context)
+    h = 1e-7
+    numeric = np.column_stack([
+        (update(x0 + h * e) - update(x0 - h * e)) / (2 * h) for e in np.eye(len(x0))
+    ])  # fmt: skip
+    assert jacobian.shape == (len(x0), len(x0))
+    np.testing.assert_allclose(jacobian, numeric, rtol=1e-5, atol=1e-5)
+
+
+def test_gains_live_in_the_context(mapping):
+    # One built system, two contexts: the default gains, and K_pm = 20, K_dm = 0 set in the
+    # second; the force by hand in each (no saturation at a 100 N limit).
+    system = ForceFeedback(mapping=mapping, mode="position_error", peak_force=100.0)
+    p_WE, v_WE = np.array([0.75, -0.18, 0.33]), np.array([0.1, 0.0, -0.2])
+    p_MS, v_MS = np.array([0.01, -0.02, 0.0]), np.array([0.0, 0.05, 0.01])
+    e = mapping.slave_to_master(p_WE) - p_MS
+    edot = mapping.velocity_to_master(v_WE) - v_MS
+    forces = []
+    for gains in ({}, dict(stiffness=20.0, damping=0.0)):
+        context = system.CreateDefaultContext()
+        system.set_gains(context, **gains)
+        for name, value in (("p_WE", p_WE), ("v_WE", v_WE), ("p_MS", p_MS), ("v_MS", v_MS)):
+            system.GetInputPort(name).FixValue(context, value)
+        forces.append(system.GetOutputPort("motor_force").Eval(context))
+    np.testing.assert_allclose(forces[0], 50.0 * e + 50.0 * edot, rtol=1e-12)
+    np.testing.assert_allclose(forces[1], 20.0 * e, rtol=1e-12)

@@ -1,8 +1,9 @@
 """HapticMaster: exact mass-damper steps, motor saturation, soft walls, friction, errors.
 
-The references are closed forms written here (the mass-damper, with Coulomb friction, and
-the damped spring of a wall), not the system's numpy twin, which shares its maths.
+The references are closed forms written here (the mass-damper, with Coulomb friction, the
+damped spring of a wall, and the zero-order-hold matrices that Drake's Linearize must find).
 """
+
 
 import numpy as np
 import pytest
@@ -10,15 +11,23 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
-from hemg_drake.teleop.master import HapticMaster, MasterDynamics
+from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
+
+from hemg_drake.teleop.config import MasterConfig
+from hemg_drake.teleop.master import HapticMaster
 
 PERIOD = 1e-3
+
+
+def make_master(p_MS_initial=(0.0, 0.0, 0.0), **settings):
+    """A HapticMaster with MasterConfig's defaults but ``settings``."""
+    return HapticMaster(config=MasterConfig(**settings), p_MS_initial=p_MS_initial)
 
 
 def run_master(hand_force, motor_force=(0.0, 0.0, 0.0), duration=0.1, **parameters):
     """Simulate a HapticMaster under constant forces; return sample times and p_MS, v_MS."""
     builder = DiagramBuilder()
-    master = builder.AddSystem(HapticMaster(**parameters))
+    master = builder.AddSystem(make_master(**parameters))
     hand = builder.AddSystem(ConstantVectorSource(np.asarray(hand_force, float)))
     motor = builder.AddSystem(ConstantVectorSource(np.asarray(motor_force, float)))
     builder.Connect(hand.get_output_port(), master.GetInputPort("hand_force"))
@@ -73,7 +82,7 @@ def test_friction_stops_a_coasting_tip_where_the_analytic_solution_does():
     # zero at t_stop = tau ln(1 + b v0 / f_c); then the tip sticks.
     mass, damping, friction, v0 = 0.045, 0.3, 0.06, 0.02
     builder = DiagramBuilder()
-    master = builder.AddSystem(HapticMaster(friction=friction, damping=damping))
+    master = builder.AddSystem(make_master(friction=friction, damping=damping))
     zero = builder.AddSystem(ConstantVectorSource(np.zeros(3)))
     builder.Connect(zero.get_output_port(), master.GetInputPort("hand_force"))
     builder.Connect(zero.get_output_port(), master.GetInputPort("motor_force"))
@@ -133,17 +142,59 @@ def test_wall_push_with_saturated_motor_is_the_analytic_damped_spring():
     np.testing.assert_array_equal(p[:, 1:], 0.0)
 
 
-def test_system_matches_numpy_twin_with_friction():
-    # A wiring test only: the twin shares the maths (the tests above check the maths).
-    parameters = dict(friction=0.06, damping=0.3)
-    hand_force = np.array([0.2, 0.03, -0.1])
-    times, p, v = run_master(hand_force, duration=0.05, **parameters)
-    dynamics = MasterDynamics(**parameters)
-    p_twin, v_twin = np.zeros(3), np.zeros(3)
-    for k in range(1, len(times)):
-        p_twin, v_twin = dynamics.step(p_twin, v_twin, hand_force, np.zeros(3))
-        np.testing.assert_allclose(p[k], p_twin, atol=1e-15)
-        np.testing.assert_allclose(v[k], v_twin, atol=1e-15)
+@pytest.mark.parametrize("p_x", [0.0, 0.081])
+def test_autodiff_update_is_the_zero_order_hold_of_the_mass_damper(p_x):
+    # The AutoDiffXd master's discrete update, differentiated with respect to [p; v; F_hand;
+    # F_motor] (what a linearisation of the loop reads): in free space each axis is
+    # A_d = [[1, tau (1 - e)], [0, e]], B_d = [(T - tau (1 - e)) / b, (1 - e) / b] for both
+    # inputs, e = exp(-T / tau), tau = m / b. Beyond the +x wall (p_x = 81 mm) that axis is
+    # the damped spring: A_d = expm(A T) of [[0, 1], [-k/m, -(b + c)/m]] (its series here).
+    mass, damping, k, c = 0.045, 0.1, 5000.0, 20.0
+    master = make_master(p_MS_initial=[p_x, 0.0, 0.0]).ToAutoDiffXd()
+    context = master.CreateDefaultContext()
+    point = InitializeAutoDiff(np.concatenate([[p_x], np.zeros(11)])).ravel()
+    context.SetDiscreteState(0, point[0:3])
+    context.SetDiscreteState(1, point[3:6])
+    master.GetInputPort("hand_force").FixValue(context, point[6:9])
+    master.GetInputPort("motor_force").FixValue(context, point[9:12])
+    update = master.EvalUniquePeriodicDiscreteUpdate(context)
+    jacobian = ExtractGradient(np.concatenate([update.value(0), update.value(1)]))
+    A, B = jacobian[:, :6], jacobian[:, 6:]
+    tau = mass / damping
+    e = np.exp(-PERIOD / tau)
+    A_free = np.array([[1.0, tau * (1.0 - e)], [0.0, e]])
+    B_free = np.array([(PERIOD - tau * (1.0 - e)) / damping, (1.0 - e) / damping])
+    for axis in range(3):
+        rows = [axis, 3 + axis]
+        block = A[np.ix_(rows, rows)]
+        if axis == 0 and p_x > 0.08:
+            M = np.array([[0.0, 1.0], [-k / mass, -(damping + c) / mass]]) * PERIOD
+            term, expected = np.eye(2), np.eye(2)
+            for n in range(1, 30):
+                term = term @ M / n
+                expected = expected + term
+            np.testing.assert_allclose(block, expected, rtol=1e-9, atol=1e-12)
+            continue
+        np.testing.assert_allclose(block, A_free, rtol=1e-9, atol=1e-15)
+        for j in (axis, 3 + axis):  # hand_force then motor_force columns
+            np.testing.assert_allclose(B[rows, j], B_free, rtol=1e-9)
+
+
+def test_master_clones_and_steps_alike():
+    builder = DiagramBuilder()
+    master = builder.AddSystem(make_master(friction=0.06, damping=0.3))
+    hand = builder.AddSystem(ConstantVectorSource(np.array([0.2, 0.03, -0.1])))
+    builder.Connect(hand.get_output_port(), master.GetInputPort("hand_force"))
+    builder.Connect(hand.get_output_port(), master.GetInputPort("motor_force"))
+    builder.ExportOutput(master.GetOutputPort("state"), "state")
+    diagram = builder.Build()
+    states = []
+    for system in (diagram, diagram.Clone()):
+        simulator = Simulator(system)
+        simulator.AdvanceTo(0.05)
+        states.append(system.GetOutputPort("state").Eval(simulator.get_context()).copy())
+    assert np.linalg.norm(states[0][:3]) > 1e-3
+    np.testing.assert_array_equal(states[0], states[1])
 
 
 def test_friction_holds_a_small_push_and_yields_to_a_larger_one():
@@ -192,7 +243,7 @@ def test_zero_force_from_rest_stays_at_rest():
 
 
 def test_state_port_is_position_then_velocity():
-    master = HapticMaster(p_MS_initial=[0.01, 0.02, 0.03])
+    master = make_master(p_MS_initial=[0.01, 0.02, 0.03])
     context = master.CreateDefaultContext()
     state = master.GetOutputPort("state").Eval(context)
     np.testing.assert_array_equal(state, [0.01, 0.02, 0.03, 0, 0, 0])
@@ -211,7 +262,7 @@ def test_state_port_is_position_then_velocity():
 )
 def test_bad_parameters_are_named(parameters, message):
     with pytest.raises(ValueError, match=message):
-        HapticMaster(**parameters)
+        make_master(**parameters)
 
 
 def test_nan_input_is_rejected():

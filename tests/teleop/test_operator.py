@@ -6,12 +6,24 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
+from pydrake.common import RandomGenerator
+
 from hemg_drake.tasks.plan import TaskPlan
+from hemg_drake.teleop.config import OperatorConfig
 from hemg_drake.teleop.mapping import WorkspaceMapping
 from hemg_drake.teleop.master import HapticMaster
-from hemg_drake.teleop.operator import OperatorModel, SimulatedOperator
+from hemg_drake.teleop.operator import SimulatedOperator as _SimulatedOperator
 
 PERIOD = 1e-3
+# No variability unless a test asks for it: the operator follows the plan it is given.
+STEADY = dict(timing_std=0.0, path_std=[0.0, 0.0, 0.0], effort_std=0.0)
+
+
+def SimulatedOperator(*, plan, mapping, **settings):
+    """The system with OperatorConfig's defaults but ``settings`` (steady by default)."""
+    return _SimulatedOperator(plan=plan, mapping=mapping, config=OperatorConfig(**{**STEADY, **settings}))
+
+
 MAPPING = WorkspaceMapping(scale=3.0, p_WMo=[0.7, -0.2, 0.25])
 PLAN = TaskPlan(
     times=[0.0, 0.6, 1.4, 2.0],
@@ -20,10 +32,14 @@ PLAN = TaskPlan(
 )
 
 
-def run_operator(plan=PLAN, feedback_force=(0.0, 0.0, 0.0), duration=2.0, **operator_parameters):
-    """Operator and master in closed loop; logs at every sample instant."""
+def run_operator(plan=PLAN, feedback_force=(0.0, 0.0, 0.0), duration=2.0, seed=None,
+                 generator=None, **operator_parameters):  # fmt: skip
+    """Operator and master in closed loop; logs at every sample instant. ``seed``: the
+    operator's set_seed; ``generator``: a RandomGenerator for SetRandomContext."""
     builder = DiagramBuilder()
-    master = builder.AddSystem(HapticMaster(p_MS_initial=MAPPING.slave_to_master(plan.points[0])))
+    # The stylus starts where the task starts (the nominal plan's first point), as in a
+    # demonstration; the operator's own plan may vary from there.
+    master = builder.AddSystem(HapticMaster(p_MS_initial=MAPPING.slave_to_master(PLAN.points[0])))
     operator = builder.AddSystem(
         SimulatedOperator(plan=plan, mapping=MAPPING, **operator_parameters)
     )
@@ -45,10 +61,17 @@ def run_operator(plan=PLAN, feedback_force=(0.0, 0.0, 0.0), duration=2.0, **oper
             operator.GetOutputPort("hand_force"), builder, publish_period=PERIOD
         ),
     }
-    simulator = Simulator(builder.Build())
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    root = simulator.get_mutable_context()
+    if generator is not None:
+        diagram.SetRandomContext(root, generator)
+    if seed is not None:
+        operator.set_seed(operator.GetMyMutableContextFromRoot(root), seed)
     simulator.AdvanceTo(duration)
     context = simulator.get_context()
     result = {name: log.FindLog(context).data().T for name, log in logs.items()}
+    result["plan"] = operator.plan(operator.GetMyContextFromRoot(context))
     result["t"] = logs["p_MS"].FindLog(context).sample_times()
     result["activation"] = result["activation"][:, 0]
     return result
@@ -83,7 +106,7 @@ def test_activation_is_an_exact_first_order_lag(nominal):
     # From rest (0.05) towards the free level (0.2) with tau = 40 ms, sampled exactly: at
     # each of the activation's own sample instants t_k = k period (the logger, at 1 ms,
     # sees the value of k updates there), a = 0.2 - 0.15 exp(-t_k / tau).
-    period = OperatorModel(plan=PLAN, mapping=MAPPING).period
+    period = OperatorConfig().period
     t, a = nominal["t"], nominal["activation"]
     k = np.round(t / period)
     instants = (t < 0.3) & np.isclose(t, k * period, rtol=0, atol=1e-9)
@@ -121,24 +144,21 @@ def test_hand_force_is_the_impedance_law_by_hand():
     )
 
 
-def test_system_matches_numpy_twin_and_saturates_the_hand():
-    # A wiring test: the twin shares the maths (test_hand_force_is_the_impedance_law_by_hand
-    # and the activation tests check it).
+def test_one_activation_update_by_hand():
+    # At t = 0.9 s the plan is in its forceful segment (0.6 - 1.4 s, effort 1): the target
+    # is 0.7 + 0.05 |f| = 0.7 + 0.05 x 2.29 (|[1, 2, 0.5]| = sqrt(5.25)); from the rest 0.05
+    # one 5 ms step of the 40 ms lag gives a* + (0.05 - a*) exp(-0.125).
     system = SimulatedOperator(plan=PLAN, mapping=MAPPING)
-    model = OperatorModel(plan=PLAN, mapping=MAPPING)
     context = system.CreateDefaultContext()
     context.SetTime(0.9)
-    p_MS, v_MS, felt = (
-        np.array([0.03, 0.01, -0.02]),
-        np.array([0.1, 0.0, -0.05]),
-        np.array([1.0, 2.0, 0.5]),
-    )
-    for name, value in (("p_MS", p_MS), ("v_MS", v_MS), ("feedback_force", felt)):
+    felt = np.array([1.0, 2.0, 0.5])
+    for name, value in (("p_MS", np.zeros(3)), ("v_MS", np.zeros(3)), ("feedback_force", felt)):
         system.GetInputPort(name).FixValue(context, value)
-    hand_force = system.GetOutputPort("hand_force").Eval(context)
-    np.testing.assert_allclose(hand_force, model.hand_force(0.9, p_MS, v_MS), atol=1e-12)
-    next_activation = system.EvalUniquePeriodicDiscreteUpdate(context).get_vector().GetAtIndex(0)
-    assert next_activation == pytest.approx(model.activation_step(0.9, 0.05, felt), abs=1e-15)
+    update = system.EvalUniquePeriodicDiscreteUpdate(context)
+    target = 0.7 + 0.05 * np.sqrt(5.25)
+    expected = target + (0.05 - target) * np.exp(-0.005 / 0.04)
+    # Group 0: the law's activation (the random sources' draws follow).
+    assert update.get_vector(0).GetAtIndex(0) == pytest.approx(expected, abs=1e-15)
     # Far from the plan, the hand pushes at its limit, towards the plan.
     system.GetInputPort("p_MS").FixValue(context, [0.07, -0.05, 0.05])
     far = system.GetOutputPort("hand_force").Eval(context)
@@ -162,15 +182,55 @@ def test_effort_scales_the_activation_above_rest():
     assert a == pytest.approx(0.05 + 1.2 * (0.7 - 0.05), abs=1e-3)
 
 
-def test_same_seed_same_run_different_seed_different_run():
-    def run(seed):
-        return run_operator(plan=PLAN.perturbed(seed, path_std=0.002), duration=1.0)
+def test_set_seed_follows_the_plan_perturbed_by_that_seed():
+    # The operator perturbing in its Context (set_seed) against one given the plan perturbed
+    # outside (TaskPlan.perturbed) and no variability of its own: the same run, to the bit.
+    spreads = dict(timing_std=0.1, path_std=[0.002, 0.002, 0.002], effort_std=0.1)
+    inside = run_operator(duration=1.0, seed=11, **spreads)
+    outside = run_operator(plan=PLAN.perturbed(11, **spreads), duration=1.0)
+    for name in ("p_MS", "hand_force", "activation"):
+        np.testing.assert_array_equal(inside[name], outside[name])
+    np.testing.assert_array_equal(inside["plan"].times, PLAN.perturbed(11, **spreads).times)
+    other = run_operator(duration=1.0, seed=12, **spreads)
+    assert np.abs(inside["p_MS"] - other["p_MS"]).max() > 1e-4
+    assert np.abs(inside["activation"] - other["activation"]).max() > 1e-3
 
-    a, b, c = run(11), run(11), run(12)
+
+def test_set_random_context_draws_the_plan_from_the_generator():
+    # One built diagram, several seeds: SetRandomContext(RandomGenerator(seed)).
+    spreads = dict(timing_std=0.1, path_std=[0.002, 0.002, 0.002], effort_std=0.1)
+    a = run_operator(duration=0.5, generator=RandomGenerator(3), **spreads)
+    b = run_operator(duration=0.5, generator=RandomGenerator(3), **spreads)
+    c = run_operator(duration=0.5, generator=RandomGenerator(4), **spreads)
     for name in ("p_MS", "hand_force", "activation"):
         np.testing.assert_array_equal(a[name], b[name])
-    assert np.abs(a["p_MS"] - c["p_MS"]).max() > 1e-4
-    assert np.abs(a["activation"] - c["activation"]).max() > 1e-3
+    assert np.abs(a["p_MS"] - c["p_MS"]).max() > 1e-5
+    assert not np.array_equal(a["plan"].times, c["plan"].times)
+    # The plan varies as configured: a shift of millimetres, segment times within 50 %.
+    for run in (a, c):
+        offset = np.abs(run["plan"].points - PLAN.points).max()
+        assert 1e-5 < offset < 0.02
+        ratio = np.diff(run["plan"].times) / np.diff(PLAN.times)
+        assert np.all((ratio > 0.5) & (ratio < 1.5))
+    # Without variability the generator changes nothing: the nominal plan.
+    steady = run_operator(duration=0.5, generator=RandomGenerator(3))
+    np.testing.assert_array_equal(steady["plan"].points, PLAN.points)
+
+
+def test_operator_clones():
+    spreads = dict(timing_std=0.1, path_std=[0.002, 0.002, 0.002], effort_std=0.1)
+    system = SimulatedOperator(plan=PLAN, mapping=MAPPING, **spreads)
+    forces = []
+    for copy in (system, system.Clone()):
+        simulator = Simulator(copy)
+        context = simulator.get_mutable_context()
+        copy.SetRandomContext(context, RandomGenerator(7))
+        for name in ("p_MS", "v_MS", "feedback_force"):
+            copy.GetInputPort(name).FixValue(context, np.zeros(3))
+        simulator.AdvanceTo(0.3)
+        forces.append(copy.GetOutputPort("hand_force").Eval(context).copy())
+    assert np.linalg.norm(forces[0]) > 0.1
+    np.testing.assert_array_equal(forces[0], forces[1])
 
 
 @pytest.mark.parametrize(
@@ -202,3 +262,36 @@ def test_nan_stylus_input_is_rejected(name):
     system.GetInputPort(name).FixValue(context, [0.0, np.nan, 0.0])
     with pytest.raises(ValueError, match=f"{name} must be finite"):
         system.GetOutputPort("hand_force").Eval(context)
+
+
+def test_monte_carlo_runs_several_seeds_of_one_built_loop():
+    # MonteCarloSimulation: one built operator + master loop, a random context per sample
+    # (SetRandomContext), the end time of the operator's drawn plan as the output.
+    from pydrake.systems.analysis import MonteCarloSimulation
+
+    spreads = dict(timing_std=0.1, path_std=[0.002, 0.002, 0.002], effort_std=0.1)
+    builder = DiagramBuilder()
+    master = builder.AddSystem(HapticMaster(p_MS_initial=MAPPING.slave_to_master(PLAN.points[0])))
+    operator = builder.AddSystem(SimulatedOperator(plan=PLAN, mapping=MAPPING, **spreads))
+    zero = builder.AddSystem(ConstantVectorSource(np.zeros(3)))
+    builder.Connect(zero.get_output_port(), operator.GetInputPort("feedback_force"))
+    builder.Connect(zero.get_output_port(), master.GetInputPort("motor_force"))
+    builder.Connect(operator.GetOutputPort("hand_force"), master.GetInputPort("hand_force"))
+    for name in ("p_MS", "v_MS"):
+        builder.Connect(master.GetOutputPort(name), operator.GetInputPort(name))
+    diagram = builder.Build()
+
+    def end_time(system, context):
+        return operator.plan(operator.GetMyContextFromRoot(context)).end_time
+
+    def results(seed):
+        runs = MonteCarloSimulation(
+            make_simulator=lambda generator: Simulator(diagram), output=end_time,
+            final_time=0.05, num_samples=4, generator=RandomGenerator(seed),
+        )  # fmt: skip
+        return [run.output for run in runs]
+
+    first, again = results(1), results(1)
+    assert first == again  # same generator seed, same draws
+    assert len(set(first)) == 4  # four different plans from one diagram
+    assert all(abs(t / PLAN.end_time - 1.0) < 0.3 for t in first)
