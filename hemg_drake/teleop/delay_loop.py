@@ -11,7 +11,6 @@ controller. ``tests/teleop/test_feedback.py`` checks its physics and
 """
 
 import numpy as np
-from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Adder, ConstantVectorSource, MatrixGain
@@ -125,43 +124,3 @@ def simulate_delayed_spring_loop(
         if feedback.stateful:
             energy.append(float(feedback.energy(feedback.GetMyContextFromRoot(context))))
     return np.array(x), np.array(energy)
-
-
-def discrete_state(context):
-    """Every discrete state group of ``context`` (a diagram's), concatenated."""
-    values = context.get_discrete_state()
-    return np.concatenate([values.get_vector(i).CopyToVector() for i in range(values.num_groups())])
-
-
-def set_discrete_state(context, x):
-    """Set every discrete state group of ``context`` from the concatenation ``x``."""
-    values = context.get_mutable_discrete_state()
-    start = 0
-    for i in range(values.num_groups()):
-        group = values.get_mutable_vector(i)
-        group.SetFromVector(x[start : start + group.size()])
-        start += group.size()
-
-
-def discrete_update_jacobian(diagram, context):
-    """A = d x[k+1] / d x[k] of a diagram's periodic discrete update at ``context``'s state.
-
-    Drake's ``Linearize`` takes a discrete system with one state group only; a diagram of
-    several discrete systems has one group each. This converts the diagram to AutoDiffXd
-    (every system of the loop converts), seeds the concatenated state with the identity and
-    differentiates ``EvalUniquePeriodicDiscreteUpdate`` (all updates share one period).
-    Inputs of the diagram, if any, must be fixed in ``context``; they are held constant.
-
-    Returns
-    -------
-    array, shape (n, n), n the number of discrete states, in :func:`discrete_state`'s order.
-    """
-    loop = diagram.ToAutoDiffXd()
-    ad_context = loop.CreateDefaultContext()
-    ad_context.SetTimeStateAndParametersFrom(context)
-    set_discrete_state(ad_context, InitializeAutoDiff(discrete_state(context)).ravel())
-    values = loop.EvalUniquePeriodicDiscreteUpdate(ad_context)
-    updated = np.concatenate(
-        [values.get_vector(i).CopyToVector() for i in range(values.num_groups())]
-    )
-    return ExtractGradient(updated)

@@ -308,12 +308,12 @@ def test_spring_loop_clones_and_its_autodiff_update_is_the_finite_difference(
     delay_steps, passivity
 ):
     # The free-space loop of the delay study (master, map, spring, feedback, delays).
-    from hemg_drake.teleop.delay_loop import (
-        build_delayed_spring_loop,
+    from hemg_drake.analysis.stability import (
         discrete_state as get_state,
         discrete_update_jacobian,
         set_discrete_state as set_state,
     )
+    from hemg_drake.teleop.delay_loop import build_delayed_spring_loop
 
     diagram, _, _ = build_delayed_spring_loop(delay_steps, passivity)
     # Clone: two simulators, bit-identical states.
