@@ -45,7 +45,9 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import LinearBushingRollPitchYaw
-from pydrake.systems.framework import LeafSystem
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
 
 from hemg_drake.robots.baxter import MODELS_DIR, make_parser
 from hemg_drake.tasks.config import CotterPinParams
@@ -123,59 +125,73 @@ def pin_resistance_force(x, xdot, *, hold_force, detent_length, detent_stiffness
     return detent - sliding_damping * np.asarray(xdot, dtype=float)[()]
 
 
-class PinResistance(LeafSystem):
-    """The detent and the sliding friction that hold the cotter pin, as a generalized force.
+@TemplateSystem.define("PinResistance_", T_list=[float, AutoDiffXd])
+def PinResistance_(T):
+    class Impl(LeafSystem_[T]):
+        """The detent and the sliding friction that hold the cotter pin, as a generalized force.
 
-    .. pydrake_system::
+        .. pydrake_system::
 
-        name: PinResistance
-        input_ports:
-        - pin_state
-        output_ports:
-        - generalized_force
+            name: PinResistance
+            input_ports:
+            - pin_state
+            output_ports:
+            - generalized_force
 
-    ``pin_state`` is the pin model instance's [x; xdot] (m, m/s; connect
-    ``plant.get_state_output_port(pin_model)``). ``generalized_force`` (1, N along the pull
-    axis) is :func:`pin_resistance_force`: the detent's spring minus ``sliding_damping``
-    times the pin's speed. It drives the pin's own joint actuator (``pin_resistance``, added
-    by :func:`add_cotter_pin_scene`) through ``plant.get_actuation_input_port(pin_model)``,
-    so the plant's ``applied_generalized_force`` input stays free for users.
+        ``pin_state`` is the pin model instance's [x; xdot] (m, m/s; connect
+        ``plant.get_state_output_port(pin_model)``). ``generalized_force`` (1, N along the pull
+        axis) is :func:`pin_resistance_force`: the detent's spring minus ``sliding_damping``
+        times the pin's speed. It drives the pin's own joint actuator (``pin_resistance``, added
+        by :func:`add_cotter_pin_scene`) through ``plant.get_actuation_input_port(pin_model)``,
+        so the plant's ``applied_generalized_force`` input stays free for users.
 
-    Timing: stateless, direct feedthrough of the state; the discrete plant samples it once
-    per step, so the detent spring and the friction are explicit (``add_cotter_pin_scene``
-    checks their stability at the plant's step).
-    """
+        Scalar types: double and AutoDiffXd (Clone works).
 
-    def __init__(self, *, hold_force, detent_length, detent_stiffness, sliding_damping):
+        Timing: stateless, direct feedthrough of the state; the discrete plant samples it once
+        per step, so the detent spring and the friction are explicit (``add_cotter_pin_scene``
+        checks their stability at the plant's step).
         """
-        Parameters
-        ----------
-        hold_force, detent_length, detent_stiffness, sliding_damping : float, N, m, N/m,
-            N s/m (see :class:`CotterPinParams`).
-        """
-        LeafSystem.__init__(self)
-        self._law = dict(
-            hold_force=as_scalar("hold_force", hold_force),
-            detent_length=as_scalar("detent_length", detent_length),
-            detent_stiffness=as_scalar("detent_stiffness", detent_stiffness),
-            sliding_damping=as_scalar("sliding_damping", sliding_damping, strict=False),
-        )
-        self.pin_state_input = self.DeclareVectorInputPort("pin_state", 2)
-        self.generalized_force_output = self.DeclareVectorOutputPort(
-            "generalized_force",
-            1,
-            self._calc_generalized_force,
-            prerequisites_of_calc={self.pin_state_input.ticket()},
-        )
 
-    def _calc_generalized_force(self, context, output):
-        x, xdot = self.pin_state_input.Eval(context).tolist()
-        # pin_resistance_force's law on plain floats (numpy costs more than the arithmetic
-        # at 1 kHz; the tests compare the two).
-        law = self._law
-        spring = -min(max(law["detent_stiffness"] * x, -law["hold_force"]), law["hold_force"])
-        detent = spring if x < law["detent_length"] else 0.0
-        output.SetAtIndex(0, detent - law["sliding_damping"] * xdot)
+        def _construct(
+            self, *, hold_force, detent_length, detent_stiffness, sliding_damping, converter=None
+        ):
+            """
+            Parameters
+            ----------
+            hold_force, detent_length, detent_stiffness, sliding_damping : float, N, m, N/m,
+                N s/m (see :class:`CotterPinParams`).
+            """
+            LeafSystem_[T].__init__(self, converter)
+            self._law = dict(
+                hold_force=as_scalar("hold_force", hold_force),
+                detent_length=as_scalar("detent_length", detent_length),
+                detent_stiffness=as_scalar("detent_stiffness", detent_stiffness),
+                sliding_damping=as_scalar("sliding_damping", sliding_damping, strict=False),
+            )
+            self.pin_state_input = self.DeclareVectorInputPort("pin_state", 2)
+            self.generalized_force_output = self.DeclareVectorOutputPort(
+                "generalized_force",
+                1,
+                self._calc_generalized_force,
+                prerequisites_of_calc={self.pin_state_input.ticket()},
+            )
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, **other._law, converter=converter)
+
+        def _calc_generalized_force(self, context, output):
+            x, xdot = self.pin_state_input.Eval(context).tolist()
+            # pin_resistance_force's law on plain floats (numpy costs more than the arithmetic
+            # at 1 kHz; the tests compare the two).
+            law = self._law
+            spring = -min(max(law["detent_stiffness"] * x, -law["hold_force"]), law["hold_force"])
+            detent = spring if x < law["detent_length"] else 0.0
+            output.SetAtIndex(0, detent - law["sliding_damping"] * xdot)
+
+    return Impl
+
+
+PinResistance = PinResistance_[None]
 
 
 @dc.dataclass(frozen=True, eq=False)
