@@ -1,7 +1,8 @@
 """Closed-loop inverse kinematics (CLIK) of the slave's tool point, eq. 21.
 
-Why the J^T law is the project's own system and not Drake's
-``DifferentialInverseKinematicsIntegrator``: see :data:`DIFF_IK_NOTE`.
+The J^T law (the paper's) and its damped-least-squares variant are this project's own
+system; why the DLS variant is not Drake's ``DifferentialInverseKinematicsIntegrator``: the
+comment above :data:`DIFF_IK_NOTE`.
 """
 
 import math
@@ -29,7 +30,19 @@ AXIS_DAMPING = 0.1
 # point's velocity, and N stays bounded at a singularity.
 NULL_SPACE_DAMPING = 1e-4
 
-DIFF_IK_NOTE = "(filled in below)"
+# Why the "dls" variant is not Drake's DifferentialInverseKinematicsIntegrator (measured on
+# the 2-core machine, Drake 1.51, benchmarks/bench_clik.py, translation-only velocity flag,
+# the same limits):
+# - its law is another one: each step it solves a QP for the joint velocity whose tool
+#   velocity closes the whole pose error within that one step (V = dX / time_step), scaled
+#   down to the velocity limits; eq. 21's first-order rate K_sp and the DLS damping have no
+#   counterpart, so the shipped gains and their tuning would not carry over. From home to a
+#   target 0.3 m away it reported "stuck" for its first 135 steps (the limits bind);
+# - it does not convert to AutoDiffXd (ToAutoDiffXd raises "does not support scalar
+#   conversion"), which the loop's linearisation (issue 22, section 6) needs;
+# - one step costs 73-112 us of CPU (the QP) against 40-47 us for this system's DLS
+#   update, measured in the same run.
+DIFF_IK_NOTE = "see the comment above"
 
 
 @TemplateSystem.define("Clik_", T_list=[float, AutoDiffXd])
@@ -338,7 +351,8 @@ def axis_task_rates(
     L = K (G + nu^2 I)^-1 and B = Jw N = Jw - L Jv,
     B B^T = Jw Jw^T - L K^T - nu^2 L L^T (as L G L^T = L K^T - nu^2 L L^T), A A^T = P B B^T P,
     and with w = P (A A^T + mu^2 I)^-1 (...), qdot = J^T [w; gain y - L^T w].
-    3x3 matrices are row-major 9-tuples of scalars (floats or AutoDiffXd).
+    3x3 matrices are row-major 9-tuples of scalars (floats or AutoDiffXd), written out
+    term by term: at 1 kHz each Python call and loop counts.
 
     Parameters
     ----------
@@ -352,32 +366,40 @@ def axis_task_rates(
     -------
     list of n scalars, rad/s, before the limits.
     """
-    JJ = (J @ J.T).tolist()
-    S_ww = (*JJ[0][:3], *JJ[1][:3], *JJ[2][:3])
-    K = (*JJ[0][3:], *JJ[1][3:], *JJ[2][3:])  # Jw Jv^T
-    G = (*JJ[3][3:], *JJ[4][3:], *JJ[5][3:])  # Jv Jv^T
+    (s00, s01, s02, k00, k01, k02), (_, s11, s12, k10, k11, k12), (
+        _, _, s22, k20, k21, k22), (_, _, _, g00, g01, g02), (_, _, _, _, g11, g12), (
+        _, _, _, _, _, g22) = (J @ J.T).tolist()  # fmt: skip
     R = R_WE.ravel().tolist()
     p0, p1, p2 = _mv(R, p_EoE_E)
     q0, q1, q2 = p_WoEo_W.tolist()
     d0, d1, d2 = p_WE_desired.tolist()
-    e = (d0 - (q0 + p0), d1 - (q1 + p1), d2 - (q2 + p2))
+    y = (d0 - (q0 + p0), d1 - (q1 + p1), d2 - (q2 + p2))  # e
     a0, a1, a2 = _mv(R, axis_E)
-    y = e if dls_damping is None else _mv(_inverse3(G, dls_damping * dls_damping), e)
+    G = (g00, g01, g02, g01, g11, g12, g02, g12, g22)
+    if dls_damping is not None:
+        y = _mv(_inverse3(G, dls_damping * dls_damping), y)
     nu2 = NULL_SPACE_DAMPING * NULL_SPACE_DAMPING
-    L = _mm(K, _inverse3(G, nu2))
-    LKt = _mm_t(L, K)
-    LLt = _mm_t(L, L)
-    X = tuple(S_ww[i] - LKt[i] - nu2 * LLt[i] for i in range(9))  # B B^T
+    K = (k00, k01, k02, k10, k11, k12, k20, k21, k22)
+    l00, l01, l02, l10, l11, l12, l20, l21, l22 = L = _mm(K, _inverse3(G, nu2))
+    # X = B B^T = S_ww - L K^T - nu^2 L L^T (symmetric: six entries).
+    x00 = s00 - (l00 * k00 + l01 * k01 + l02 * k02) - nu2 * (l00 * l00 + l01 * l01 + l02 * l02)
+    x01 = s01 - (l00 * k10 + l01 * k11 + l02 * k12) - nu2 * (l00 * l10 + l01 * l11 + l02 * l12)
+    x02 = s02 - (l00 * k20 + l01 * k21 + l02 * k22) - nu2 * (l00 * l20 + l01 * l21 + l02 * l22)
+    x11 = s11 - (l10 * k10 + l11 * k11 + l12 * k12) - nu2 * (l10 * l10 + l11 * l11 + l12 * l12)
+    x12 = s12 - (l10 * k20 + l11 * k21 + l12 * k22) - nu2 * (l10 * l20 + l11 * l21 + l12 * l22)
+    x22 = s22 - (l20 * k20 + l21 * k21 + l22 * k22) - nu2 * (l20 * l20 + l21 * l21 + l22 * l22)
     # H = P X P with P = I - a a^T: X - a (X a)^T - (X a) a^T + (a^T X a) a a^T.
-    x0, x1, x2 = _mv(X, (a0, a1, a2))
-    axa = a0 * x0 + a1 * x1 + a2 * x2
-    a = (a0, a1, a2)
-    xa = (x0, x1, x2)
-    H = tuple(
-        X[3 * i + k] - a[i] * xa[k] - xa[i] * a[k] + axa * a[i] * a[k]
-        for i in range(3)
-        for k in range(3)
-    )
+    xa0 = x00 * a0 + x01 * a1 + x02 * a2
+    xa1 = x01 * a0 + x11 * a1 + x12 * a2
+    xa2 = x02 * a0 + x12 * a1 + x22 * a2
+    axa = a0 * xa0 + a1 * xa1 + a2 * xa2
+    h00 = x00 - 2.0 * a0 * xa0 + axa * a0 * a0
+    h01 = x01 - a0 * xa1 - xa0 * a1 + axa * a0 * a1
+    h02 = x02 - a0 * xa2 - xa0 * a2 + axa * a0 * a2
+    h11 = x11 - 2.0 * a1 * xa1 + axa * a1 * a1
+    h12 = x12 - a1 * xa2 - xa1 * a2 + axa * a1 * a2
+    h22 = x22 - 2.0 * a2 * xa2 + axa * a2 * a2
+    H = (h00, h01, h02, h01, h11, h12, h02, h12, h22)
     # Axis error: the rotation vector that turns a onto d.
     d0, d1, d2 = axis_W
     c0, c1, c2 = a1 * d2 - a2 * d1, a2 * d0 - a0 * d2, a0 * d1 - a1 * d0
@@ -391,9 +413,12 @@ def axis_task_rates(
     r = (scale * c0 - (k0 - a0 * ak), scale * c1 - (k1 - a1 * ak), scale * c2 - (k2 - a2 * ak))
     z0, z1, z2 = _mv(_inverse3(H, AXIS_DAMPING * AXIS_DAMPING), r)
     az = a0 * z0 + a1 * z1 + a2 * z2
-    w = (z0 - a0 * az, z1 - a1 * az, z2 - a2 * az)
-    l0, l1, l2 = _mv((L[0], L[3], L[6], L[1], L[4], L[7], L[2], L[5], L[8]), w)  # L^T w
-    u = np.array([*w, gain * y[0] - l0, gain * y[1] - l1, gain * y[2] - l2])
+    w0, w1, w2 = z0 - a0 * az, z1 - a1 * az, z2 - a2 * az
+    # L^T w.
+    m0 = l00 * w0 + l10 * w1 + l20 * w2
+    m1 = l01 * w0 + l11 * w1 + l21 * w2
+    m2 = l02 * w0 + l12 * w1 + l22 * w2
+    u = np.array([w0, w1, w2, gain * y[0] - m0, gain * y[1] - m1, gain * y[2] - m2])
     return (u @ J).tolist()
 
 
@@ -418,17 +443,6 @@ def _mm(A, B):
     )  # fmt: skip
 
 
-def _mm_t(A, B):
-    """A B^T for row-major 3x3 9-tuples."""
-    a0, a1, a2, a3, a4, a5, a6, a7, a8 = A
-    b0, b1, b2, b3, b4, b5, b6, b7, b8 = B
-    return (
-        a0 * b0 + a1 * b1 + a2 * b2, a0 * b3 + a1 * b4 + a2 * b5, a0 * b6 + a1 * b7 + a2 * b8,
-        a3 * b0 + a4 * b1 + a5 * b2, a3 * b3 + a4 * b4 + a5 * b5, a3 * b6 + a4 * b7 + a5 * b8,
-        a6 * b0 + a7 * b1 + a8 * b2, a6 * b3 + a7 * b4 + a8 * b5, a6 * b6 + a7 * b7 + a8 * b8,
-    )  # fmt: skip
-
-
 def _inverse3(G, damping_squared):
     """(G + damping_squared I)^-1 for a symmetric 3x3 G (row-major 9-tuple), by its adjugate.
 
@@ -443,12 +457,10 @@ def _inverse3(G, damping_squared):
     c11 = g00 * g22 - g02 * g02
     c12 = g01 * g02 - g00 * g12
     c22 = g00 * g11 - g01 * g01
-    det = g00 * c00 + g01 * c01 + g02 * c02
-    return (
-        c00 / det, c01 / det, c02 / det,
-        c01 / det, c11 / det, c12 / det,
-        c02 / det, c12 / det, c22 / det,
-    )  # fmt: skip
+    inverse_det = 1.0 / (g00 * c00 + g01 * c01 + g02 * c02)
+    c00, c01, c02 = c00 * inverse_det, c01 * inverse_det, c02 * inverse_det
+    c11, c12, c22 = c11 * inverse_det, c12 * inverse_det, c22 * inverse_det
+    return (c00, c01, c02, c01, c11, c12, c02, c12, c22)
 
 
 def _atan2(y, x):
