@@ -4,7 +4,7 @@
    this process's CPU time, best of 7 x 2000 calls) for each law, without and with the
    pen-axis task (``orientation_gain`` 10 1/s); then, for the DLS variant, one step of
    Drake's ``DifferentialInverseKinematicsIntegrator`` (a QP per step; see
-   ``hemg_drake.control.clik.DIFF_IK_NOTE``).
+   the module docstring of ``hemg_drake.control.clik``).
 2. The pen's tilt from vertical while it touches the paper over the whole default drawing
    plan (the shipped drawing scenario's station followed at K = 100 by
    ``build_plan_follower``, the measured arm's pose logged at 0.01 s), with the

