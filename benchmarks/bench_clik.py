@@ -1,8 +1,10 @@
 """CLIK and the arm's start configuration: step cost, pen tilt while drawing, IK time.
 
-1. One ``Clik`` update (the 1 kHz callback itself, this process's CPU time, best of
-   7 x 2000 calls) for each law, without and with the pen-axis task (``orientation_gain``
-   10 1/s).
+1. One ``Clik`` update (the 1 kHz callback itself with its cache entry's position update,
+   this process's CPU time, best of 7 x 2000 calls) for each law, without and with the
+   pen-axis task (``orientation_gain`` 10 1/s); then, for the DLS variant, one step of
+   Drake's ``DifferentialInverseKinematicsIntegrator`` (a QP per step; see
+   the module docstring of ``hemg_drake.control.clik``).
 2. The pen's tilt from vertical while it touches the paper over the whole default drawing
    plan (the shipped drawing scenario's station followed at K = 100 by
    ``build_plan_follower``, the measured arm's pose logged at 0.01 s), with the
@@ -15,9 +17,14 @@
 Prints its figures; the machine is shared (2 cores), so take the best of several runs.
 """
 
+import dataclasses as dc
 import time
 
 import numpy as np
+from pydrake.multibody.inverse_kinematics import (
+    DifferentialInverseKinematicsIntegrator,
+    DifferentialInverseKinematicsParameters,
+)
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, ContactModel
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.analysis import Simulator
@@ -25,6 +32,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
 
 from hemg_drake.control.clik import Clik, velocity_columns
+from hemg_drake.control.config import ClikConfig
 from hemg_drake.control.ik import solve_tool_point_ik
 from hemg_drake.diagrams.plan_follower import build_plan_follower
 from hemg_drake.robots.baxter import add_baxter_arm
@@ -48,75 +56,58 @@ def drawing_plant(builder=None, X_WT=None):
 
 def update_cost():
     _, plant, arm, _ = drawing_plant()
+    fk = plant.CreateDefaultContext()
+    plant.SetPositions(fk, arm.model_instance, arm.home_positions)
+    target = arm.tool_frame.CalcPoseInWorld(fk).translation() + [0.05, 0.02, -0.03]
     print("Clik update (the callback, us of CPU time per call; best / median of 7 x 2000)")
     for method, gain in (("transpose", 300.0), ("dls", 50.0)):
         for axis_gain in (0.0, AXIS_GAIN):
+            config = dc.replace(
+                ClikConfig(), method=method, gain=gain, orientation_gain=axis_gain
+            )
             clik = Clik(
                 plant=plant,
                 model_instance=arm.model_instance,
                 frame_E=arm.tool_frame,
-                method=method,
-                gain=gain,
-                orientation_gain=axis_gain,
+                config=config,
             )
             context = clik.CreateDefaultContext()
-            target = clik.p_WE(arm.home_positions) + [0.05, 0.02, -0.03]
             clik.GetInputPort("p_WE_desired").FixValue(context, target)
             clik.GetInputPort("state").FixValue(context, np.r_[arm.home_positions, np.zeros(7)])
-            context.SetDiscreteState(0, arm.home_positions)
             out = clik.AllocateDiscreteVariables()
             update = clik._update_axis if axis_gain else clik._update  # the periodic event's
-            update(context, out)  # compile
             times = []
             for _ in range(7):
                 start = time.process_time()
                 for _ in range(2000):
+                    # A new q_d each call, as in a simulation: the cache entry recomputes.
+                    context.SetDiscreteState(0, arm.home_positions)
                     update(context, out)
                 times.append((time.process_time() - start) / 2000 * 1e6)
             print(
                 f"  {method:9s} axis task {'on ' if axis_gain else 'off'}: "
                 f"{min(times):5.1f} / {np.median(times):5.1f}"
             )
-
-
-def draw(position, axis_gain):
-    """The whole default plan on the shipped drawing scenario's station (plan follower at
-    K = 100) with the sheet at ``position``; returns (max tilt in contact (deg), strokes,
-    ink's farthest point from the plan (m), wall s, simulated s)."""
-    scenario = load_scenario(shipped_scenario("drawing"), overrides=[
-        f"scene.position={list(position)}", f"clik.orientation_gain={axis_gain}",
-    ])  # fmt: skip
-    follower = build_plan_follower(scenario, gain=100.0)
-    plan, plant, arm = follower.plan, follower.plant, follower.station.arm
-    builder = DiagramBuilder()
-    diagram = builder.AddSystem(follower.diagram)
-    state_log = LogVectorOutput(diagram.GetOutputPort("arm_state"), builder, 0.01)
-    force_log = LogVectorOutput(diagram.GetOutputPort("f_WE"), builder, 0.01)
-    simulator = Simulator(builder.Build())
-    start = time.perf_counter()
-    simulator.AdvanceTo(plan.end_time)
-    wall = time.perf_counter() - start
-    context = simulator.get_context()
-    states = state_log.FindLog(context)
-    fk = plant.CreateDefaultContext()
-    tilt, p_WP = [], []
-    for q in states.data()[:7].T:
-        plant.SetPositions(fk, arm.model_instance, q)
-        X_WE = arm.tool_frame.CalcPoseInWorld(fk)
-        tilt.append(np.degrees(np.arccos(np.clip(-X_WE.rotation().matrix()[2, 2], -1, 1))))
-        p_WP.append(X_WE.translation())
-    touching = in_contact(force_log.FindLog(context).data().T)
-    strokes = ink_strokes(states.sample_times(), np.array(p_WP), touching)
-    # Each ink stroke's farthest point from the plan's pen-down path (m, on the paper).
-    t = np.arange(plan.start_time, plan.end_time, 0.005)
-    planned = plan.position(t[[plan.segment(ti).pen_down for ti in t]])[:, :2]
-    error = max(_distance_to_polyline(ink[:, :2], planned).max() for ink in strokes)
-    return np.max(np.array(tilt)[touching]), len(strokes), error, wall, plan.end_time
-
-
-def _distance_to_polyline(points, polyline):
-    """Distance (m) from each point (n, d) to the nearest sample of a dense path (k, d)."""
-    return np.linalg.norm(points[:, None] - polyline[None], axis=-1).min(axis=1)
+    # Drake's differential IK integrator, translation only, the same limits (its QP step).
+    params = DifferentialInverseKinematicsParameters(plant.num_positions(), plant.num_velocities())
+    params.set_end_effector_velocity_flag([False, False, False, True, True, True])
+    integrator = DifferentialInverseKinematicsIntegrator(plant, arm.tool_frame, 1e-3, params)
+    simulator = Simulator(integrator)
+    context = simulator.get_mutable_context()
+    X_WE = arm.tool_frame.CalcPoseInWorld(fk)
+    X_WE.set_translation(target)
+    integrator.GetInputPort("X_WE_desired").FixValue(context, X_WE)
+    integrator.GetInputPort("use_robot_state").FixValue(context, False)
+    integrator.SetPositions(context, plant.GetPositions(fk))
+    times = []
+    for _ in range(7):
+        start = time.process_time()
+        simulator.AdvanceTo(context.get_time() + 0.2)
+        times.append((time.process_time() - start) / 200 * 1e6)
+    print(
+        f"  DifferentialInverseKinematicsIntegrator (a simulated step, QP): "
+        f"{min(times):5.1f} / {np.median(times):5.1f}"
+    )
 
 
 def tilt_while_drawing():

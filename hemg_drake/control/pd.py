@@ -1,209 +1,232 @@
-"""Variable-gain joint PD with gravity compensation (eq. 20), and its numpy twin.
+"""Variable-gain joint PD with gravity compensation (eq. 20).
 
 The paper's slave law is tau = K_p e + K_d edot with e = q_d - q, where K_p follows the
 operator's muscle activation (eq. 22) and Table I puts the nominal gain at 50. One scalar K
 cannot suit all seven joints: the shoulder carries about 3 kg m^2, the last wrist roll about
 6e-4 kg m^2. So each joint gets
 
-    k_j = K * s_j                       (stiffness, N m/rad; s_j in STIFFNESS_SCALE)
+    k_j = K * s_j                       (stiffness, N m/rad; s_j: PdConfig.stiffness_scale)
     d_j = 2 * zeta * sqrt(k_j * M_jj)   (damping, N m s/rad; M_jj(q) from the plant)
 
 The damping follows K at a fixed damping ratio zeta. Why this form: the torque is explicit
 (the 1 ms discrete plant holds it over the step), and an explicit PD on one joint of inertia
 M_jj is stable only while x = omega_j * dt, omega_j = sqrt(k_j / M_jj), satisfies
-x^2 + 4 zeta x < 4 (x < 0.83 at zeta = 1). With STIFFNESS_SCALE, K = 500 keeps x below 0.35
+x^2 + 4 zeta x < 4 (x < 0.83 at zeta = 1). With the default scale, K = 500 keeps x below 0.35
 on every joint over the whole joint range (2000 sampled configurations). That is the
 one-joint picture; the off-diagonal terms of M lower the margin, and K = 1000 was measured to
 end in a limit cycle. The tests check K from 5 to 500 (``GAIN_RANGE``).
 
+Gravity compensation -g(q) is Drake's own ``InverseDynamics`` in ``kGravityCompensation``
+mode on the controller's plant, fed to the PD's ``feedforward_torque`` input, which the PD
+adds before the saturation (:func:`add_variable_gain_pd` wires both).
+
 Why not the plant's implicit joint PD (``set_controller_gains``), which takes any gain: a
 varying K would then mean rewriting plant parameters every step, and the torque would not be
-an output that the rest of the diagram can log or saturate.
+an output that the rest of the diagram can log or saturate. Why not Drake's
+``JointStiffnessController`` or ``PidController``: their gains are constructor constants,
+not an input, and the damping here follows M_jj(q).
 """
 
 import math
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.common.value import AbstractValue
+from pydrake.systems.controllers import InverseDynamics
+from pydrake.systems.framework import LeafSystem_, ValueProducer
+from pydrake.systems.scalar_conversion import TemplateSystem
 
-from hemg_drake.control._kernels import pd_torque_into
-from hemg_drake.control.clik import velocity_columns
 from hemg_drake._validate import as_scalar
+from hemg_drake.control.config import GAIN_RANGE, MAX_TIME_STEP, PdConfig  # noqa: F401
 
-# Per-joint stiffness per unit of K (N m/rad per unit gain), s0 s1 e0 e1 w0 w1 w2. At
-# Table I's K = 50 the shoulder holds 1000 N m/rad (1 cm at 1 m reach under 10 N m), the
-# elbow 500, the wrist pitch/roll 100, the last wrist roll 5 (it carries almost no load and
-# has the least inertia).
-STIFFNESS_SCALE = np.array([20.0, 20.0, 10.0, 10.0, 2.0, 2.0, 0.1])
-# Tested range of K at a 1 ms plant step.
-GAIN_RANGE = (5.0, 500.0)
-# Longest plant step the gains are checked at (the explicit PD's stability, module docstring).
-MAX_TIME_STEP = 1e-3
+# The default per-joint stiffness per unit of K, s_j (PdConfig's; figures label with it).
+STIFFNESS_SCALE = np.array(PdConfig().stiffness_scale)
 
 
-def pd_gains(gain, stiffness_scale, mass_diagonal, damping_ratio):
-    """Joint stiffness and damping for a scalar gain.
-
-    Parameters
-    ----------
-    gain : float, K (> 0).
-    stiffness_scale : array, shape (n,), s_j.
-    mass_diagonal : array, shape (n,), M_jj(q), kg m^2.
-    damping_ratio : float, zeta.
-
-    Returns
-    -------
-    kp, kd : arrays, shape (n,): k_j = K s_j (N m/rad), d_j = 2 zeta sqrt(k_j M_jj) (N m s/rad).
-    """
-    kp = gain * np.asarray(stiffness_scale)
-    kd = 2.0 * damping_ratio * np.sqrt(kp * np.asarray(mass_diagonal))
-    return kp, kd
+def plant_for_scalar(plant, T):
+    """``plant`` itself for T = float, else its conversion to ``T`` (Drake's ToScalarType)."""
+    return plant if T is float else plant.ToScalarType[T]()
 
 
-def pd_torque(q, v, q_desired, v_desired, kp, kd, effort_limit, gravity_torque=0.0):
-    """Eq. 20 plus a feed-forward, saturated: clip(kp (q_d - q) + kd (v_d - v) + tau_ff).
+@TemplateSystem.define("VariableGainPd_", T_list=[float, AutoDiffXd])
+def VariableGainPd_(T):
+    class Impl(LeafSystem_[T]):
+        """Joint PD whose stiffness follows a scalar gain K, plus a feed-forward (eq. 20).
 
-    Parameters
-    ----------
-    q, v, q_desired, v_desired, kp, kd, effort_limit : arrays, shape (n,).
-    gravity_torque : array, shape (n,), or 0.0. The torque that holds the arm against gravity
-        (``-CalcGravityGeneralizedForces``).
+        .. pydrake_system::
 
-    Returns
-    -------
-    tau : array, shape (n,), N m, within [-effort_limit, effort_limit].
-    """
-    tau = kp * (q_desired - q) + kd * (v_desired - v) + gravity_torque
-    # np.minimum/np.maximum rather than np.clip: the same numbers, at half the cost.
-    return np.minimum(np.maximum(tau, -effort_limit), effort_limit)
+            name: VariableGainPd
+            input_ports:
+            - q_desired
+            - v_desired
+            - state
+            - gain
+            - feedforward_torque
+            output_ports:
+            - torque
 
+        Ports (n = 7 arm joints, order ``BaxterArm.joint_names``): ``q_desired`` (n, rad),
+        ``v_desired`` (n, rad/s; zero when not connected), ``state`` ([q; v], 2n, the arm
+        model instance's plant state), ``gain`` (1, K, dimensionless; ``config.gain`` when
+        not connected), ``feedforward_torque`` (n, N m; zero when not connected: the
+        gravity compensation -g(q) from ``InverseDynamics``, see
+        :func:`add_variable_gain_pd`); ``torque`` (n, N m) for the plant's actuation input.
 
-class VariableGainPd(LeafSystem):
-    """Joint PD whose stiffness follows a scalar gain K, plus gravity compensation (eq. 20).
+        Law (module docstring): k_j = K s_j, d_j = 2 zeta sqrt(k_j M_jj(q)),
+        tau_j = clip(k_j (q_d - q)_j + d_j (v_d - v)_j + tau_ff_j, +-effort_limit_j).
+        M(q) comes from ``plant`` (the arm alone, :func:`~hemg_drake.robots.baxter.
+        make_arm_controller_plant`, or a plant holding it) on a context kept in a cache
+        entry that depends on ``state``.
 
-    .. pydrake_system::
-
-        name: VariableGainPd
-        input_ports:
-        - q_desired
-        - v_desired
-        - state
-        - gain
-        output_ports:
-        - torque
-
-    Ports (n = 7 arm joints, order ``BaxterArm.joint_names``): ``q_desired`` (n, rad),
-    ``v_desired`` (n, rad/s; zero when not connected), ``state`` ([q; v], 2n, the arm model
-    instance's plant state), ``gain`` (1, K, dimensionless; the constructor's ``gain`` when not
-    connected); ``torque`` (n, N m) for the plant's actuation input of the arm.
-
-    Law: see the module docstring, k_j = K s_j and d_j = 2 zeta sqrt(k_j M_jj(q)), torque
-    ``pd_torque``; gravity compensation -g(q) from ``CalcGravityGeneralizedForces`` on the
-    controller's own plant context; then saturation at the actuators' effort limits.
-
-    Timing: stateless and direct-feedthrough; a discrete plant samples it once per step.
-    Table I's K = 50 lies inside the tested range ``GAIN_RANGE``.
-    """
-
-    def __init__(
-        self,
-        *,
-        plant,
-        arm,
-        gain=50.0,
-        stiffness_scale=STIFFNESS_SCALE,
-        damping_ratio=1.0,
-        gravity_compensation=True,
-    ):
+        Timing: stateless and direct-feedthrough; a discrete plant samples it once per
+        step. Table I's K = 50 lies inside the tested range ``GAIN_RANGE``. Scalar types:
+        double and AutoDiffXd.
         """
-        Parameters
-        ----------
-        plant : MultibodyPlant, finalized, containing ``arm`` (the simulated plant will do).
-        arm : BaxterArm, from ``add_baxter_arm``.
-        gain : float, K used while the ``gain`` port is not connected.
-        stiffness_scale : array, shape (7,), s_j > 0.
-        damping_ratio : float, zeta > 0.
-        gravity_compensation : bool, add -g(q) to the torque.
-        """
-        LeafSystem.__init__(self)
-        n = len(arm.joint_names)
-        stiffness_scale = np.asarray(stiffness_scale, dtype=float)
-        positive = np.isfinite(stiffness_scale) & (stiffness_scale > 0)
-        if stiffness_scale.shape != (n,) or not positive.all():
-            raise ValueError(
-                f"stiffness_scale must be {n} positive finite numbers, got {stiffness_scale}"
+
+        def _construct(self, *, plant, arm, config=None, converter=None):
+            """
+            Parameters
+            ----------
+            plant : MultibodyPlant (double), finalized, containing ``arm``.
+            arm : BaxterArm, from ``add_baxter_arm``.
+            config : PdConfig; ``gain``, ``stiffness_scale`` and ``damping_ratio`` are read
+                here (``gravity_compensation`` by :func:`add_variable_gain_pd`).
+            """
+            LeafSystem_[T].__init__(self, converter)
+            config = PdConfig() if config is None else config
+            n = len(arm.joint_names)
+            scale = np.asarray(config.stiffness_scale, dtype=float)
+            if scale.shape != (n,) or not (np.isfinite(scale) & (scale > 0)).all():
+                raise ValueError(
+                    f"stiffness_scale must be {n} positive finite numbers, got {scale}"
+                )
+            _check_gain(config.gain, "gain")
+            damping_ratio = as_scalar("damping_ratio", config.damping_ratio)
+            if not plant.is_finalized():
+                raise ValueError("VariableGainPd needs a finalized plant")
+            self._args = dict(plant=plant, arm=arm, config=config)
+            self._plant = plant_for_scalar(plant, T)
+            self._model = arm.model_instance
+            self._n = n
+            self._default_gain = [T(float(config.gain))]
+            self._scale = scale.tolist()
+            self._twice_zeta = 2.0 * damping_ratio
+            self._limit = np.asarray(arm.effort_limit, dtype=float).tolist()
+            # The arm's joints among the plant's velocities (M is the plant's, full size).
+            velocities = np.arange(plant.num_velocities(), dtype=float)
+            self._columns = plant.GetVelocitiesFromArray(self._model, velocities).astype(int)
+            self._zeros = [T(0.0)] * n
+
+            self.q_desired_input = self.DeclareVectorInputPort("q_desired", n)
+            self.v_desired_input = self.DeclareVectorInputPort("v_desired", n)
+            self.state_input = self.DeclareVectorInputPort("state", 2 * n)
+            self.gain_input = self.DeclareVectorInputPort("gain", 1)
+            self.feedforward_input = self.DeclareVectorInputPort("feedforward_torque", n)
+            # The controller plant's context at the arm's measured q: M(q) on demand.
+            self._plant_context = self.DeclareCacheEntry(
+                "plant_context",
+                ValueProducer(
+                    allocate=lambda: AbstractValue.Make(self._plant.CreateDefaultContext()),
+                    calc=self._calc_plant_context,
+                ),
+                {self.state_input.ticket()},
             )
-        _check_gain(gain, "gain")
-        damping_ratio = as_scalar("damping_ratio", damping_ratio)
-        if not plant.is_finalized():
-            raise ValueError("VariableGainPd needs a finalized plant")
-        self._plant = plant
-        self._model = arm.model_instance
-        self._plant_context = plant.CreateDefaultContext()
-        self._default_gain = float(gain)
-        self._stiffness_scale = stiffness_scale
-        self._damping_ratio = damping_ratio
-        self._gravity_compensation = bool(gravity_compensation)
-        self._effort_limit = np.asarray(arm.effort_limit, dtype=float)
-        # The arm's joints among all the plant's velocities (M and g are full size).
-        self._columns = np.arange(plant.num_velocities())[velocity_columns(plant, self._model)]
-        self._n = n
-        self._zeros = np.zeros(n)
-        self._no_gravity = np.zeros(0)
-        self._torque = np.zeros(n)
+            self.torque_output = self.DeclareVectorOutputPort(
+                "torque",
+                n,
+                self._calc_torque,
+                prerequisites_of_calc={self.all_input_ports_ticket()},
+            )
 
-        self.q_desired_input = self.DeclareVectorInputPort("q_desired", n)
-        self.v_desired_input = self.DeclareVectorInputPort("v_desired", n)
-        self.state_input = self.DeclareVectorInputPort("state", 2 * n)
-        self.gain_input = self.DeclareVectorInputPort("gain", 1)
-        self.torque_output = self.DeclareVectorOutputPort(
-            "torque",
-            BasicVector(n),
-            self._calc_torque,
-            prerequisites_of_calc={self.all_input_ports_ticket()},
-        )
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, **other._args, converter=converter)
 
-    def _calc_torque(self, context, output):
-        x = self.state_input.Eval(context)
-        q_desired = self.q_desired_input.Eval(context)
-        v_desired = (
-            self.v_desired_input.Eval(context)
-            if self.v_desired_input.HasValue(context)
-            else self._zeros
+        def _calc_plant_context(self, context, value):
+            q = self.state_input.Eval(context)[: self._n]
+            self._plant.SetPositions(value.get_mutable_value(), self._model, q)
+
+        def _calc_torque(self, context, output):
+            n = self._n
+            x = self.state_input.Eval(context).tolist()
+            q_desired = self.q_desired_input.Eval(context).tolist()
+            v_desired = (
+                self.v_desired_input.Eval(context).tolist()
+                if self.v_desired_input.HasValue(context)
+                else self._zeros
+            )
+            feedforward = (
+                self.feedforward_input.Eval(context).tolist()
+                if self.feedforward_input.HasValue(context)
+                else self._zeros
+            )
+            gain = (
+                self.gain_input.Eval(context).tolist()
+                if self.gain_input.HasValue(context)
+                else self._default_gain
+            )[0]
+            _check_gain(gain, "gain input")
+            if not _finite(sum(q_desired) + sum(v_desired)):
+                raise ValueError("VariableGainPd: q_desired/v_desired contain NaN or inf")
+            M = self._plant.CalcMassMatrix(self._plant_context.Eval(context))
+            mass = M.diagonal()[self._columns].tolist()
+            torque = []
+            twice_zeta, scale, limit = self._twice_zeta, self._scale, self._limit
+            # Scalar arithmetic on 7 joints (numpy's per-call cost exceeds the sums here);
+            # the same lines run on floats and on AutoDiffXd.
+            for j in range(n):
+                k = gain * scale[j]
+                d = twice_zeta * (k * mass[j]) ** 0.5
+                tau = k * (q_desired[j] - x[j]) + d * (v_desired[j] - x[n + j]) + feedforward[j]
+                torque.append(min(max(tau, -limit[j]), limit[j]))
+            output.SetFromVector(torque)
+
+    return Impl
+
+
+VariableGainPd = VariableGainPd_[None]
+
+
+def add_variable_gain_pd(builder, *, plant, arm, state_port, config=None, name="pd"):
+    """Add eq. 20 to ``builder``: a :class:`VariableGainPd` reading ``state_port`` and, if
+    ``config.gravity_compensation``, Drake's ``InverseDynamics`` (``kGravityCompensation``,
+    named ``<name>_gravity``) on ``plant`` reading it too and feeding the PD's
+    ``feedforward_torque`` with -g(q).
+
+    Parameters
+    ----------
+    builder : DiagramBuilder.
+    plant : MultibodyPlant, finalized, of the arm alone (its state is the arm's [q; v]), e.g.
+        from :func:`~hemg_drake.robots.baxter.make_arm_controller_plant`.
+    arm : BaxterArm of ``plant``.
+    state_port : OutputPort, the arm's [q; v] (the simulated plant's arm state).
+    config : PdConfig.
+    name : str, the PD's name in the builder.
+
+    Returns
+    -------
+    VariableGainPd; connect its ``q_desired`` (and ``v_desired``, ``gain``) and its
+    ``torque`` output.
+    """
+    config = PdConfig() if config is None else config
+    if plant.num_velocities() != len(arm.joint_names):
+        raise ValueError("add_variable_gain_pd needs a plant of the arm alone")
+    pd = builder.AddNamedSystem(name, VariableGainPd(plant=plant, arm=arm, config=config))
+    builder.Connect(state_port, pd.state_input)
+    if config.gravity_compensation:
+        gravity = builder.AddNamedSystem(
+            f"{name}_gravity",
+            InverseDynamics(plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation),
         )
-        gain = (
-            self.gain_input.Eval(context)[0]
-            if self.gain_input.HasValue(context)
-            else self._default_gain
-        )
-        _check_gain(gain, "gain input")
-        # M and g from one position update of the controller's plant context.
-        self._plant.SetPositions(self._plant_context, self._model, x[: self._n])
-        M = self._plant.CalcMassMatrix(self._plant_context)
-        g = (
-            self._plant.CalcGravityGeneralizedForces(self._plant_context)
-            if self._gravity_compensation
-            else self._no_gravity
-        )
-        # pd_gains and pd_torque in one compiled call (the same sums; tests compare them).
-        finite = pd_torque_into(
-            self._torque,
-            x,
-            q_desired,
-            v_desired,
-            float(gain),
-            self._stiffness_scale,
-            self._damping_ratio,
-            M,
-            g,
-            self._columns,
-            self._effort_limit,
-        )
-        if not finite:
-            raise ValueError("VariableGainPd: q_desired/v_desired contain NaN or inf")
-        output.SetFromVector(self._torque)
+        builder.Connect(state_port, gravity.get_input_port_estimated_state())
+        builder.Connect(gravity.get_output_port_generalized_force(), pd.feedforward_input)
+    return pd
+
+
+def _finite(value):
+    """True for a finite float or AutoDiffXd (NaN fails both comparisons)."""
+    return -math.inf < value < math.inf
 
 
 def _check_gain(gain, name):
-    if not (math.isfinite(gain) and gain > 0):
+    if not (0.0 < gain < math.inf):
         raise ValueError(f"VariableGainPd: {name} must be a positive finite number, got {gain}")

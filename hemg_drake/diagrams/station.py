@@ -19,16 +19,20 @@ the user's own forces.
 import dataclasses as dc
 
 import numpy as np
-from pydrake.multibody.plant import AddMultibodyPlant
-from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.common.value import AbstractValue
 from pydrake.geometry import MeshcatVisualizer
-from pydrake.systems.framework import DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import ConstantVectorSource
+from pydrake.math import RigidTransform_
+from pydrake.multibody.math import SpatialVelocity_
+from pydrake.multibody.plant import AddMultibodyPlant
+from pydrake.systems.framework import DiagramBuilder, LeafSystem_
+from pydrake.systems.primitives import ConstantVectorSource, SharedPointerSystem
+from pydrake.systems.scalar_conversion import TemplateSystem
 
-from hemg_drake.control.clik import Clik, velocity_columns
+from hemg_drake.control.clik import Clik
 from hemg_drake.control.ik import solve_tool_point_ik
-from hemg_drake.control.pd import VariableGainPd
-from hemg_drake.robots.baxter import add_baxter_arm
+from hemg_drake.control.pd import add_variable_gain_pd
+from hemg_drake.robots.baxter import add_baxter_arm, make_arm_controller_plant
 from hemg_drake.tasks.cotter_pin import add_cotter_pin_scene
 from hemg_drake.tasks.drawing import add_drawing_scene
 
@@ -38,55 +42,81 @@ SCENE_BUILDERS = {"cotter_pin": add_cotter_pin_scene, "drawing": add_drawing_sce
 REFERENCES = ("tool_point", "joints")
 
 
-class ToolPointKinematics(LeafSystem):
-    """Position and velocity of the arm's tool point E in the world, from the arm's state.
+@TemplateSystem.define("ToolPointKinematics_", T_list=[float, AutoDiffXd])
+def ToolPointKinematics_(T):
+    class Impl(LeafSystem_[T]):
+        """Position and velocity of the tool point E in the world, from the plant's body
+        kinematics.
 
-    .. pydrake_system::
+        .. pydrake_system::
 
-        name: ToolPointKinematics
-        input_ports:
-        - state
-        output_ports:
-        - p_WE
-        - v_WE
+            name: ToolPointKinematics
+            input_ports:
+            - body_poses
+            - body_spatial_velocities
+            output_ports:
+            - p_WE
+            - v_WE
 
-    ``state`` is the arm's [q; v] (14: rad, rad/s); ``p_WE`` (3, m) and ``v_WE`` (3, m/s)
-    are the origin of ``frame_E`` (the tool frame) measured and expressed in W, by forward
-    kinematics on the controller's own plant context: v_WE = J_WE(q) v.
+        ``body_poses`` and ``body_spatial_velocities`` are the plant's output ports of the
+        same names (the poses X_WB and spatial velocities V_WB of every body, which the
+        plant computes for its own step). ``p_WE`` (3, m) and ``v_WE`` (3, m/s) are the
+        origin E of ``frame_E`` (the tool frame, fixed on body B at p_BE) measured and
+        expressed in W: p_WE = X_WB p_BE, v_WE = v_WB + w_WB x (R_WB p_BE).
 
-    Timing: stateless, direct feedthrough; computed only when a consumer (a logger, the
-    force feedback in ``position_error`` mode, a reproducer observing the tool) evaluates it.
-    """
+        Timing: stateless, direct feedthrough; computed only when a consumer (a logger, the
+        force feedback in ``position_error`` mode, a reproducer observing the tool)
+        evaluates it. Scalar types: double and AutoDiffXd.
 
-    def __init__(self, *, plant, arm, frame_E=None):
-        LeafSystem.__init__(self)
-        self._plant = plant
-        self._context = plant.CreateDefaultContext()
-        self._model = arm.model_instance
-        self._frame_E = arm.tool_frame if frame_E is None else frame_E
-        self._columns = velocity_columns(plant, self._model)
-        n = len(arm.joint_names)
-        self._n = n
-        self.state_input = self.DeclareVectorInputPort("state", 2 * n)
-        self.p_WE_output = self.DeclareVectorOutputPort("p_WE", 3, self._calc_p_WE)
-        self.v_WE_output = self.DeclareVectorOutputPort("v_WE", 3, self._calc_v_WE)
+        Parameters
+        ----------
+        frame_E : Frame of a finalized plant, fixed to a body (the tool frame).
+        """
 
-    def _set_positions(self, context):
-        x = self.state_input.Eval(context)
-        self._plant.SetPositions(self._context, self._model, x[: self._n])
-        return x[self._n :]
+        def _construct(self, *, frame_E, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self._frame_E = frame_E
+            self._body = int(frame_E.body().index())
+            p_BE = frame_E.GetFixedPoseInBodyFrame().translation()
+            self._p_BE = p_BE if T is float else np.array([T(x) for x in p_BE])
+            self.body_poses_input = self.DeclareAbstractInputPort(
+                "body_poses", AbstractValue.Make([RigidTransform_[T]()])
+            )
+            self.body_spatial_velocities_input = self.DeclareAbstractInputPort(
+                "body_spatial_velocities", AbstractValue.Make([SpatialVelocity_[T]()])
+            )
+            self.p_WE_output = self.DeclareVectorOutputPort(
+                "p_WE",
+                3,
+                self._calc_p_WE,
+                prerequisites_of_calc={self.body_poses_input.ticket()},
+            )
+            self.v_WE_output = self.DeclareVectorOutputPort(
+                "v_WE",
+                3,
+                self._calc_v_WE,
+                prerequisites_of_calc={
+                    self.body_poses_input.ticket(),
+                    self.body_spatial_velocities_input.ticket(),
+                },
+            )
 
-    def _calc_p_WE(self, context, output):
-        self._set_positions(context)
-        output.SetFromVector(self._frame_E.CalcPoseInWorld(self._context).translation())
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, frame_E=other._frame_E, converter=converter)
 
-    def _calc_v_WE(self, context, output):
-        v = self._set_positions(context)
-        world = self._plant.world_frame()
-        J_WE = self._plant.CalcJacobianTranslationalVelocity(
-            self._context, JacobianWrtVariable.kV, self._frame_E, np.zeros(3), world, world
-        )
-        output.SetFromVector(J_WE[:, self._columns] @ v)
+        def _calc_p_WE(self, context, output):
+            X_WB = self.body_poses_input.Eval(context)[self._body]
+            output.SetFromVector(X_WB.multiply(self._p_BE))
+
+        def _calc_v_WE(self, context, output):
+            R_WB = self.body_poses_input.Eval(context)[self._body].rotation()
+            V_WB = self.body_spatial_velocities_input.Eval(context)[self._body]
+            output.SetFromVector(V_WB.Shift(R_WB.multiply(self._p_BE)).translational())
+
+    return Impl
+
+
+ToolPointKinematics = ToolPointKinematics_[None]
 
 
 @dc.dataclass(frozen=True, eq=False)
@@ -102,7 +132,8 @@ class SlaveStation:
         (3, N: the scene's force on the tool point, zero in free space), ``arm_state``
         (14: [q; v]), ``q_desired`` (7, the CLIK's joint reference; absent with joint
         references), ``contact_results``, ``query_object``. Subsystems: ``plant``,
-        ``scene_graph``, ``clik``, ``pd``, ``tool_point`` and the scene's own.
+        ``scene_graph``, ``clik``, ``pd``, ``pd_gravity`` (gravity compensation), ``tool_point``
+        and the scene's own. The controllers use a plant of the arm alone.
     plant : MultibodyPlant
     arm : BaxterArm
     scene : CotterPinScene, DrawingScene or None (free space).
@@ -118,6 +149,22 @@ class SlaveStation:
     def plant_context(self, root_context):
         """The plant's context inside the context of the diagram holding the station."""
         return self.plant.GetMyContextFromRoot(root_context)
+
+    def set_start(self, root_context, diagram=None):
+        """Put the plant of ``diagram`` (default this station's; a clone or an AutoDiffXd
+        conversion of it) at the start, at rest: the arm at ``q0``, the scene at its
+        defaults, in ``root_context`` (of the diagram holding it).
+
+        A new context of this station's own diagram already starts there; a converted one
+        does not: Drake 1.51's scalar conversion of a MultibodyPlant (Clone,
+        ToAutoDiffXd) drops the joints' default positions (drake#14344 once fixed this).
+        """
+        diagram = self.diagram if diagram is None else diagram
+        plant = diagram.GetSubsystemByName(self.plant.get_name())
+        plant_context = plant.GetMyMutableContextFromRoot(root_context)
+        positions = self.plant.GetPositions(self.plant.CreateDefaultContext())
+        plant.SetPositions(plant_context, positions)
+        plant.SetVelocities(plant_context, np.zeros(plant.num_velocities()))
 
 
 def make_slave_station(
@@ -136,7 +183,7 @@ def make_slave_station(
     Parameters
     ----------
     scenario : Scenario
-        Its ``plant``, ``task``, ``scene`` and ``clik`` sections are used.
+        Its ``plant``, ``task``, ``scene``, ``clik`` and ``pd`` sections are used.
     start : array, shape (3,), optional
         Where the tool point starts, at rest (m, W); default the task plan's first point.
     q0 : array, shape (7,), optional
@@ -191,20 +238,29 @@ def make_slave_station(
     q0 = np.array(q0, dtype=float)
     plant.SetDefaultPositions(arm.model_instance, q0)
 
-    pd = builder.AddNamedSystem("pd", VariableGainPd(plant=plant, arm=arm))
-    tool_point = builder.AddNamedSystem("tool_point", ToolPointKinematics(plant=plant, arm=arm))
+    # The controllers' own plant of the arm alone (manipulation's station does the same),
+    # owned by the diagram through a SharedPointerSystem.
+    controller_plant, controller_arm = make_arm_controller_plant()
+    SharedPointerSystem.AddToBuilder(builder, controller_plant)
     arm_state = plant.get_state_output_port(arm.model_instance)
-    builder.Connect(arm_state, pd.state_input)
-    builder.Connect(arm_state, tool_point.state_input)
+    pd = add_variable_gain_pd(
+        builder, plant=controller_plant, arm=controller_arm, state_port=arm_state,
+        config=scenario.pd,
+    )  # fmt: skip
+    tool_point = builder.AddNamedSystem("tool_point", ToolPointKinematics(frame_E=arm.tool_frame))
+    builder.Connect(plant.get_body_poses_output_port(), tool_point.body_poses_input)
+    builder.Connect(
+        plant.get_body_spatial_velocities_output_port(), tool_point.body_spatial_velocities_input
+    )
     builder.Connect(pd.torque_output, plant.get_actuation_input_port(arm.model_instance))
     if reference == "tool_point":
         clik = builder.AddNamedSystem(
             "clik",
             Clik(
-                plant=plant,
-                model_instance=arm.model_instance,
-                frame_E=arm.tool_frame,
-                **dc.asdict(scenario.clik),
+                plant=controller_plant,
+                model_instance=controller_arm.model_instance,
+                frame_E=controller_arm.tool_frame,
+                config=scenario.clik,
             ),
         )
         builder.Connect(arm_state, clik.GetInputPort("state"))

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame, ModelInstanceIndex
 
 # Found without pydrake (so the task plans can read the files too); public here as before.
@@ -148,3 +149,27 @@ def _effort_limits(plant, model, joints, path):
             f"(found {actuated}); declare one transmission per joint"
         )
     return np.array([a.effort_limit() for a in actuators])
+
+
+def make_arm_controller_plant(*, model_path=None):
+    """A plant of the arm alone, for controllers: kinematics, M(q) and g(q), nothing else.
+
+    As in Drake's ``manipulation/station.py``: the simulated plant also holds the task's
+    scene, while a controller models only the robot it drives. The arm's trees do not touch
+    the scene's, so its mass matrix and gravity forces are those of the arm's columns of the
+    simulated plant (velocities 0..6 here, in ``JOINT_NAMES`` order). The plant is continuous
+    (``time_step=0``), has no ``SceneGraph``, and converts to AutoDiffXd.
+
+    Parameters
+    ----------
+    model_path : path-like, optional, as for :func:`add_baxter_arm`.
+
+    Returns
+    -------
+    (MultibodyPlant, BaxterArm), the plant finalized.
+    """
+    plant = MultibodyPlant(time_step=0.0)
+    arm = add_baxter_arm(plant, model_path=model_path)
+    plant.Finalize()
+    plant.set_name("controller_plant")
+    return plant, arm

@@ -1,31 +1,58 @@
 """CLIK (eq. 21) on the Baxter arm, driven through Drake."""
 
+import dataclasses as dc
+
 import numpy as np
 import pytest
-from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, InitializeAutoDiff
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
-from pydrake.systems.analysis import Simulator
+from pydrake.systems.analysis import Simulator, Simulator_
 from pydrake.systems.framework import DiagramBuilder
 
 from hemg_drake.control.clik import Clik
+from hemg_drake.control.config import ClikConfig
 from hemg_drake.robots.baxter import add_baxter_arm
 
+# The test's own plant of the arm (not the CLIK's): forward kinematics and Jacobians.
+_PLANT = MultibodyPlant(0.0)
+_ARM = add_baxter_arm(_PLANT)
+_PLANT.Finalize()
+_CONTEXT = _PLANT.CreateDefaultContext()
 
-def make_clik(**kwargs):
-    """A kinematic-only diagram: the CLIK reads a fixed arm state and a fixed target."""
+
+def p_WE(q):
+    """The tool point at arm configuration q (m), on the test's plant."""
+    _PLANT.SetPositions(_CONTEXT, _ARM.model_instance, q)
+    return _ARM.tool_frame.CalcPoseInWorld(_CONTEXT).translation().copy()
+
+
+def make_clik(p_EoE_E=None, **changes):
+    """A kinematic-only diagram: the CLIK (its own plant, in a scene) reads a fixed arm
+    state and a fixed target; ``changes`` replace ClikConfig fields."""
     builder = DiagramBuilder()
     plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
     arm = add_baxter_arm(plant)
     plant.Finalize()
     clik = builder.AddSystem(
-        Clik(plant=plant, model_instance=arm.model_instance, frame_E=arm.tool_frame, **kwargs)
+        Clik(
+            plant=plant, model_instance=arm.model_instance, frame_E=arm.tool_frame,
+            config=dc.replace(ClikConfig(), **changes), p_EoE_E=p_EoE_E,
+        )  # fmt: skip
     )
     builder.ExportInput(clik.GetInputPort("p_WE_desired"), "p_WE_desired")
     builder.ExportInput(clik.GetInputPort("state"), "state")
     builder.ExportOutput(clik.GetOutputPort("q_desired"), "q_desired")
     builder.ExportOutput(clik.GetOutputPort("v_desired"), "v_desired")
     diagram = builder.Build()
-    return diagram, clik, arm
+    return diagram, clik, _ARM  # the test plant's handles (the same joints and limits)
+
+
+def finite_difference_jacobian(q, h=1e-6):
+    """d p_WE / d q (3, 7) by central differences of the forward kinematics."""
+    return np.column_stack(
+        [(p_WE(q + h * np.eye(7)[j]) - p_WE(q - h * np.eye(7)[j])) / (2 * h) for j in range(7)]
+    )
 
 
 def run_clik(target, q0, seconds, **kwargs):
@@ -46,17 +73,17 @@ def test_converges_to_reachable_target(method, gain):
     q_goal = np.array([0.3, -0.3, 0.2, 1.0, -0.2, 0.8, 0.1])
     q0 = np.array([0.0, -0.55, 0.0, 0.75, 0.0, 1.26, 0.0])
     _, clik, _ = make_clik()
-    target = clik.p_WE(q_goal)
-    assert np.linalg.norm(target - clik.p_WE(q0)) > 0.1  # a real move
+    target = p_WE(q_goal)
+    assert np.linalg.norm(target - p_WE(q0)) > 0.1  # a real move
     q_d, v_d, clik, _ = run_clik(target, q0, 3.0, method=method, gain=gain)
-    assert np.linalg.norm(clik.p_WE(q_d) - target) < 1e-3
+    assert np.linalg.norm(p_WE(q_d) - target) < 1e-3
     assert np.linalg.norm(v_d) < 0.05  # settled
 
 
 def test_starts_from_the_measured_state():
     q0 = np.array([0.1, -0.4, 0.1, 0.9, 0.1, 1.0, 0.2])
     _, clik, _ = make_clik()
-    q_d, v_d, _, _ = run_clik(clik.p_WE(q0), q0, 0.0)
+    q_d, v_d, _, _ = run_clik(p_WE(q0), q0, 0.0)
     np.testing.assert_allclose(q_d, q0)
     np.testing.assert_allclose(v_d, 0.0)
 
@@ -70,35 +97,36 @@ def test_unreachable_target_stays_finite_within_limits(method):
     assert np.all(np.abs(v_d) <= arm.velocity_limit + 1e-9)
     # Stretched toward the target: closer than at the start.
     target = np.array([3.0, -2.0, 2.5])
-    assert np.linalg.norm(clik.p_WE(q_d) - target) < np.linalg.norm(clik.p_WE(q0) - target)
+    assert np.linalg.norm(p_WE(q_d) - target) < np.linalg.norm(p_WE(q0) - target)
 
 
-def test_transpose_step_is_eq_21():
-    """Two updates equal q + dt * K * J^T e, computed independently with the plant."""
+@pytest.mark.parametrize("method", ["transpose", "dls"])
+def test_step_is_eq_21_with_a_finite_difference_jacobian(method):
+    """Two updates equal q + dt * K * J^T e (transpose) or q + dt * K * J^T (J J^T +
+    lambda^2 I)^-1 e (dls), with J by finite differences of the forward kinematics."""
     q0 = np.array([0.2, -0.5, 0.1, 0.8, 0.0, 1.0, 0.0])
     _, clik, _ = make_clik()
     # 2 cm away: small enough that no velocity limit scales the step.
-    target = clik.p_WE(q0) + np.array([0.02, -0.01, 0.01])
+    target = p_WE(q0) + np.array([0.02, -0.01, 0.01])
     # Updates fire at t = 0 and t = 1 ms before 1.5 ms.
-    q_d, v_d, clik, arm = run_clik(target, q0, 1.5e-3, gain=20.0)
+    gain, damping = (20.0, 0.05) if method == "transpose" else (2.0, 0.3)
+    q_d, v_d, clik, arm = run_clik(
+        target, q0, 1.5e-3, gain=gain, method=method, damping=damping
+    )
     assert np.all(np.abs(v_d) < 0.5 * arm.velocity_limit)
 
-    plant = clik._plant
-    context = plant.CreateDefaultContext()  # not the CLIK's own
-
     def step(q):
-        plant.SetPositions(context, arm.model_instance, q)
-        W = plant.world_frame()
-        p = plant.CalcPointsPositions(context, arm.tool_frame, np.zeros(3), W).ravel()
-        J = plant.CalcJacobianTranslationalVelocity(
-            context, JacobianWrtVariable.kV, arm.tool_frame, np.zeros(3), W, W
-        )
-        return q + 1e-3 * 20.0 * J.T @ (target - p)
+        J = finite_difference_jacobian(q)
+        e = target - p_WE(q)
+        if method == "dls":
+            e = np.linalg.solve(J @ J.T + damping**2 * np.eye(3), e)
+        return q + 1e-3 * gain * J.T @ e
 
     q1 = step(q0)
     q2 = step(q1)
-    np.testing.assert_allclose(q_d, q2, atol=1e-12)
-    np.testing.assert_allclose(v_d, (q2 - q1) / 1e-3, atol=1e-9)
+    np.testing.assert_allclose(q_d, q2, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(v_d, (q2 - q1) / 1e-3, rtol=0, atol=1e-9)
+    assert np.linalg.norm(q2 - q0) > 1e-4  # a real step
 
 
 @pytest.mark.parametrize(
@@ -120,6 +148,7 @@ def test_nan_target_holds_the_reference(kwargs):
         ({"damping": float("nan")}, "damping"),
         ({"p_EoE_E": [0.0, 0.0]}, "p_EoE_E"),
         ({"p_EoE_E": [0.0, np.nan, 0.0]}, "p_EoE_E must be finite"),
+        ({"method": "dls", "damping": -0.1}, "damping"),
         ({"limit_margin": float("nan")}, "limit_margin"),
         ({"limit_margin": -0.1}, "limit_margin"),
     ],
@@ -165,7 +194,7 @@ def test_a_joint_at_its_limit_stops_alone():
     _, clik, arm = make_clik()
     q0 = np.array([0.2, -0.5, 0.0, 0.8, 0.0, 1.0, 0.0])
     q0[pinned] = arm.position_lower[pinned] + margin  # exactly at the CLIK's limit
-    J = _jacobian(clik._plant, arm, q0)
+    J = _jacobian(_PLANT, _ARM, q0)
     # A target error along -J's column of the pinned joint pushes it outward, and is sized so
     # that the fastest other joint runs at 80 % of its velocity limit.
     direction = -J[:, pinned] / np.linalg.norm(J[:, pinned])
@@ -175,7 +204,7 @@ def test_a_joint_at_its_limit_stops_alone():
     law = gain * J.T @ e
     # The premise: the pinned joint alone would exceed its velocity limit by over 2x.
     assert law[pinned] < -2.0 * arm.velocity_limit[pinned]
-    target = clik.p_WE(q0) + e
+    target = p_WE(q0) + e
 
     q_d, v_d, _, _ = run_clik(target, q0, 0.5e-3, gain=gain, limit_margin=margin)
     assert v_d[pinned] == 0.0 and q_d[pinned] == q0[pinned]
@@ -223,7 +252,7 @@ def test_limits_against_the_rule_in_a_simulator(seed):
         q0 = rng.uniform(lower, upper)
         at_limit = rng.random(7) < 0.3
         q0[at_limit] = np.where(rng.random(7) < 0.5, lower, upper)[at_limit]
-        target = clik.p_WE(q0) + rng.normal(0.0, 0.03, 3)
+        target = p_WE(q0) + rng.normal(0.0, 0.03, 3)
         context.SetTime(0.0)
         diagram.GetInputPort("p_WE_desired").FixValue(context, target)
         diagram.GetInputPort("state").FixValue(context, np.concatenate([q0, np.zeros(7)]))
@@ -231,8 +260,8 @@ def test_limits_against_the_rule_in_a_simulator(seed):
         simulator.AdvanceTo(0.5 * period)
         q_d = diagram.GetOutputPort("q_desired").Eval(context)
         v_d = diagram.GetOutputPort("v_desired").Eval(context)
-        J = _jacobian(clik._plant, arm, q0)
-        law = gain * J.T @ (target - clik.p_WE(q0))
+        J = _jacobian(_PLANT, _ARM, q0)
+        law = gain * J.T @ (target - p_WE(q0))
         np.testing.assert_allclose(
             v_d, _reference_limited_rates(q0, law, v_max, lower, upper, period), atol=1e-9
         )
@@ -276,7 +305,7 @@ def test_tool_axis_turns_down_at_the_gain_rate_with_the_tool_point_held():
     k = 5.0
     q0 = Q_PEN_DOWN + np.array([0.0, 0.0, 0.0, 0.0, 0.1, 0.1, 0.0])
     diagram, clik, arm = make_clik(orientation_gain=k)
-    plant = clik._plant
+    plant = _PLANT
     axis0, p0 = _tool_axis_and_point(plant, arm, q0)
     theta0 = _tilt(axis0)
     assert np.degrees(theta0) > 5.0
@@ -297,15 +326,15 @@ def test_tool_axis_task_leaves_the_tool_point_velocity_of_eq_21():
     (null space), the joint rates differ, and the axis turns toward the desired direction."""
     q0 = Q_PEN_DOWN + np.array([0.1, 0.0, -0.2, 0.0, 0.2, 0.2, 0.0])
     _, clik, arm = make_clik()
-    target = clik.p_WE(q0) + np.array([0.01, -0.005, 0.004])
+    target = p_WE(q0) + np.array([0.01, -0.005, 0.004])
     _, v_off, _, _ = run_clik(target, q0, 0.5e-3, gain=20.0)
     _, v_on, _, _ = run_clik(target, q0, 0.5e-3, gain=20.0, orientation_gain=2.0)
-    J = _jacobian(clik._plant, arm, q0)
+    J = _jacobian(_PLANT, _ARM, q0)
     assert np.all(np.abs(v_on) < arm.velocity_limit)  # no limit scales either step
     np.testing.assert_allclose(J @ v_on, J @ v_off, rtol=0, atol=1e-6 * np.linalg.norm(J @ v_off))
     assert np.linalg.norm(v_on - v_off) > 0.1
-    axis0, _ = _tool_axis_and_point(clik._plant, arm, q0)
-    axis1, _ = _tool_axis_and_point(clik._plant, arm, q0 + 0.01 * v_on)
+    axis0, _ = _tool_axis_and_point(_PLANT, _ARM, q0)
+    axis1, _ = _tool_axis_and_point(_PLANT, _ARM, q0 + 0.01 * v_on)
     assert _tilt(axis1) < _tilt(axis0)
 
 
@@ -313,18 +342,18 @@ def test_any_tool_axis_onto_any_direction():
     """The tool's x axis turned onto world +y, from 30+ deg away: aligned within 0.5 deg."""
     q0 = Q_PEN_DOWN
     diagram, clik, arm = make_clik()
-    context = clik._plant.CreateDefaultContext()
-    clik._plant.SetPositions(context, arm.model_instance, q0)
+    context = _PLANT.CreateDefaultContext()
+    _PLANT.SetPositions(context, arm.model_instance, q0)
     x_W = arm.tool_frame.CalcPoseInWorld(context).rotation().matrix()[:, 0]
     desired = np.array([0.0, 1.0, 0.0])
     assert np.degrees(np.arccos(x_W @ desired)) > 30.0
     q_d, _, _, _ = run_clik(
-        clik.p_WE(q0), q0, 1.5, axis_E=[1, 0, 0], axis_W_desired=desired, orientation_gain=10.0
+        p_WE(q0), q0, 1.5, axis_E=[1, 0, 0], axis_W_desired=desired, orientation_gain=10.0
     )
-    clik._plant.SetPositions(context, arm.model_instance, q_d)
+    _PLANT.SetPositions(context, arm.model_instance, q_d)
     X_WE = arm.tool_frame.CalcPoseInWorld(context)
     assert np.degrees(np.arccos(X_WE.rotation().matrix()[:, 0] @ desired)) < 0.5
-    assert np.linalg.norm(X_WE.translation() - clik.p_WE(q0)) < 1e-4
+    assert np.linalg.norm(X_WE.translation() - p_WE(q0)) < 1e-4
 
 
 @pytest.mark.parametrize(
@@ -397,9 +426,80 @@ def test_pen_stays_vertical_while_drawing_with_the_axis_task():
 def test_axis_directions_are_normalised():
     q0 = Q_PEN_DOWN + np.array([0.0, 0.0, 0.0, 0.0, 0.1, 0.1, 0.0])
     _, clik, _ = make_clik()
-    target = clik.p_WE(q0)
+    target = p_WE(q0)
     unit = run_clik(target, q0, 0.01, orientation_gain=5.0)[0]
     scaled = run_clik(target, q0, 0.01, axis_E=[0, 0, 3], axis_W_desired=[0, 0, -0.5],
                       orientation_gain=5.0)[0]
     np.testing.assert_allclose(scaled, unit, rtol=0, atol=1e-14)
     assert np.linalg.norm(unit - q0) > 1e-3
+
+
+def _axis_rates_by_the_docstring(q, target, gain, axis_gain, axis_E, axis_W):
+    """The class docstring's tool-axis law written with numpy's solves and Drake's spatial
+    Jacobian on the test's plant (no block algebra)."""
+    from hemg_drake.control.clik import AXIS_DAMPING, NULL_SPACE_DAMPING
+
+    _PLANT.SetPositions(_CONTEXT, _ARM.model_instance, q)
+    W = _PLANT.world_frame()
+    J = _PLANT.CalcJacobianSpatialVelocity(
+        _CONTEXT, JacobianWrtVariable.kV, _ARM.tool_frame, np.zeros(3), W, W
+    )
+    Jw, Jv = J[:3], J[3:]
+    X_WE = _ARM.tool_frame.CalcPoseInWorld(_CONTEXT)
+    e = target - X_WE.translation()
+    a = X_WE.rotation().matrix() @ axis_E
+    qdot_p = gain * Jv.T @ e
+    N = np.eye(7) - Jv.T @ np.linalg.solve(Jv @ Jv.T + NULL_SPACE_DAMPING**2 * np.eye(3), Jv)
+    P = np.eye(3) - np.outer(a, a)
+    A = P @ Jw @ N
+    cross = np.cross(a, axis_W)
+    e_a = np.arctan2(np.linalg.norm(cross), a @ axis_W) * cross / np.linalg.norm(cross)
+    r = axis_gain * e_a - P @ Jw @ qdot_p
+    return qdot_p + A.T @ np.linalg.solve(A @ A.T + AXIS_DAMPING**2 * np.eye(3), r)
+
+
+def test_axis_step_is_the_documented_law():
+    """One update with the axis task against the law as the docstring states it."""
+    q0 = Q_PEN_DOWN + np.array([0.1, 0.0, -0.2, 0.0, 0.2, 0.2, 0.0])
+    target = p_WE(q0) + np.array([0.01, -0.005, 0.004])
+    axis_E, axis_W = np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0])
+    _, v_d, _, arm = run_clik(target, q0, 0.5e-3, gain=20.0, orientation_gain=2.0)
+    expected = _axis_rates_by_the_docstring(q0, target, 20.0, 2.0, axis_E, axis_W)
+    assert np.all(np.abs(expected) < arm.velocity_limit)  # no limit acts
+    np.testing.assert_allclose(v_d, expected, rtol=1e-9, atol=1e-9)
+
+
+def test_autodiff_step_slope_is_dt_gain_J_transpose():
+    """The CLIK converted to AutoDiffXd: after one update, d q_d / d p_WE_desired =
+    period * gain * J^T (closed form of the transpose law; J by finite differences)."""
+    diagram, _, arm = make_clik(gain=20.0)
+    ad = diagram.ToAutoDiffXd()
+    q0 = np.array([0.2, -0.5, 0.1, 0.8, 0.0, 1.0, 0.0])
+    target = p_WE(q0) + np.array([0.02, -0.01, 0.01])
+    simulator = Simulator_[AutoDiffXd](ad)
+    context = simulator.get_mutable_context()
+    ad.GetInputPort("p_WE_desired").FixValue(context, InitializeAutoDiff(target)[:, 0])
+    ad.GetInputPort("state").FixValue(
+        context, [AutoDiffXd(x) for x in np.concatenate([q0, np.zeros(7)])]
+    )
+    simulator.AdvanceTo(0.5e-3)  # the update at t = 0
+    q_d = ad.GetOutputPort("q_desired").Eval(context)
+    expected = 1e-3 * 20.0 * finite_difference_jacobian(q0).T
+    np.testing.assert_allclose(ExtractGradient(q_d), expected, rtol=1e-7, atol=1e-12)
+
+
+@pytest.mark.parametrize("changes", [{}, {"method": "dls", "gain": 50.0}, {"orientation_gain": 10.0}])
+def test_clones_run_bit_identical(changes):
+    diagram, _, _ = make_clik(**changes)
+    q0 = Q_PEN_DOWN
+    target = p_WE(q0) + np.array([0.05, -0.03, 0.02])
+    finals = []
+    for system in (diagram, diagram.Clone()):
+        simulator = Simulator(system)
+        context = simulator.get_mutable_context()
+        system.GetInputPort("p_WE_desired").FixValue(context, target)
+        system.GetInputPort("state").FixValue(context, np.concatenate([q0, np.zeros(7)]))
+        simulator.AdvanceTo(0.2)
+        finals.append(system.GetOutputPort("q_desired").Eval(context).copy())
+    np.testing.assert_array_equal(finals[0], finals[1])
+    assert np.linalg.norm(finals[0] - q0) > 0.01

@@ -1,7 +1,11 @@
-"""VariableGainPd (eq. 20) on the Baxter arm: its numpy twin, holding, sag, stiffness, limits."""
+"""VariableGainPd (eq. 20) on the Baxter arm through Drake: the law by hand, holding, sag,
+stiffness, limits, AutoDiffXd slopes and clones."""
+
+import dataclasses as dc
 
 import numpy as np
 import pytest
+from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import (
@@ -9,13 +13,17 @@ from pydrake.multibody.plant import (
     ExternallyAppliedSpatialForce,
     MultibodyPlant,
 )
-from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.multibody.tree import JacobianWrtVariable, SpatialInertia
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 
-from hemg_drake.control.pd import GAIN_RANGE, STIFFNESS_SCALE, VariableGainPd, pd_gains, pd_torque
-from hemg_drake.robots.baxter import add_baxter_arm
+from hemg_drake.control.config import GAIN_RANGE, PdConfig
+from hemg_drake.control.pd import VariableGainPd, add_variable_gain_pd
+from hemg_drake.robots.baxter import add_baxter_arm, make_arm_controller_plant
+
+# PdConfig's default per-joint stiffness per unit of K, written out (s0 s1 e0 e1 w0 w1 w2).
+SCALE = np.array([20.0, 20.0, 10.0, 10.0, 2.0, 2.0, 0.1])
 
 
 def _build(gain=50.0, *, gravity_compensation=True, q_desired=None, force_W=None):
@@ -24,13 +32,15 @@ def _build(gain=50.0, *, gravity_compensation=True, q_desired=None, force_W=None
     plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
     arm = add_baxter_arm(plant)
     plant.Finalize()
-    pd = builder.AddSystem(
-        VariableGainPd(plant=plant, arm=arm, gain=gain, gravity_compensation=gravity_compensation)
-    )
+    controller_plant, controller_arm = make_arm_controller_plant()
+    config = PdConfig(gain=gain, gravity_compensation=gravity_compensation)
+    pd = add_variable_gain_pd(
+        builder, plant=controller_plant, arm=controller_arm,
+        state_port=plant.get_state_output_port(arm.model_instance), config=config,
+    )  # fmt: skip
     q_desired = arm.home_positions if q_desired is None else q_desired
     target = builder.AddSystem(ConstantVectorSource(q_desired))
     builder.Connect(target.get_output_port(), pd.q_desired_input)
-    builder.Connect(plant.get_state_output_port(arm.model_instance), pd.state_input)
     builder.Connect(pd.torque_output, plant.get_actuation_input_port(arm.model_instance))
     if force_W is not None:
         push = ExternallyAppliedSpatialForce()
@@ -58,88 +68,134 @@ def _simulate(diagram, plant, arm, q0, duration):
     )
 
 
-def test_pd_gains_by_hand():
-    kp, kd = pd_gains(50.0, np.array([20.0, 0.1]), np.array([2.0, 5e-4]), 1.0)
-    np.testing.assert_allclose(kp, [1000.0, 5.0])
-    np.testing.assert_allclose(kd, [2 * np.sqrt(2000.0), 2 * np.sqrt(2.5e-3)])
-    tau = pd_torque(
-        np.zeros(2), np.array([0.0, 1.0]), np.full(2, 0.1), np.zeros(2), kp, kd,
-        np.array([50.0, 15.0]), 1.0,
-    )
-    np.testing.assert_allclose(tau, [50.0, 0.1 * 5.0 - kd[1] + 1.0])
+def _reference_plant():
+    """M(q) and g(q) from a plant the PD never sees: the arm behind a free body, so that the
+    arm's velocities are not the plant's first (and its columns must be picked by joint)."""
+    plant = MultibodyPlant(1e-3)
+    plant.AddRigidBody("ball", SpatialInertia.SolidSphereWithMass(2.0, 0.1))
+    arm = add_baxter_arm(plant)
+    plant.Finalize()
+    context = plant.CreateDefaultContext()
+
+    def mass_and_gravity(q):
+        plant.SetPositions(context, arm.model_instance, q)
+        M = plant.CalcMassMatrix(context)
+        g = plant.CalcGravityGeneralizedForces(context)
+        columns = [plant.GetJointByName(name).velocity_start() for name in arm.joint_names]
+        return np.diag(M)[columns], g[columns]
+
+    return mass_and_gravity
+
+
+# A configuration near home, rates and references: e1 is 0.3 rad off (saturates at K >= 100).
+Q = np.array([0.0, -0.55, 0.0, 0.75, 0.0, 1.26, 0.0]) + [0.01, -0.02, 0.015, 0.0, -0.01, 0.02, 0.03]
+V = np.array([0.1, -0.05, 0.2, -0.1, 0.0, 0.3, -0.2])
+Q_DESIRED = np.array([0.0, -0.55, 0.0, 1.05, 0.0, 1.26, 0.0])
+V_DESIRED = np.array([0.0, 0.1, 0.0, 0.0, -0.2, 0.0, 0.5])
+
+
+def _hand_law(K, zeta, M_jj, feedforward, limit, q=Q, v=V, q_d=Q_DESIRED, v_d=V_DESIRED):
+    expected = np.empty(7)
+    for j in range(7):
+        k_j = K * SCALE[j]
+        d_j = 2.0 * zeta * np.sqrt(k_j * M_jj[j])
+        tau = k_j * (q_d[j] - q[j]) + d_j * (v_d[j] - v[j]) + feedforward[j]
+        expected[j] = min(max(tau, -limit[j]), limit[j])
+    return expected
 
 
 @pytest.mark.parametrize("gravity_compensation, damping_ratio", [(True, 1.0), (False, 0.7)])
 def test_torque_is_the_documented_law_by_hand(gravity_compensation, damping_ratio):
-    # The module docstring's law, written here without pd_gains / pd_torque:
-    # k_j = K s_j, d_j = 2 zeta sqrt(k_j M_jj(q)), tau = k (q_d - q) + d (v_d - v) - g(q),
-    # clipped at the effort limits; M and g from Drake on a fresh context of the plant.
+    """k_j = K s_j, d_j = 2 zeta sqrt(k_j M_jj(q)), tau = k (q_d - q) + d (v_d - v) - g(q),
+    clipped at the effort limits; M and g from another plant (a ball before the arm)."""
     builder = DiagramBuilder()
-    plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
-    arm = add_baxter_arm(plant)
-    plant.Finalize()
-    pd = VariableGainPd(
-        plant=plant, arm=arm, gravity_compensation=gravity_compensation,
-        damping_ratio=damping_ratio,
-    )
-    q = arm.home_positions + np.array([0.01, -0.02, 0.015, 0.0, -0.01, 0.02, 0.03])
-    v = np.array([0.1, -0.05, 0.2, -0.1, 0.0, 0.3, -0.2])
-    q_desired = arm.home_positions + np.array([0.0, 0.0, 0.0, 0.3, 0.0, 0.0, 0.0])
-    v_desired = np.array([0.0, 0.1, 0.0, 0.0, -0.2, 0.0, 0.5])
+    controller_plant, arm = make_arm_controller_plant()
+    state = builder.AddSystem(ConstantVectorSource(np.concatenate([Q, V])))
+    config = PdConfig(damping_ratio=damping_ratio, gravity_compensation=gravity_compensation)
+    pd = add_variable_gain_pd(
+        builder, plant=controller_plant, arm=arm, state_port=state.get_output_port(),
+        config=config,
+    )  # fmt: skip
+    builder.ExportInput(pd.q_desired_input, "q_desired")
+    builder.ExportInput(pd.v_desired_input, "v_desired")
+    builder.ExportInput(pd.gain_input, "gain")
+    builder.ExportOutput(pd.torque_output, "torque")
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
     K = 120.0
-    context = pd.CreateDefaultContext()
-    pd.state_input.FixValue(context, np.concatenate([q, v]))
-    pd.q_desired_input.FixValue(context, q_desired)
-    pd.v_desired_input.FixValue(context, v_desired)
-    pd.gain_input.FixValue(context, [K])
-    torque = pd.torque_output.Eval(context)
+    diagram.GetInputPort("q_desired").FixValue(context, Q_DESIRED)
+    diagram.GetInputPort("v_desired").FixValue(context, V_DESIRED)
+    diagram.GetInputPort("gain").FixValue(context, [K])
+    torque = diagram.GetOutputPort("torque").Eval(context)
 
-    plant_context = plant.CreateDefaultContext()
-    plant.SetPositions(plant_context, q)
-    M_jj = np.diag(plant.CalcMassMatrix(plant_context))
-    g = plant.CalcGravityGeneralizedForces(plant_context)  # tau_g: the PD adds -tau_g
-    s = np.array([20.0, 20.0, 10.0, 10.0, 2.0, 2.0, 0.1])
+    M_jj, g = _reference_plant()(Q)
     limit = np.asarray(arm.effort_limit)
-    expected = np.empty(7)
-    for j in range(7):
-        k_j = K * s[j]
-        d_j = 2.0 * damping_ratio * np.sqrt(k_j * M_jj[j])
-        tau = k_j * (q_desired[j] - q[j]) + d_j * (v_desired[j] - v[j])
-        if gravity_compensation:
-            tau -= g[j]
-        expected[j] = min(max(tau, -limit[j]), limit[j])
+    expected = _hand_law(K, damping_ratio, M_jj, -g if gravity_compensation else np.zeros(7), limit)
     # Joint e1 is 0.3 rad off at K s = 1200 N m/rad: saturated; the others are not.
     assert expected[3] == limit[3]
     assert np.all(np.abs(np.delete(expected, 3)) < np.delete(limit, 3))
     np.testing.assert_allclose(torque, expected, rtol=1e-12, atol=1e-12)
 
 
-def test_system_matches_numpy_twin_with_gain_port():
-    # The compiled kernel against the numpy forms (pd_gains, pd_torque; checked by hand in
-    # test_pd_gains_by_hand), and the gain port overriding the constructor's gain. The law
-    # itself: test_torque_is_the_documented_law_by_hand.
-    diagram, plant, arm, pd = _build(gain=50.0)
-    rng = np.random.default_rng(3)
-    q = arm.home_positions + rng.uniform(-0.01, 0.01, 7)  # small errors: no saturation
-    v = rng.uniform(-0.1, 0.1, 7)
-    q_desired = arm.home_positions
-    v_desired = rng.uniform(-0.1, 0.1, 7)
-    context = diagram.CreateDefaultContext()
-    pd_context = pd.GetMyMutableContextFromRoot(context)
-    pd.state_input.FixValue(pd_context, np.concatenate([q, v]))
-    pd.q_desired_input.FixValue(pd_context, q_desired)
-    pd.v_desired_input.FixValue(pd_context, v_desired)
-    pd.gain_input.FixValue(pd_context, [80.0])  # overrides the constructor's 50
-    torque = pd.torque_output.Eval(pd_context)
+def test_unconnected_inputs_take_the_configs_gain_and_zero():
+    """Without gain, v_desired and feed-forward inputs: K = config.gain, v_d = 0, tau_ff = 0."""
+    controller_plant, arm = make_arm_controller_plant()
+    pd = VariableGainPd(plant=controller_plant, arm=arm, config=PdConfig(gain=30.0))
+    context = pd.CreateDefaultContext()
+    q_desired = Q + 0.01  # small errors: nothing saturates
+    pd.state_input.FixValue(context, np.concatenate([Q, V]))
+    pd.q_desired_input.FixValue(context, q_desired)
+    M_jj, _ = _reference_plant()(Q)
+    expected = _hand_law(30.0, 1.0, M_jj, np.zeros(7), arm.effort_limit, q_d=q_desired,
+                         v_d=np.zeros(7))  # fmt: skip
+    np.testing.assert_allclose(pd.torque_output.Eval(context), expected, rtol=1e-12, atol=1e-12)
+    # A feed-forward adds before the clip.
+    pd.feedforward_input.FixValue(context, np.arange(7.0))
+    np.testing.assert_allclose(
+        pd.torque_output.Eval(context), expected + np.arange(7.0), rtol=1e-12, atol=1e-12
+    )
 
-    # Independent reference: M and g from a fresh context of the plant.
-    plant_context = plant.CreateDefaultContext()
-    plant.SetPositions(plant_context, q)
-    kp, kd = pd_gains(80.0, STIFFNESS_SCALE, np.diag(plant.CalcMassMatrix(plant_context)), 1.0)
-    gravity_torque = -plant.CalcGravityGeneralizedForces(plant_context)
-    expected = pd_torque(q, v, q_desired, v_desired, kp, kd, arm.effort_limit, gravity_torque)
-    np.testing.assert_allclose(torque, expected, rtol=1e-12, atol=1e-12)
-    assert np.all(np.abs(torque) < arm.effort_limit)  # the comparison did not just hit limits
+
+def test_autodiff_slopes_are_the_laws_derivatives():
+    """The PD converted to AutoDiffXd: d tau / d K = s (q_d - q) + d / (2 K) (v_d - v) and
+    d tau / d q_d = diag(K s), where nothing saturates (closed forms)."""
+    controller_plant, arm = make_arm_controller_plant()
+    pd = VariableGainPd(plant=controller_plant, arm=arm).ToAutoDiffXd()
+    context = pd.CreateDefaultContext()
+    K = 40.0
+    q_desired = Q + np.array([0.01, -0.01, 0.02, 0.0, 0.01, -0.02, 0.01])
+    # Derivatives with respect to (K, q_d): 8 directions.
+    K_ad = InitializeAutoDiff([[K]], num_derivatives=8, deriv_num_start=0)
+    q_d_ad = InitializeAutoDiff(q_desired.reshape(-1, 1), num_derivatives=8, deriv_num_start=1)
+    pd.gain_input.FixValue(context, K_ad[:, 0])
+    pd.q_desired_input.FixValue(context, q_d_ad[:, 0])
+    pd.v_desired_input.FixValue(context, [AutoDiffXd(x) for x in V_DESIRED])
+    pd.state_input.FixValue(context, [AutoDiffXd(x) for x in np.concatenate([Q, V])])
+    torque = pd.torque_output.Eval(context)
+    M_jj, _ = _reference_plant()(Q)
+    k = K * SCALE
+    d = 2.0 * np.sqrt(k * M_jj)
+    np.testing.assert_allclose(
+        ExtractValue(torque).ravel(), k * (q_desired - Q) + d * (V_DESIRED - V), rtol=1e-12
+    )
+    gradient = ExtractGradient(torque)
+    dtau_dK = SCALE * (q_desired - Q) + d / (2.0 * K) * (V_DESIRED - V)
+    np.testing.assert_allclose(gradient[:, 0], dtau_dK, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(gradient[:, 1:], np.diag(k), rtol=1e-12, atol=1e-12)
+
+
+def test_clones_run_bit_identical():
+    diagram, plant, arm, _ = _build(gain=80.0)
+    runs = []
+    for system in (diagram, diagram.Clone()):
+        simulator = Simulator(system)
+        its_plant = system.GetSubsystemByName(plant.get_name())  # the clone has its own
+        plant_context = its_plant.GetMyMutableContextFromRoot(simulator.get_mutable_context())
+        its_plant.SetPositions(plant_context, arm.model_instance, arm.home_positions + 0.1)
+        simulator.AdvanceTo(0.3)
+        runs.append(simulator.get_context().get_discrete_state_vector().CopyToVector())
+    np.testing.assert_array_equal(runs[0], runs[1])
+    assert np.linalg.norm(runs[0][:7] - arm.home_positions) < 0.1  # it moved
 
 
 def test_holds_configuration_with_gravity_compensation():
@@ -150,6 +206,7 @@ def test_holds_configuration_with_gravity_compensation():
 
 def test_sags_without_gravity_compensation():
     diagram, plant, arm, _ = _build(gain=50.0, gravity_compensation=False)
+    assert not diagram.HasSubsystemNamed("pd_gravity")
     drift, _, _ = _simulate(diagram, plant, arm, arm.home_positions, 5.0)
     # Gravity on s1 (~48 N m) against 1000 N m/rad: about 5 cm at the tool, downwards.
     assert np.linalg.norm(drift) > 0.02
@@ -181,7 +238,7 @@ def test_static_deflection_scales_with_inverse_gain():
         plant.world_frame(), plant.world_frame(),
     )
     for gain, drift in deflections.items():
-        predicted = J @ ((J.T @ force_W) / (gain * STIFFNESS_SCALE))
+        predicted = J @ ((J.T @ force_W) / (gain * SCALE))
         np.testing.assert_allclose(drift, predicted, rtol=0.05, atol=2e-4)
     # 4x the gain, 1/4 of the deflection, within 5 % (the rest is geometric nonlinearity).
     ratio = np.linalg.norm(deflections[50.0]) / np.linalg.norm(deflections[200.0])
@@ -203,20 +260,20 @@ def test_torque_saturates_at_effort_limits():
 
 
 @pytest.mark.parametrize(
-    "kwargs, message",
+    "changes, message",
     [
         ({"gain": 0.0}, "gain"),
         ({"gain": float("nan")}, "gain"),
-        ({"stiffness_scale": np.ones(6)}, "stiffness_scale"),
+        ({"stiffness_scale": [1.0] * 6}, "stiffness_scale"),
         ({"stiffness_scale": [1.0] * 6 + [np.inf]}, "stiffness_scale"),
         ({"damping_ratio": -1.0}, "damping_ratio"),
         ({"damping_ratio": float("nan")}, "damping_ratio"),
     ],
 )
-def test_bad_parameters(kwargs, message):
-    _, plant, arm, _ = _build()
+def test_bad_parameters(changes, message):
+    plant, arm = make_arm_controller_plant()
     with pytest.raises(ValueError, match=message):
-        VariableGainPd(plant=plant, arm=arm, **kwargs)
+        VariableGainPd(plant=plant, arm=arm, config=dc.replace(PdConfig(), **changes))
 
 
 def test_unfinalized_plant_is_rejected():
@@ -224,6 +281,18 @@ def test_unfinalized_plant_is_rejected():
     arm = add_baxter_arm(plant)
     with pytest.raises(ValueError, match="finalized"):
         VariableGainPd(plant=plant, arm=arm)
+
+
+def test_gravity_needs_a_plant_of_the_arm_alone():
+    plant = MultibodyPlant(1e-3)
+    plant.AddRigidBody("ball", SpatialInertia.SolidSphereWithMass(2.0, 0.1))
+    arm = add_baxter_arm(plant)
+    plant.Finalize()
+    with pytest.raises(ValueError, match="arm alone"):
+        add_variable_gain_pd(
+            DiagramBuilder(), plant=plant, arm=arm,
+            state_port=plant.get_state_output_port(arm.model_instance),
+        )  # fmt: skip
 
 
 @pytest.mark.parametrize(
