@@ -19,6 +19,7 @@ from hemg_drake.commands import (
     import_robomimic_command,
     learn_command,
     reproduce_command,
+    stability_command,
     sweep_command,
     teleop_command,
 )
@@ -252,6 +253,23 @@ def build_parser():
     teleop.add_argument("--no-replay", action="store_true", help="write no HTML replay")
     add_set(teleop)
     teleop.set_defaults(func=teleop_command)
+
+    stability = command(
+        "stability", "the teleoperation loop's stability against delay, by linearisation"
+    )
+    stability.add_argument("scenario", help="scenario YAML file, or a shipped one: cotter_pin, drawing")
+    stability.add_argument(
+        "--delays", type=_finite_float("--delays"), nargs="+",
+        default=[0, 5, 10, 15, 20, 25, 50, 100, 150, 200], metavar="MS",
+        help="one-way delays (ms, each way; whole master samples)",
+    )  # fmt: skip
+    stability.add_argument(
+        "--gains", type=_finite_float("--gains", positive=True), nargs="+", metavar="K",
+        help="the PD's K held during the hold (default: the scenario's emg.k_min and k_max)",
+    )  # fmt: skip
+    stability.add_argument("-o", "--output", help="also draw the figure (.png, .svg, .pdf)")
+    add_set(stability)
+    stability.set_defaults(func=stability_command)
 
     sweep = command("sweep", "run a sweep file's trials on all cores (or Ray); table + figure")
     sweep.add_argument(

@@ -234,3 +234,43 @@ def import_robomimic_command(args):
     _print(f"wrote {folder.dataset} ({len(demos)} demonstrations from {args.input})")
 
 
+
+
+def stability_command(args):
+    """``hemg-drake stability``: the hold loop's spectral radius against delay (a table), the
+    first unstable delay per gain, and optionally the figure."""
+    from hemg_drake.scenario import load_scenario
+
+    scenario = load_scenario(_scenario_path(args.scenario), overrides=args.set)
+    if args.output:
+        check_output_file(args.output)
+    period_ms = 1e3 * scenario.master.period
+    for delay in args.delays:
+        if delay < 0 or abs(round(delay / period_ms) * period_ms - delay) > 1e-9:
+            raise ValueError(
+                f"--delays {delay:g}: a delay must be a whole number of the master's "
+                f"{period_ms:g} ms samples, >= 0"
+            )
+    from hemg_drake.analysis.stability import loop_stability, onset_delay
+
+    gains = args.gains or [scenario.emg.k_min, scenario.emg.k_max]
+    curves = {}
+    for gain in gains:
+        label = f"{scenario.feedback.mode}, K = {gain:g}"
+        curves[label] = loop_stability(scenario, args.delays, gain=gain)
+    _print("delay (ms)  " + "  ".join(f"{label:>28}" for label in curves))
+    for row, delay in enumerate(args.delays):
+        cells = []
+        for results in curves.values():
+            r = results[row]
+            cells.append(f"{r.spectral_radius:.6f} ({r.frequency_hz:5.2f} Hz)".rjust(28))
+        _print(f"{delay:10g}  " + "  ".join(cells))
+    for label, results in curves.items():
+        onset = onset_delay(results)
+        verdict = "stable at every delay" if onset is None else f"unstable from {onset:g} ms"
+        _print(f"{label}: {verdict} (spectral radius of the linearised loop about a hold)")
+    if args.output:
+        from hemg_drake.viz.figures import plot_loop_stability, save_figure
+
+        save_figure(plot_loop_stability(curves, title=f"{scenario.task}: loop about a hold"), args.output)
+        _print(f"wrote {args.output}")

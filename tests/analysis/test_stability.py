@@ -88,3 +88,19 @@ def test_force_loop_onset_matches_the_delay_studys_simulation(pin):
 def test_delays_must_be_whole_samples(pin):
     with pytest.raises(ValueError, match="not a whole number"):
         loop_stability(pin, [2.5], gain=10.0)
+
+
+def test_cli_prints_the_onset_and_refuses_a_partial_sample(run_cli, tmp_path):
+    figure = tmp_path / "stability.png"
+    code, out, err = run_cli(
+        ["stability", "cotter_pin", "--delays", "0", "25", "--gains", "10", "-o", str(figure)]
+    )
+    assert code == 0, err
+    assert "force, K = 10: unstable from 25 ms" in out
+    assert figure.stat().st_size > 0
+    code, out, err = run_cli(["stability", "cotter_pin", "--delays", "2.5"])
+    assert code == 2 and out == ""
+    assert err.strip().splitlines() == [
+        "hemg-drake stability: error: --delays 2.5: a delay must be a whole number of the "
+        "master's 1 ms samples, >= 0"
+    ]

@@ -6,7 +6,8 @@ work under any backend; ``save_figure`` writes one atomically. By concept:
 time), :mod:`~hemg_drake.viz.figures.emg` (Fig. 6, eq. 22),
 :mod:`~hemg_drake.viz.figures.learning` (demonstrations, reproductions, Fig. 8 (c), the GMR
 field) and :mod:`~hemg_drake.viz.figures.tasks` (Fig. 8 (d)-(f), Fig. 10, Fig. 11, the
-placements); every name is importable from here.
+placements), :mod:`~hemg_drake.viz.figures.stability` (the loop's spectral radius against
+delay); every name is importable from here.
 """
 
 from hemg_drake.viz.figures.common import (
@@ -28,6 +29,7 @@ from hemg_drake.viz.figures.learning import (
     plot_state_activations,
     state_activations_title,
 )
+from hemg_drake.viz.figures.stability import plot_loop_stability
 from hemg_drake.viz.figures.tasks import (
     ROMAN,
     mark_steps,
