@@ -83,6 +83,11 @@ def test_force_loop_onset_matches_the_delay_studys_simulation(pin):
     for changes in (["feedback.gain=0"], ["feedback.mode=position_error"]):
         results = loop_stability(pin.replaced(changes), grid[:3], gain=10.0, settle_time=1.0)
         assert onset_delay(results) is None, changes
+    # The passivity controller is inactive about a hold: the same linearised loop.
+    passive = loop_stability(pin.replaced(["feedback.passivity=tdpa"]), grid[:2], gain=10.0,
+                             settle_time=1.0)  # fmt: skip
+    for plain, with_tdpa in zip(force, passive):
+        assert with_tdpa.spectral_radius == pytest.approx(plain.spectral_radius, rel=1e-9)
 
 
 def test_delays_must_be_whole_samples(pin):
