@@ -25,7 +25,7 @@ def normalised_envelope(envelope, rest_level, mvc_level):
     -------
     u : ndarray, same shape
     """
-    return np.clip((envelope - rest_level) / (mvc_level - rest_level), 0.0, 1.0)
+    return np.minimum(np.maximum((envelope - rest_level) / (mvc_level - rest_level), 0.0), 1.0)
 
 
 @dataclasses.dataclass
@@ -77,7 +77,7 @@ class EmgCalibration:
         Each level is the mean of the recording's ``moving_rms`` envelope,
         leaving out the first ``window - 1`` values (partial windows). A
         sustained maximal contraction therefore normalises to about 1 on
-        average, its noise clipped above; with ``SyntheticEmgSource`` the
+        average, its noise clipped above; with the synthetic source the
         normalised envelope is close to the activation (within about 0.05
         between 0.2 and 0.8).
 

@@ -89,7 +89,7 @@ def gain_from_activation(a, *, k_min=DEFAULT_K_MIN, k_max=DEFAULT_K_MAX, a_rest=
     if a.dtype != object:
         a = a.astype(float)
     K = (k_max - k_min) * (a - a_rest) / (a_mvc - a_rest) + k_min
-    return np.clip(K, k_min, k_max)
+    return np.minimum(np.maximum(K, k_min), k_max)
 
 
 # The numeric parameter of VariableGain, in this order.
@@ -195,7 +195,7 @@ def VariableGain_(T):
 
         def _calc_gain(self, context, output):
             _, k_min, k_max, _, _ = context.get_numeric_parameter(self._parameter).CopyToVector()
-            a = self._activation(context)
+            a = self._activation_output.Eval(context)[0]  # cached: a(u) once per envelope
             K = gain_from_activation(a, k_min=_value(k_min), k_max=_value(k_max))
             output.SetAtIndex(0, np.asarray(K).item())
 

@@ -31,6 +31,9 @@ from hemg_drake.emg.config import (
     SyntheticEmgConfig,
 )
 
+# Samples whose noise is drawn at once (one second at 200 Hz): the RandomSource's block.
+NOISE_BLOCK = 200
+
 
 def _checked_config(config):
     gains = np.asarray(config.channel_gains, dtype=float)
@@ -68,7 +71,8 @@ def synthetic_emg_sample(activation, noise, channel_gains, rest_std, exponent):
         Integer-valued floats in -128..127 (``np.round``: half to even).
     """
     a = 0.0 if np.isnan(activation) else min(max(float(activation), 0.0), 1.0)
-    return np.clip(np.round((rest_std + channel_gains * a**exponent) * noise), INT8_MIN, INT8_MAX)
+    sample = np.round((rest_std + channel_gains * a**exponent) * noise)
+    return np.minimum(np.maximum(sample, INT8_MIN), INT8_MAX)
 
 
 @TemplateSystem.define("SyntheticEmgLaw_", T_list=(float, AutoDiffXd))
@@ -85,34 +89,40 @@ def SyntheticEmgLaw_(T):
             output_ports:
             - emg
 
-        ``activation`` (1, unitless), ``noise`` (8, unit Gaussian), ``emg`` (8, MYO units):
-        :func:`synthetic_emg_sample` (Sec. II-B's armband; a stand-in for the MYO, not a
-        physiological model), stateless, direct feedthrough. The channel gains, rest_std and
-        exponent are a numeric parameter (10 values, in that order). Converted to
+        ``activation`` (1, unitless), ``noise`` (``NOISE_BLOCK`` x 8 unit Gaussians, row by
+        row), ``emg`` (8, MYO units): :func:`synthetic_emg_sample` of the activation and
+        noise row k mod ``NOISE_BLOCK``, k = round(t / period) the sample's index (Sec. II-B's
+        armband; a stand-in for the MYO, not a physiological model); stateless, direct
+        feedthrough. The channel gains, rest_std and exponent are a numeric parameter (10
+        values, in that order). Converted to
         AutoDiffXd (as a Clone needs a conversion), the samples carry zero derivatives: the
         rounding to integers is piecewise constant.
 
         Parameters
         ----------
         config : SyntheticEmgConfig
+        period : float
+            Sample period in s.
         """
 
-        def _construct(self, *, config=SyntheticEmgConfig(), converter=None):
+        def _construct(self, *, config=SyntheticEmgConfig(), period=MYO_PERIOD, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self._config = config
+            self._config, self._period = config, as_scalar("period", period)
             self._parameter = self.DeclareNumericParameter(BasicVector_[T](_checked_config(config)))
             self._activation_input = self.DeclareVectorInputPort("activation", 1)
-            self._noise_input = self.DeclareVectorInputPort("noise", MYO_CHANNELS)
+            self._noise_input = self.DeclareVectorInputPort("noise", NOISE_BLOCK * MYO_CHANNELS)
             self.DeclareVectorOutputPort("emg", MYO_CHANNELS, self._calc_emg)
 
         def _construct_copy(self, other, converter=None):
-            Impl._construct(self, config=other._config, converter=converter)
+            Impl._construct(self, config=other._config, period=other._period, converter=converter)
 
         def _calc_emg(self, context, output):
-            p = ExtractValue(context.get_numeric_parameter(self._parameter).CopyToVector())[:, 0]
+            p = _values(context.get_numeric_parameter(self._parameter).CopyToVector())
+            row = round(_float(context.get_time()) / self._period) % NOISE_BLOCK
+            noise = _values(self._noise_input.Eval(context))
             sample = synthetic_emg_sample(
-                ExtractValue(self._activation_input.Eval(context))[0, 0],
-                ExtractValue(self._noise_input.Eval(context))[:, 0],
+                _values(self._activation_input.Eval(context))[0],
+                noise[row * MYO_CHANNELS : (row + 1) * MYO_CHANNELS],
                 p[:MYO_CHANNELS],
                 p[MYO_CHANNELS],
                 p[MYO_CHANNELS + 1],
@@ -120,6 +130,15 @@ def SyntheticEmgLaw_(T):
             output.SetFromVector(sample if T == float else [AutoDiffXd(x) for x in sample])
 
     return Impl
+
+
+def _float(x):
+    return x.value() if isinstance(x, AutoDiffXd) else float(x)
+
+
+def _values(vector):
+    """A vector's values as floats: itself for float, the AutoDiffXd values otherwise."""
+    return vector if vector.dtype != object else ExtractValue(vector)[:, 0]
 
 
 SyntheticEmgLaw = SyntheticEmgLaw_[None]
@@ -146,10 +165,15 @@ def make_synthetic_emg_source(*, config=SyntheticEmgConfig(), period=MYO_PERIOD)
     clipping, rare below 3 std = 127), so after an ``EmgCalibration`` from rest and MVC
     recordings the normalised envelope is close to the activation itself.
 
-    Inside: ``noise`` (Drake's ``RandomSource``, 8 unit Gaussians redrawn every period),
-    ``law`` (``SyntheticEmgLaw``), ``hold`` (Drake's ``ZeroOrderHold``). Timing: at t_k =
-    k * period the hold samples the law, which reads the activation and that instant's
-    noise; the output holds sample k until t_{k+1}, zero before the first. The noise is in
+    Inside: ``noise`` (Drake's ``RandomSource``: ``NOISE_BLOCK`` x 8 unit Gaussians, redrawn
+    every ``NOISE_BLOCK`` periods, i.e. once a second), ``law`` (``SyntheticEmgLaw``, which
+    takes row k mod ``NOISE_BLOCK`` for sample k), ``hold`` (Drake's ``ZeroOrderHold``).
+    Timing: at t_k = k * period the hold samples the law, which reads the activation and
+    sample k's noise; the output holds sample k until t_{k+1}, zero before the first. The
+    noise is drawn a block at a time because a ``RandomSource`` updates through an
+    unrestricted update, which invalidates every state-dependent cache of the diagram: once
+    per sample it cost a demonstration about 65 ms of CPU per simulated second (15 %),
+    once per block it costs nothing measurable. The noise is in
     the Context: ``diagram.SetRandomContext(context, RandomGenerator(seed))`` seeds it (same
     seed, same samples); a default Context's noise depends on how many random sources the
     process built before, so always seed it.
@@ -166,11 +190,20 @@ def make_synthetic_emg_source(*, config=SyntheticEmgConfig(), period=MYO_PERIOD)
         Named ``emg_source``; input port ``activation``, output port ``emg``.
     """
     period = as_scalar("period", period)
+    block = NOISE_BLOCK * period
+    # The noise's blocks must begin exactly at a sample instant (Drake times periodic events
+    # at offset + n * period): true of 1/200 s, checked for the first 10^5 blocks.
+    n = np.arange(1, 100_001, dtype=float)
+    if not np.array_equal(n * block, (n * NOISE_BLOCK) * period):
+        raise ValueError(
+            f"period {period!r}: {NOISE_BLOCK} periods do not add up exactly to a block; "
+            f"use the MYO's 1/200 s"
+        )
     builder = DiagramBuilder()
     noise = builder.AddNamedSystem(
-        "noise", RandomSource(RandomDistribution.kGaussian, MYO_CHANNELS, period)
+        "noise", RandomSource(RandomDistribution.kGaussian, NOISE_BLOCK * MYO_CHANNELS, block)
     )
-    law = builder.AddNamedSystem("law", SyntheticEmgLaw(config=config))
+    law = builder.AddNamedSystem("law", SyntheticEmgLaw(config=config, period=period))
     hold = builder.AddNamedSystem("hold", ZeroOrderHold(period, MYO_CHANNELS))
     builder.Connect(noise.get_output_port(), law.GetInputPort("noise"))
     builder.Connect(law.GetOutputPort("emg"), hold.get_input_port())

@@ -42,21 +42,30 @@ def _run_synthetic(builder, simulate, held_signal, activation, seed, config=Synt
     ],
 )  # fmt: skip
 def test_synthetic_law_by_hand(activation, noise, expected):
-    law = SyntheticEmgLaw()
+    np.testing.assert_array_equal(_law_sample(SyntheticEmgLaw(), activation, noise), expected)
+
+
+def _law_sample(law, activation, noise, k=0):
+    """The law's sample k, with ``noise`` in row k mod 200 of the noise block (zeros else)."""
     context = law.CreateDefaultContext()
+    context.SetTime(k * MYO_PERIOD)
+    block = np.zeros((200, 8))
+    block[k % 200] = noise
     law.GetInputPort("activation").FixValue(context, [activation])
-    law.GetInputPort("noise").FixValue(context, noise)
-    np.testing.assert_array_equal(law.GetOutputPort("emg").Eval(context), expected)
+    law.GetInputPort("noise").FixValue(context, block.ravel())
+    return law.GetOutputPort("emg").Eval(context)
+
+
+def test_synthetic_law_reads_row_k_of_the_block():
+    for k in (0, 1, 199, 200, 437):
+        np.testing.assert_array_equal(_law_sample(SyntheticEmgLaw(), 1.0, np.ones(8), k), 2 + GAINS)
 
 
 def test_synthetic_law_exponent_by_hand():
     # p = 2, a = 0.5: std_i = 2 + g_i / 4 = 12, 10.5, 8.5, 7, 7, 8.5, 10.5, 12 (unit noise),
     # rounded half to even.
     law = SyntheticEmgLaw(config=SyntheticEmgConfig(exponent=2.0))
-    context = law.CreateDefaultContext()
-    law.GetInputPort("activation").FixValue(context, [0.5])
-    law.GetInputPort("noise").FixValue(context, np.ones(8))
-    np.testing.assert_array_equal(law.GetOutputPort("emg").Eval(context), [12, 10, 8, 7, 7, 8, 10, 12])
+    np.testing.assert_array_equal(_law_sample(law, 0.5, np.ones(8)), [12, 10, 8, 7, 7, 8, 10, 12])
 
 
 def test_synthetic_source_takes_sample_k_at_t_k(builder, simulate, held_signal):
@@ -82,6 +91,9 @@ def test_synthetic_source_has_the_documented_spread(builder, simulate, held_sign
     cross = np.corrcoef(emg.T)[np.triu_indices(8, 1)]
     assert np.max(np.abs(cross)) < 4 / np.sqrt(3000)
     assert np.all(emg == np.round(emg)) and emg.min() >= -128 and emg.max() <= 127
+    # The noise is drawn 200 samples at a time: no block repeats another.
+    blocks = emg.reshape(15, 200, 8)
+    assert all(np.mean(blocks[i] != blocks[j]) > 0.9 for i in range(15) for j in range(i))
 
 
 def test_one_built_diagram_runs_many_seeds_same_seed_same_bytes():
@@ -135,6 +147,8 @@ def test_synthetic_bad_parameters(config, message):
         make_synthetic_emg_source(config=config)
     with pytest.raises(ValueError, match="period"):
         make_synthetic_emg_source(period=0.0)
+    with pytest.raises(ValueError, match="200 periods do not add up"):
+        make_synthetic_emg_source(period=1 / 3)
 
 
 def test_synthesize_emg_rejects_bad_input():
