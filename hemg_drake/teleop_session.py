@@ -10,6 +10,7 @@ import dataclasses as dc
 import time
 
 import numpy as np
+from pydrake.common import RandomGenerator
 from pydrake.math import RigidTransform
 from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 
@@ -125,6 +126,7 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
         page = TeleopPage(meshcat, k_min=scenario.emg.k_min, k_max=scenario.emg.k_max)
     diagram = built.diagram
     simulator = Simulator(diagram)
+    diagram.SetRandomContext(simulator.get_mutable_context(), RandomGenerator(seed))  # sEMG noise
     ApplySimulatorConfig(scenario.simulator, simulator)
     simulator.set_target_realtime_rate(1.0 if realtime else 0.0)
     simulator.Initialize()

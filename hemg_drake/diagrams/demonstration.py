@@ -23,6 +23,7 @@ when the diagram was built with a recorder.
 import dataclasses as dc
 
 import numpy as np
+from pydrake.common import RandomGenerator
 from pydrake.systems.framework import DiagramBuilder
 
 from hemg_drake._validate import as_seed
@@ -31,7 +32,7 @@ from hemg_drake.diagrams.log import add_logger, split_log
 from hemg_drake.diagrams.station import make_slave_station
 from hemg_drake.emg.calibration import EmgCalibration
 from hemg_drake.emg.chain import add_emg_gain_chain
-from hemg_drake.emg.sources import MYO_PERIOD, MYO_RATE, SyntheticEmgSource, synthesize_emg
+from hemg_drake.emg.sources import MYO_PERIOD, MYO_RATE, make_synthetic_emg_source, synthesize_emg
 from hemg_drake.learning.demos import FIELD_WIDTHS, Demonstration
 from hemg_drake.teleop.feedback import ForceFeedback
 from hemg_drake.teleop.mapping import WorkspaceMap
@@ -100,13 +101,13 @@ def emg_calibration(scenario):
     )
 
 
-def make_emg_source(scenario, seed):
-    """The raw sEMG source of ``scenario.emg.source``: the seeded synthetic armband, or a
+def make_emg_source(scenario):
+    """The raw sEMG source of ``scenario.emg.source``: the synthetic armband, or a
     live one (``LiveEmgSource``: a MYO through pyomyo, or a LibEMG streamer's shared memory).
     """
     source = scenario.emg.source
     if source == "synthetic":
-        return SyntheticEmgSource(seed=seed)
+        return make_synthetic_emg_source()
     if source == "myo":
         from hemg_drake.emg.sources import LiveEmgSource, open_myo_device
 
@@ -179,14 +180,12 @@ def build_demonstration_diagram(
             config=scenario.mapping,
         ),
     )
-    emg_source = add("emg_source", make_emg_source(scenario, seed))
+    emg_source = add("emg_source", make_emg_source(scenario))
     envelope, variable_gain = add_emg_gain_chain(
         builder,
-        emg_source.get_emg_output_port(),
+        emg_source.GetOutputPort("emg"),
+        config=scenario.emg,
         calibration=emg_calibration(scenario),
-        A_emg=scenario.emg.A_emg,
-        k_min=scenario.emg.k_min,
-        k_max=scenario.emg.k_max,
     )
     envelope.set_name("envelope")
     variable_gain.set_name("variable_gain")
@@ -198,7 +197,7 @@ def build_demonstration_diagram(
     connect = builder.Connect
     connect(operator.GetOutputPort("hand_force"), master.GetInputPort("hand_force"))
     if emg_source.num_input_ports():  # the synthetic armband reads the operator's activation
-        connect(operator.GetOutputPort("activation"), emg_source.get_activation_input_port())
+        connect(operator.GetOutputPort("activation"), emg_source.GetInputPort("activation"))
     for name in ("p_MS", "v_MS"):
         connect(master.GetOutputPort(name), operator.GetInputPort(name))
         connect(master.GetOutputPort(name), workspace_map.GetInputPort(name))
@@ -232,7 +231,7 @@ def build_demonstration_diagram(
     }
     logger = add_logger(builder, {name: sources[name] for name in LOGGED_FIELDS}, scenario.log_period)
     emg_sources = {
-        "emg": emg_source.get_emg_output_port(),
+        "emg": emg_source.GetOutputPort("emg"),
         "muscle_activation": operator.GetOutputPort("activation"),
     }
     emg_logger = add_logger(builder, emg_sources, MYO_PERIOD, name="emg_logger")
@@ -299,6 +298,9 @@ def run_demonstration(built, *, duration=None, replay_path=None):
     Demonstration
     """
     simulator, duration = make_simulator(built, duration, replay_path)
+    # The seed's sEMG noise (the synthetic armband's RandomSource) lives in the Context;
+    # seeded first, as SetRandomContext also resets the operator's parameters.
+    built.diagram.SetRandomContext(simulator.get_mutable_context(), RandomGenerator(built.seed))
     seed_operator(built, simulator.get_mutable_context())
     simulator.Initialize()
     if built.recorder is not None:

@@ -10,6 +10,24 @@ from hemg_drake.emg.envelope import DEFAULT_WINDOW, _check_window, moving_rms
 from hemg_drake.fileio import write_text_atomic
 
 
+def normalised_envelope(envelope, rest_level, mvc_level):
+    """The envelope mapped to [0, 1]: u = clip((envelope - rest) / (mvc - rest), 0, 1).
+
+    ``EmgCalibration.normalise`` and ``VariableGain`` both call it; NaN stays NaN.
+
+    Parameters
+    ----------
+    envelope : float or ndarray, any shape
+    rest_level, mvc_level : float
+        Envelope at rest and at maximum voluntary contraction, rest_level < mvc_level.
+
+    Returns
+    -------
+    u : ndarray, same shape
+    """
+    return np.minimum(np.maximum((envelope - rest_level) / (mvc_level - rest_level), 0.0), 1.0)
+
+
 @dataclasses.dataclass
 class EmgCalibration:
     """Maps an RMS envelope to [0, 1]: u = clip((rms - rest) / (mvc - rest), 0, 1).
@@ -59,7 +77,7 @@ class EmgCalibration:
         Each level is the mean of the recording's ``moving_rms`` envelope,
         leaving out the first ``window - 1`` values (partial windows). A
         sustained maximal contraction therefore normalises to about 1 on
-        average, its noise clipped above; with ``SyntheticEmgSource`` the
+        average, its noise clipped above; with the synthetic source the
         normalised envelope is close to the activation (within about 0.05
         between 0.2 and 0.8).
 
@@ -98,10 +116,9 @@ class EmgCalibration:
         -------
         u : float or ndarray, same shape
         """
-        u = (np.asarray(envelope, dtype=float) - self.rest_level) / (
-            self.mvc_level - self.rest_level
+        return normalised_envelope(
+            np.asarray(envelope, dtype=float), self.rest_level, self.mvc_level
         )
-        return np.clip(u, 0.0, 1.0)
 
     def save(self, path):
         """Write as YAML (atomically)."""

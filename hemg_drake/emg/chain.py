@@ -1,41 +1,36 @@
 """Wire the envelope and the gain law behind any sEMG source in one call, and run it."""
 
 import numpy as np
+from pydrake.common import RandomGenerator
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import LogVectorOutput, TrajectorySource
-from pydrake.trajectories import PiecewisePolynomial
+from pydrake.systems.primitives import LogVectorOutput
 
+from hemg_drake._validate import as_seed
 from hemg_drake.emg.calibration import EmgCalibration
+from hemg_drake.emg.config import MYO_PERIOD, EmgConfig
 from hemg_drake.emg.envelope import RmsEnvelope
-from hemg_drake.emg.gain import A_EMG, DEFAULT_K_MAX, DEFAULT_K_MIN, VariableGain
-from hemg_drake.emg.sources import MYO_PERIOD
+from hemg_drake.emg.gain import VariableGain
+from hemg_drake.emg.synthetic import held_samples
+
+__all__ = ["add_emg_gain_chain", "held_samples", "run_emg_chain"]
 
 
-def add_emg_gain_chain(
-    builder,
-    emg_output,
-    *,
-    calibration=None,
-    A_emg=A_EMG,
-    k_min=DEFAULT_K_MIN,
-    k_max=DEFAULT_K_MAX,
-    period=MYO_PERIOD,
-):
+def add_emg_gain_chain(builder, emg_output, *, config=EmgConfig(), calibration=None,
+                       period=MYO_PERIOD):  # fmt: skip
     """Add ``RmsEnvelope`` -> ``VariableGain`` to ``builder``, fed by ``emg_output``.
-
-    The envelope takes its window and form from the calibration, so the raw
-    envelope is normalised with levels measured the same way.
 
     Parameters
     ----------
     builder : pydrake.systems.framework.DiagramBuilder
     emg_output : OutputPort
-        8-channel raw sEMG, e.g. ``SyntheticEmgSource.get_emg_output_port()``.
+        Raw sEMG, e.g. a source's ``emg`` port (8 channels for a MYO, 16 for others).
+    config : EmgConfig
+        The envelope's window and form (``config.envelope()``) and the gain law
+        (``config.gain()``).
     calibration : EmgCalibration, optional
-        None: L_win = 20, paper form, identity normalisation.
-    A_emg, k_min, k_max
-        See ``VariableGain``.
+        Rest and MVC levels, measured with the same window and form as ``config``'s
+        envelope; None: identity normalisation.
     period : float
         Sample period of the source in s.
 
@@ -45,71 +40,47 @@ def add_emg_gain_chain(
     gain : VariableGain
         Its ``activation`` and ``gain`` output ports feed the controller.
     """
-    calibration = EmgCalibration() if calibration is None else calibration
+    envelope = config.envelope()
+    if calibration is None:
+        calibration = EmgCalibration(window=envelope.window, per_channel=envelope.per_channel)
+    measured = (calibration.window, calibration.per_channel)
+    if measured != (envelope.window, envelope.per_channel):
+        raise ValueError(
+            f"the calibration was measured with window={measured[0]}, per_channel="
+            f"{measured[1]}, the envelope uses window={envelope.window}, per_channel="
+            f"{envelope.per_channel}"
+        )
     rms = builder.AddSystem(
-        RmsEnvelope(
-            window=calibration.window, per_channel=calibration.per_channel, period=period,
-            channels=emg_output.size(),  # 8 for a MYO, 16 for other armbands
-        )  # fmt: skip
+        RmsEnvelope(config=envelope, period=period, channels=emg_output.size())
     )
-    gain = builder.AddSystem(
-        VariableGain(calibration=calibration, A_emg=A_emg, k_min=k_min, k_max=k_max)
-    )
+    gain = builder.AddSystem(VariableGain(config=config.gain(), calibration=calibration))
     builder.Connect(emg_output, rms.get_emg_input_port())
     builder.Connect(rms.get_envelope_output_port(), gain.get_envelope_input_port())
     return rms, gain
 
 
-def held_samples(values):
-    """A source holding ``values[k]`` around each 200 Hz sample instant t_k = k / 200 s.
-
-    Its breaks sit a quarter period before each sample instant, away from the sources'
-    updates (t_k) and the envelope's (t_k + T/2), so every system of the chain reads
-    ``values[k]`` for sample k whatever the rounding of k * T.
-
-    Parameters
-    ----------
-    values : array-like, shape (n_samples,) or (n_samples, size)
-
-    Returns
-    -------
-    TrajectorySource
-        Its output has size 1, or ``size``; after the last sample it holds the last row.
-    """
-    values = np.asarray(values, dtype=float)
-    if values.ndim == 1:
-        values = values[:, None]
-    breaks = np.concatenate([[0.0], (np.arange(1, len(values) + 1) - 0.25) * MYO_PERIOD])
-    knots = np.vstack([values, values[-1:]]).T
-    return TrajectorySource(PiecewisePolynomial.ZeroOrderHold(breaks, knots))
-
-
-def run_emg_chain(
-    source,
-    n_samples,
-    *,
-    activation=None,
-    calibration=None,
-    A_emg=A_EMG,
-    k_min=DEFAULT_K_MIN,
-    k_max=DEFAULT_K_MAX,
-):
+def run_emg_chain(source, n_samples, *, seed, activation=None, config=EmgConfig(),
+                  calibration=None):  # fmt: skip
     """Simulate ``source`` -> ``RmsEnvelope`` -> ``VariableGain`` and read every sample.
 
-    The diagram runs n_samples MYO periods (200 Hz); row k of each result is what the port
-    held after the sources' update k at t_k = k / 200 s.
+    The diagram runs n_samples MYO periods (200 Hz), its Context seeded with
+    ``RandomGenerator(seed)``; row k of each result is what the port held after the sources'
+    update k at t_k = k / 200 s.
 
     Parameters
     ----------
-    source : SyntheticEmgSource or FileEmgSource
-        A new, unconnected source (it is added to a new diagram).
+    source : System
+        A new, unconnected source with an ``emg`` output port (``make_synthetic_emg_source``,
+        ``make_file_emg_source``); it is added to a new diagram.
     n_samples : int
         Number of 200 Hz samples, >= 1.
+    seed : int
+        Seeds the Context's random sources (the synthetic source's noise).
     activation : array-like, shape (n_samples,), optional
         Muscle activation fed to a source with an ``activation`` input: sample k reads
         ``activation[k]``, so ``synthesize_emg(activation, seed)`` gives the same sEMG.
         Required for such a source, rejected for any other.
-    calibration, A_emg, k_min, k_max
+    config, calibration
         See :func:`add_emg_gain_chain`.
 
     Returns
@@ -119,6 +90,7 @@ def run_emg_chain(
         (n_samples,) MYO units; ``activation`` (n_samples,) a(u) of eq. 22; ``gain``
         (n_samples,).
     """
+    seed = as_seed(seed)
     if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 1:
         raise ValueError(f"n_samples must be a positive integer, got {n_samples!r}")
     has_input = source.num_input_ports() > 0
@@ -135,17 +107,12 @@ def run_emg_chain(
                 f"activation must be {n_samples} numbers without NaN, got shape {values.shape}"
             )
         held = builder.AddSystem(held_samples(values))
-        builder.Connect(held.get_output_port(), source.get_activation_input_port())
+        builder.Connect(held.get_output_port(), source.GetInputPort("activation"))
     rms, gain = add_emg_gain_chain(
-        builder,
-        source.get_emg_output_port(),
-        calibration=calibration,
-        A_emg=A_emg,
-        k_min=k_min,
-        k_max=k_max,
+        builder, source.GetOutputPort("emg"), config=config, calibration=calibration
     )
     ports = {
-        "emg": source.get_emg_output_port(),
+        "emg": source.GetOutputPort("emg"),
         "envelope": rms.get_envelope_output_port(),
         "activation": gain.get_activation_output_port(),
         "gain": gain.get_gain_output_port(),
@@ -154,7 +121,9 @@ def run_emg_chain(
         name: LogVectorOutput(port, builder, publish_period=MYO_PERIOD)
         for name, port in ports.items()
     }
-    simulator = Simulator(builder.Build())
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    diagram.SetRandomContext(simulator.get_mutable_context(), RandomGenerator(seed))
     simulator.AdvanceTo(n_samples * MYO_PERIOD)
     context = simulator.get_context()
     # A logger publishing at t_k sees the port before the update at t_k: row k + 1 holds

@@ -1,17 +1,23 @@
-"""Moving-RMS envelope of the sEMG (eqs. 1-2): an offline function and its system.
+"""Moving-RMS envelope of the sEMG (eqs. 1-2): the law, and the system that applies it.
 
-Both forms treat the samples before the start as zeros and always divide by the
-window length, so the first ``window - 1`` envelope values ramp up from the
-first sample rather than being undefined.
+The law is two functions, :func:`emg_squares` (eq. 1, squared) and :func:`window_rms`
+(eq. 2 on one window of squares). ``RmsEnvelope`` keeps the last ``window`` squares in its
+discrete state and outputs ``window_rms`` of them; :func:`moving_rms` applies the same two
+functions to every window of a recording at once (Fig. 6, calibration). Samples before the
+start count as zeros and the sum is always divided by the window length, so the first
+``window - 1`` values ramp up from the first sample rather than being undefined.
 """
 
-import math
-
 import numpy as np
-from pydrake.systems.framework import LeafSystem
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
 
 from hemg_drake._validate import as_scalar
-from hemg_drake.emg.sources import MYO_CHANNELS, MYO_PERIOD
+from hemg_drake.emg.config import MYO_CHANNELS, MYO_PERIOD, EnvelopeConfig
+
+# The paper's moving-RMS window L_win (200 Hz samples).
+DEFAULT_WINDOW = EnvelopeConfig.window
 
 
 def _check_window(window):
@@ -20,31 +26,51 @@ def _check_window(window):
     raise ValueError(f"window must be a positive integer, got {window!r}")
 
 
-def _squares(samples, per_channel):
-    """Squares of the signal eq. 2 averages: of the channel sum (eq. 1) or per channel."""
+def emg_squares(samples, per_channel):
+    """The squares eq. 2 averages, per sample: of the channel sum u_k (eq. 1) or per channel.
+
+    Parameters
+    ----------
+    samples : ndarray, shape (n_samples, n_channels)
+    per_channel : bool
+
+    Returns
+    -------
+    squares : ndarray, shape (n_samples, n_channels) if per_channel else (n_samples, 1)
+    """
     if per_channel:
-        return np.square(samples, dtype=float)
-    return np.square(samples.sum(axis=1, keepdims=True, dtype=float))
+        return samples * samples
+    u = samples.sum(axis=-1, keepdims=True)
+    return u * u
 
 
-def _combine(mean_squares):
-    """RMS per column, summed over columns (one column unless per channel)."""
-    return np.sqrt(mean_squares).sum(axis=-1)
+def window_rms(squares):
+    """Eq. 2 on windows of squares: sqrt of the mean over the window, summed over columns.
 
+    Parameters
+    ----------
+    squares : ndarray, shape (..., window, columns)
+        From :func:`emg_squares`, oldest first (one column for the paper's form).
 
-# The paper's moving-RMS window L_win (200 Hz samples): the default everywhere.
-DEFAULT_WINDOW = 20
+    Returns
+    -------
+    rms : ndarray, shape (...)
+    """
+    window = squares.shape[-2]
+    # A sum of integer squares is exact in any order; rounding of non-integer input must not
+    # take a zero sum below zero.
+    return np.sqrt(np.maximum(squares.sum(axis=-2) / window, 0.0)).sum(axis=-1)
+
 
 def moving_rms(samples, window=DEFAULT_WINDOW, *, per_channel=False):
     """Moving-window RMS envelope of multichannel sEMG (eqs. 1-2).
 
     By default, the paper's form: u_k = sum_i samples[k, i] (eq. 1), then
-    rms_k = sqrt((1 / L) sum_{j=k-L+1..k} u_j^2) (eq. 2). With
-    ``per_channel=True``, the RMS of each channel over the window, summed over
-    channels (signed channel sums partly cancel; per-channel RMS does not).
-
-    Samples before the first are taken as zeros, and the sum is always divided
-    by ``window``, so ``rms[:window - 1]`` ramps up from the first sample.
+    rms_k = sqrt((1 / L) sum_{j=k-L+1..k} u_j^2) (eq. 2). With ``per_channel=True``, the
+    RMS of each channel over the window, summed over channels (signed channel sums partly
+    cancel; per-channel RMS does not). Samples before the first are taken as zeros, and the
+    sum is always divided by ``window``, so ``rms[:window - 1]`` ramps up from the first
+    sample. ``RmsEnvelope`` outputs the same numbers sample for sample (same functions).
 
     Parameters
     ----------
@@ -69,120 +95,105 @@ def moving_rms(samples, window=DEFAULT_WINDOW, *, per_channel=False):
             f"samples must have shape (n_samples, n_channels) with n_samples > 0, "
             f"got {samples.shape}"
         )
-    # Integer recordings (the MYO's int8) are used as they are: no float copy.
     if samples.dtype.kind == "f" and not np.all(np.isfinite(samples)):
         raise ValueError("samples contain NaN or infinite values")
-    squares = _squares(samples, per_channel)
-    # Each window summed on its own (the current square plus the window - 1
-    # earlier ones, zeros before the start): exact for integer samples, and
-    # free of the cancellation of a difference of cumulative sums.
-    sums = squares.copy()
-    for lag in range(1, window):
-        sums[lag:] += squares[:-lag]
-    return _combine(sums / window)
+    squares = emg_squares(samples.astype(float), per_channel)
+    padded = np.concatenate([np.zeros((window - 1, squares.shape[1])), squares])
+    # Every window as a view, shape (n_samples, window, columns): no copy.
+    windows = np.lib.stride_tricks.sliding_window_view(padded, window, axis=0).swapaxes(-1, -2)
+    return window_rms(windows)
 
 
-class RmsEnvelope(LeafSystem):
-    """Moving-window RMS of 8-channel sEMG, in O(1) per sample (eqs. 1-2).
+@TemplateSystem.define("RmsEnvelope_", T_list=(float, AutoDiffXd))
+def RmsEnvelope_(T):
+    class Impl(LeafSystem_[T]):
+        """Moving-window RMS of multichannel sEMG (eqs. 1-2).
 
-    .. pydrake_system::
+        .. pydrake_system::
 
-        name: RmsEnvelope
-        input_ports:
-        - emg
-        output_ports:
-        - envelope
+            name: RmsEnvelope
+            input_ports:
+            - emg
+            output_ports:
+            - envelope
 
-    ``emg`` is the raw sEMG (8 channels, MYO units), ``envelope`` the RMS in the
-    same units: of the channel sum by default (eq. 1 then eq. 2), or the
-    per-channel RMS summed over channels with ``per_channel=True``.
+        ``emg`` is the raw sEMG (``channels`` values, MYO units), ``envelope`` (1) the RMS in
+        the same units: of the channel sum by default (eq. 1 then eq. 2), or the per-channel
+        RMS summed over channels with ``config.per_channel``.
 
-    Timing: a periodic discrete update every ``period`` reads the input, adds
-    its square to a ring buffer of the last ``window`` squares with a running
-    sum, and stores the envelope, which the output holds until the next update.
-    The update runs half a period after the sources' updates (offset
-    ``period / 2``; sources update at t_k = k * period), so it reads sample k
-    whether the source is discrete or a held signal, and envelope k is output
-    from t_k + period / 2. Fed by any source of this package, the output is
-    sample for sample ``moving_rms`` of the source's samples (zeros before the
-    start, divided by L_win throughout): exactly for integer samples, to
-    rounding otherwise.
+        Timing: a periodic discrete update every ``period`` pushes the input's square
+        (:func:`emg_squares`) into the window of the last L_win squares (the discrete state,
+        oldest first); ``envelope`` is :func:`window_rms` of that state. The update runs half
+        a period after the sources' (offset ``period / 2``; sources update at t_k = k *
+        period), so it reads sample k whether the source is discrete or a held signal, and
+        envelope k is output from t_k + period / 2: sample for sample ``moving_rms`` of the
+        source's samples (zeros before the start, divided by L_win throughout). A NaN sample
+        makes the envelope NaN for L_win samples (``VariableGain`` reads it as rest).
 
-    Modelling choice: the running sum is recomputed from the buffer each time
-    the ring wraps, so rounding (non-integer input) cannot drift, and a NaN
-    sample makes the envelope NaN for at most 2 L_win samples (``VariableGain``
-    maps a NaN envelope to K_min).
+        Parameters
+        ----------
+        config : EnvelopeConfig
+            L_win and the form.
+        period : float
+            Sample period of the source in s (MYO: 1/200).
+        channels : int
+            Values per sample (MYO: 8; other armbands 16, in volts).
+        """
 
-    Parameters
-    ----------
-    window : int
-        L_win, samples per window (default 20, the paper's choice).
-    per_channel : bool
-        Per-channel RMS summed over channels instead of the RMS of the sum.
-    period : float
-        Sample period in s (MYO: 1/200).
-    channels : int
-        Values per sample (MYO: 8; other armbands 16, in volts).
-    """
+        def _construct(self, *, config=EnvelopeConfig(), period=MYO_PERIOD,
+                       channels=MYO_CHANNELS, converter=None):  # fmt: skip
+            LeafSystem_[T].__init__(self, converter)
+            self._config = config
+            self._window = _check_window(config.window)
+            self._per_channel = bool(config.per_channel)
+            if isinstance(channels, bool) or not isinstance(channels, (int, np.integer)) or channels < 1:
+                raise ValueError(f"channels must be a positive integer, got {channels!r}")
+            self._channels = int(channels)
+            self._period = as_scalar("period", period)
+            self._columns = self._channels if self._per_channel else 1
+            self._emg_input = self.DeclareVectorInputPort("emg", self._channels)
+            # The last L_win squares, oldest first, row-major (window x columns).
+            self._window_state = self.DeclareDiscreteState(self._window * self._columns)
+            self.DeclarePeriodicDiscreteUpdateEvent(
+                period_sec=self._period, offset_sec=self._period / 2, update=self._push
+            )
+            self._envelope_output = self.DeclareVectorOutputPort(
+                "envelope", 1, self._calc_envelope,
+                prerequisites_of_calc={self.discrete_state_ticket(self._window_state)},
+            )  # fmt: skip
 
-    def __init__(
-        self, *, window=DEFAULT_WINDOW, per_channel=False, period=MYO_PERIOD,
-        channels=MYO_CHANNELS,
-    ):  # fmt: skip
-        LeafSystem.__init__(self)
-        self._window = _check_window(window)
-        self._per_channel = bool(per_channel)
-        if isinstance(channels, bool) or not isinstance(channels, (int, np.integer)) or channels < 1:
-            raise ValueError(f"channels must be a positive integer, got {channels!r}")
-        self._columns = int(channels) if per_channel else 1
-        period = as_scalar("period", period)
-        self._emg_input = self.DeclareVectorInputPort("emg", int(channels))
-        # Layout: ring of squares (window x columns, row-major), running sum
-        # (columns), index of the oldest row.
-        self._ring_state = self.DeclareDiscreteState((self._window + 1) * self._columns + 1)
-        self._envelope_state = self.DeclareDiscreteState(1)
-        self.DeclarePeriodicDiscreteUpdateEvent(
-            period_sec=period, offset_sec=period / 2, update=self._update_envelope
-        )
-        self._envelope_output = self.DeclareStateOutputPort("envelope", self._envelope_state)
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, config=other._config, period=other._period,
+                            channels=other._channels, converter=converter)  # fmt: skip
 
-    @property
-    def window(self):
-        """L_win, samples per window."""
-        return self._window
+        @property
+        def window(self):
+            """L_win, samples per window."""
+            return self._window
 
-    @property
-    def per_channel(self):
-        """True for the per-channel form."""
-        return self._per_channel
+        @property
+        def per_channel(self):
+            """True for the per-channel form."""
+            return self._per_channel
 
-    def get_emg_input_port(self):
-        return self._emg_input
+        def get_emg_input_port(self):
+            return self._emg_input
 
-    def get_envelope_output_port(self):
-        return self._envelope_output
+        def get_envelope_output_port(self):
+            return self._envelope_output
 
-    def _update_envelope(self, context, discrete_state):
-        # Plain floats: numpy's per-call overhead on a few numbers costs more than the sums,
-        # which are the same (exact for integer samples, as moving_rms's).
-        state = context.get_discrete_state(self._ring_state).value().tolist()
-        emg = self._emg_input.Eval(context).tolist()
-        window, columns = self._window, self._columns
-        squares = [x * x for x in emg] if self._per_channel else [sum(emg) ** 2]
-        oldest = int(state[-1])
-        row = oldest * columns
-        totals = state[window * columns : -1]
-        totals = [t + q - r for t, q, r in zip(totals, squares, state[row : row + columns])]
-        state[row : row + columns] = squares
-        oldest = (oldest + 1) % window
-        if oldest == 0:
-            totals = [sum(state[c : window * columns : columns]) for c in range(columns)]
-        state[window * columns : -1] = totals
-        state[-1] = oldest
-        discrete_state.set_value(self._ring_state, state)
-        # Rounding of non-integer input must not push a zero sum below zero.
-        if columns == 1:
-            envelope = math.sqrt(max(totals[0], 0.0) / window)
-        else:
-            envelope = float(_combine(np.maximum(totals, 0.0) / window))
-        discrete_state.set_value(self._envelope_state, [envelope])
+        def _push(self, context, discrete_state):
+            squares = emg_squares(self._emg_input.Eval(context)[np.newaxis, :], self._per_channel)
+            window = context.get_discrete_state(self._window_state).CopyToVector()
+            discrete_state.set_value(
+                self._window_state, np.concatenate([window[self._columns :], squares[0]])
+            )
+
+        def _calc_envelope(self, context, output):
+            window = context.get_discrete_state(self._window_state).CopyToVector()
+            output.SetAtIndex(0, window_rms(window.reshape(self._window, self._columns)))
+
+    return Impl
+
+
+RmsEnvelope = RmsEnvelope_[None]

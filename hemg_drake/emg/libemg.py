@@ -293,7 +293,8 @@ def libemg_emg_source(*, channels=8, units="int8", period=None, tag="emg", timeo
     source : LiveEmgSource
     reader : LibEmgSharedMemory
     """
-    from hemg_drake.emg.sources import MYO_PERIOD, LiveEmgSource
+    from hemg_drake.emg.live import LiveEmgSource
+    from hemg_drake.emg.config import MYO_PERIOD
 
     reader = LibEmgSharedMemory(channels=channels, tag=tag, wait=wait, **reader_options)
     try:

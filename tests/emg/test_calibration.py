@@ -5,7 +5,8 @@ import pytest
 
 from hemg_drake.emg.calibration import EmgCalibration
 from hemg_drake.emg.envelope import moving_rms
-from hemg_drake.emg.sources import DEFAULT_CHANNEL_GAINS, DEFAULT_REST_STD, synthesize_emg
+from hemg_drake.emg.config import SyntheticEmgConfig
+from hemg_drake.emg.sources import synthesize_emg
 from hemg_drake.fileio import write_text_atomic
 
 
@@ -20,9 +21,10 @@ def test_levels_match_the_source_model(calibration):
     # The channel sum of independent zero-mean channels has std sqrt(sum std_i^2)
     # (plus 1/12 per channel from rounding); the mean RMS over 20 samples sits
     # just below it.
-    gains = np.asarray(DEFAULT_CHANNEL_GAINS)
-    rest_std = np.sqrt(8 * (DEFAULT_REST_STD**2 + 1 / 12))
-    mvc_std = np.sqrt(np.sum((DEFAULT_REST_STD + gains) ** 2 + 1 / 12))
+    config = SyntheticEmgConfig()
+    gains = np.asarray(config.channel_gains)
+    rest_std = np.sqrt(8 * (config.rest_std**2 + 1 / 12))
+    mvc_std = np.sqrt(np.sum((config.rest_std + gains) ** 2 + 1 / 12))
     assert calibration.rest_level == pytest.approx(rest_std, rel=0.05)
     assert calibration.mvc_level == pytest.approx(mvc_std, rel=0.05)
 
