@@ -34,6 +34,7 @@ import yaml
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import SimulatorConfig
+from pydrake.visualization import VisualizationConfig
 
 from hemg_drake.config_fields import check_config, checked
 from hemg_drake.control.config import MAX_TIME_STEP, ClikConfig, PdConfig
@@ -76,6 +77,17 @@ class Scenario:
     )
     # Drake's simulator settings (target_realtime_rate 0: as fast as possible).
     simulator: SimulatorConfig = dc.field(default_factory=SimulatorConfig)
+    # Drake's visualisation settings, applied (ApplyVisualizationConfig) when a diagram is
+    # built with a Visualization (hemg_drake.diagrams.visualization): the arm and its scene
+    # in Meshcat at 32 frames/s (the replays' rate), nothing else. LCM goes to Drake's null
+    # bus (no network traffic); Meshcat is always the Visualization's own, on the loopback
+    # interface, so enable_meshcat_creation (Drake's server on every interface) must stay false.
+    visualization: VisualizationConfig = dc.field(
+        default_factory=lambda: VisualizationConfig(
+            publish_period=1 / 32, publish_proximity=False, publish_contacts=False,
+            publish_inertia=False, enable_meshcat_creation=False,
+        )  # fmt: skip
+    )
     # Simulated length of one demonstration (s).
     duration: float = checked(8.0, positive=True, maximum=MAX_DURATION)
     # Sample period of the logged demonstration (s; Table I: 0.01).
@@ -138,6 +150,17 @@ class Scenario:
             raise ValueError(
                 f"key 'scene.cotter_pin.detent_length' must be shorter than the pin "
                 f"({plans.pin_length()} m, its model's), got {detent_length}"
+            )
+        if not self.visualization.publish_period > 0:
+            raise ValueError(
+                "key 'visualization.publish_period' must be positive, got "
+                f"{self.visualization.publish_period}"
+            )
+        if self.visualization.enable_meshcat_creation:
+            raise ValueError(
+                "key 'visualization.enable_meshcat_creation' must be false: Drake's own Meshcat "
+                "listens on every interface; a diagram is shown in the loopback Meshcat of a "
+                "Visualization (hemg_drake.diagrams.visualization)"
             )
         steps = self.log_period / time_step
         if steps < 1 or not math.isclose(steps, round(steps)):
