@@ -49,7 +49,9 @@ def check_types(value, schema, key=""):
     if origin is typing.Union:  # Optional[X]
         if value is not None:
             return check_types(value, next(a for a in args if a is not type(None)), key)
-    elif origin is list:
+    elif origin is list or getattr(schema, "__name__", None) == "ndarray":
+        # An np.ndarray field of a Drake struct (Rgba's rgba) reads a list of numbers.
+        args = args or (float,)
         if not isinstance(value, list):
             raise ValueError(f"{where} must be a list, got {value!r}")
         for i, item in enumerate(value):
