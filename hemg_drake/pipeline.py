@@ -13,6 +13,7 @@ change any of them for one call. :func:`run_demo` runs the three stages for both
 scenarios (``make demo``).
 """
 
+import functools
 import json
 import time
 from pathlib import Path
@@ -29,12 +30,18 @@ def _demonstrate_hint(folder):
     return f"hemg-drake demonstrate SCENARIO --out {folder.path}"
 
 
-def replay_recorder(scenario, title):
-    """A replay recorder titled ``title``, its camera framing the arm and the task's plan."""
-    from hemg_drake.robots.baxter import FLOOR_Z
-    from hemg_drake.viz.recording import ReplayRecorder, frame_task
+def record_demonstration(scenario, seed, *, replay_path=None, title=None, visualization=None):
+    """Build and run one demonstration; with ``replay_path``, shown in ``visualization`` (a
+    new loopback Meshcat if None) and recorded into an HTML replay titled ``title``."""
+    from hemg_drake.diagrams.demonstration import build_demonstration_diagram, run_demonstration
+    from hemg_drake.diagrams.visualization import Visualization
+    from hemg_drake.viz.recording import record_run
 
-    return ReplayRecorder(floor_z=FLOOR_Z, title=title, view=frame_task(scenario.task_plan().points))
+    if replay_path is None:
+        return run_demonstration(build_demonstration_diagram(scenario, seed=seed))
+    visualization = Visualization() if visualization is None else visualization
+    built = build_demonstration_diagram(scenario, seed=seed, visualization=visualization)
+    return record_run(built, run_demonstration, replay_path, title=title)
 
 
 def check_enough_data(observations, n_states):
@@ -152,17 +159,19 @@ def _demonstrate(scenario, folder, replays, progress, placed):
     import dataclasses as dc
 
     from hemg_drake.placements import describe_placement, has_placements, task_frames
-    from hemg_drake.diagrams.demonstration import operator_plan, record_demonstration
+    from hemg_drake.diagrams.demonstration import operator_plan
+    from hemg_drake.diagrams.visualization import Visualization
     from hemg_drake.learning.demos import save_dataset
     from hemg_drake.viz.run_figures import write_demonstration_figures
 
     demos, replay_files = [], []
+    visualization = Visualization() if replays else None  # one server for every replay
     for c, (seed, here) in enumerate(zip(scenario.seeds(), placed, strict=True), start=1):
         replay = folder / f"replay_{c}.html" if replays else None
         title = f"{scenario.task.replace('_', ' ')}: demonstration {c} (seed {seed})"
-        recorder = replay_recorder(here, title) if replays else None
         start = time.perf_counter()
-        demos.append(record_demonstration(here, seed, recorder=recorder, replay_path=replay))
+        demos.append(record_demonstration(here, seed, replay_path=replay, title=title,
+                                          visualization=visualization))  # fmt: skip
         if has_placements(scenario):
             progress(f"demonstration {c}: {describe_placement(here)}")
         if replay is not None:
@@ -320,16 +329,19 @@ def reproduce(
 
 def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progress):
     from hemg_drake.diagrams.reproduction import build_reproduction_diagram, run_reproduction
+    from hemg_drake.diagrams.visualization import Visualization
     from hemg_drake.evaluation import format_metrics, task_metrics
+    from hemg_drake.viz.recording import record_run
     from hemg_drake.viz.run_figures import write_reproduction_figures
 
     duration = float(np.mean([demo.time[-1] for demo in demos]))
     began = time.perf_counter()
     title = f"{scenario.task.replace('_', ' ')}: reproduction from {out.path.name}"
-    recorder = replay_recorder(scenario, title) if replay else None
-    built = build_reproduction_diagram(scenario, model, start=start, recorder=recorder)
+    visualization = Visualization() if replay else None
+    built = build_reproduction_diagram(scenario, model, start=start, visualization=visualization)
     replay_path = out / "reproduction.html" if replay else None
-    result = run_reproduction(built, duration=duration, replay_path=replay_path)
+    run = functools.partial(run_reproduction, duration=duration)
+    result = record_run(built, run, replay_path, title=title) if replay else run(built)
     settings = scenario.reproduction
     progress(
         f"reproduce: {scenario.task}, {settings.tracker} tracker, {settings.weighting} "

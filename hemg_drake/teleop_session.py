@@ -26,7 +26,7 @@ from hemg_drake.teleop.browser_inputs import (
     load_inputs,
     save_inputs,
 )
-from hemg_drake.teleop.browser_page import TeleopPage, start_meshcat
+from hemg_drake.teleop.browser_page import TeleopPage
 
 # The page is refreshed, and the simulator advanced, in steps of this (s): 32 Hz.
 PAGE_PERIOD = 1 / 32
@@ -44,9 +44,9 @@ class Take:
     wall_seconds: float
 
 
-def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, realtime=True,
-             recorder=None, replay_path=None, progress=print, on_step=None,
-             scene=True):  # fmt: skip
+def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=None,
+             realtime=True, replay_path=None, title="teleoperated take", progress=print,
+             on_step=None, scene=True):  # fmt: skip
     """Run one take of the demonstration diagram with a :class:`BrowserMaster`.
 
     Parameters
@@ -55,16 +55,18 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
     seed : int
         Seeds the sEMG noise (and the unused operator plan).
     source : "meshcat" or InputsLog
-        Live inputs from ``meshcat``'s page, or a log to re-drive (headless).
-    meshcat : Meshcat, optional
-        The live page (needed for ``source="meshcat"``): the arm, the page's controls and
-        :class:`TeleopPage`.
+        Live inputs from the page of ``visualization``'s Meshcat, or a log to re-drive
+        (headless).
+    visualization : Visualization, optional
+        The live page (needed for ``source="meshcat"``; a new one for a replay of a log):
+        the arm (``scenario.visualization``), the page's controls and :class:`TeleopPage`.
     duration : float, optional
         End after this many simulated seconds. With a log, its ``end_time`` is used.
     realtime : bool
         Pace the simulator at real time (``set_target_realtime_rate(1)``).
-    recorder : ReplayRecorder, optional; replay_path : path-like, optional
-        Record the take and write its HTML replay (with ink for drawing).
+    replay_path : path-like, optional; title : str
+        Record the take in the page's Meshcat and write its HTML replay (with ink for
+        drawing), titled ``title``.
     progress : callable taking one line (the master's messages).
     on_step : callable, optional
         Called as ``on_step(t)`` after each page period (tests script the page with it).
@@ -79,14 +81,18 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
         build_demonstration_diagram,
         demonstration_from_logs,
     )
-    from hemg_drake.analysis.contact import in_contact
-    from hemg_drake.viz.ink import add_ink_to_recording
+    from hemg_drake.diagrams.visualization import Visualization
+    from hemg_drake.robots.baxter import FLOOR_Z
+    from hemg_drake.viz.recording import ReplayRecorder, export_station_replay, frame_task
 
     live = isinstance(source, str)
     if live and source != "meshcat":
         raise ValueError(f"source must be 'meshcat' or an InputsLog, got {source!r}")
-    if live and meshcat is None:
-        raise ValueError("live inputs need the meshcat whose page the person uses")
+    if live and visualization is None:
+        raise ValueError("live inputs need the visualization whose page the person uses")
+    if visualization is None and replay_path is not None:
+        visualization = Visualization()
+    meshcat = None if visualization is None else visualization.meshcat
     if not live:
         duration = source.end_time
     elif duration is not None:
@@ -112,16 +118,13 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
         return holder["master"]
 
     built = build_demonstration_diagram(
-        scenario, seed=seed, meshcat=meshcat if live else None, recorder=recorder,
-        operator_factory=factory, scene=scene,
+        scenario, seed=seed, visualization=visualization, operator_factory=factory, scene=scene,
     )  # fmt: skip
     master = holder["master"]
     page = None
+    view = frame_task(scenario.task_plan().points)
     if live:
-        from hemg_drake.robots.baxter import FLOOR_Z
-        from hemg_drake.viz.recording import frame_task
-
-        meshcat.SetCameraPose(*frame_task(scenario.task_plan().points))
+        meshcat.SetCameraPose(*view)
         meshcat.SetTransform("/Grid", RigidTransform([0.0, 0.0, FLOOR_Z]))
         page = TeleopPage(meshcat, k_min=scenario.emg.k_min, k_max=scenario.emg.k_max)
     diagram = built.diagram
@@ -134,8 +137,10 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
     station = built.station.diagram
     gain_system = diagram.GetSubsystemByName("variable_gain")
     gain_port = gain_system.get_gain_output_port()
-    if recorder is not None:
-        recorder.start()
+    recorder = None
+    if replay_path is not None:
+        recorder = ReplayRecorder(floor_z=FLOOR_Z, title=title, view=view)
+        recorder.start(diagram, meshcat)
     began = time.perf_counter()
     k, reason, t = 0, None, 0.0
     while True:
@@ -172,11 +177,10 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
     demo = demonstration_from_logs(
         built.logger.FindLog(context), built.emg_logger.FindLog(context), seed
     )
-    if replay_path is not None:
-        if scenario.task == "drawing" and built.scene is not None:
-            add_ink_to_recording(recorder.meshcat, demo.time, demo.p_WE, in_contact(demo.f_WE),
-                                 height=built.scene.paper_height + 5e-4)  # fmt: skip
-        recorder.stop_and_export(replay_path)
+    if recorder is not None:
+        if page is not None:
+            meshcat.Delete(TeleopPage.PATH)  # the page's marks are no part of the replay
+        export_station_replay(recorder, built, replay_path, demo.time, demo.p_WE, demo.f_WE)
     times = np.array([row_t for row_t, _ in master.rows])
     rows = np.array([row for _, row in master.rows]).reshape(-1, len(COLUMNS))
     wall_times = np.asarray(holder["inputs"].wall_times) if live else source.wall_time
@@ -230,7 +234,7 @@ def existing_takes(scenario, out_dir):
 
 
 def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, replays=True,
-           progress=print, meshcat=None, on_step=None, realtime=True):  # fmt: skip
+           progress=print, visualization=None, on_step=None, realtime=True):  # fmt: skip
     """Record one take from the browser (or re-drive one from its inputs log) and append it
     to ``out_dir/dataset.npz``, as :func:`hemg_drake.pipeline.demonstrate` writes it.
 
@@ -241,7 +245,7 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     take it; an older model and reproduction are removed (they no longer match). Takes
     already there are kept.
 
-    Live (``replay_inputs`` None): without a ``meshcat``, one is started on ``port`` and
+    Live (``replay_inputs`` None): without a ``visualization``, one is started on ``port`` and
     the first line given to ``progress`` is ``Meshcat: http://localhost:P``. The take
     ends with the page's End take button or Escape, after ``duration`` simulated seconds,
     or when the page has been closed for 2 s, and is saved in each case. Ctrl-C
@@ -254,7 +258,7 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     list of Path, the files written (dataset first).
     """
     from hemg_drake.learning.demos import save_dataset
-    from hemg_drake.pipeline import replay_recorder
+    from hemg_drake.diagrams.visualization import Visualization
     from hemg_drake.placements import (
         demonstration_scenario,
         describe_placement,
@@ -277,9 +281,9 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
         seed, operator_name = source.seed, f"browser (replayed from {replay_inputs})"
     else:
         source, seed, operator_name = "meshcat", scenario.seed + c - 1, "browser"
-        if meshcat is None:
-            meshcat = start_meshcat(port)
-            progress(f"Meshcat: http://localhost:{meshcat.port()}")
+        if visualization is None:
+            visualization = Visualization(port)
+            progress(f"Meshcat: http://localhost:{visualization.port()}")
         keys = ", ".join(f"{name}: {down}/{up}" for name, (down, up) in KEYS.items())
         progress(
             f"take {c} into {folder.path}/: keys {keys}; gamepad sticks and right trigger; "
@@ -293,10 +297,9 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
         progress(f"take {c}: {describe_placement(here)}")
     replay = folder / f"replay_{c}.html" if replays else None
     title = f"{scenario.task.replace('_', ' ')}: teleoperated take {c}"
-    recorder = replay_recorder(here, title) if replays else None
     take = run_take(
-        here, seed=seed, source=source, meshcat=meshcat, duration=duration,
-        realtime=realtime and replay_inputs is None, recorder=recorder, replay_path=replay,
+        here, seed=seed, source=source, visualization=visualization, duration=duration,
+        realtime=realtime and replay_inputs is None, replay_path=replay, title=title,
         progress=progress, on_step=on_step,
     )  # fmt: skip
     progress(

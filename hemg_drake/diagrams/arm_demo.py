@@ -2,23 +2,21 @@
 
 Diagram: two ``TrajectorySource`` (q_d(t) and its derivative) -> the slave station driven by
 joint references (its ``VariableGainPd`` at a fixed K with gravity compensation -> the arm's
-``MultibodyPlant``, 1 ms step, in free space); a ``ReplayRecorder`` records the scene. ``benchmarks/bench_arm.py`` times it;
-``hemg-drake demo`` is the full pipeline (:mod:`hemg_drake.pipeline`), not this tour.
+``MultibodyPlant``, 1 ms step, in free space); with a ``visualization`` the station is shown
+in Meshcat, and :func:`hemg_drake.viz.recording.record_arm_demo` writes its replay.
+``benchmarks/bench_arm.py`` times it; ``hemg-drake demo`` is the full pipeline
+(:mod:`hemg_drake.pipeline`), not this tour.
 """
 
-from pathlib import Path
-
 import numpy as np
-from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from hemg_drake.control.pd import MAX_TIME_STEP
 from hemg_drake.diagrams.station import make_slave_station
-from hemg_drake.robots.baxter import FLOOR_Z, HOME_POSITIONS
+from hemg_drake.robots.baxter import HOME_POSITIONS
 from hemg_drake.scenario import Scenario
-from hemg_drake.viz.recording import ReplayRecorder
 
 # Joint-space waypoints (rad, s0 ... w2), visited at equal intervals: from home, reach
 # forward and low, swing out to the side with the elbow twisted, lift, and return home.
@@ -56,7 +54,7 @@ def waypoint_trajectory(waypoints, duration):
     )
 
 
-def build_arm_demo(*, duration, time_step=MAX_TIME_STEP, gain=50.0, recorder=None):
+def build_arm_demo(*, duration, time_step=MAX_TIME_STEP, gain=50.0, visualization=None):
     """Build the demo diagram on the slave station (free space, joint references); the arm
     starts at rest at home, the first waypoint.
 
@@ -65,7 +63,7 @@ def build_arm_demo(*, duration, time_step=MAX_TIME_STEP, gain=50.0, recorder=Non
     duration : float, s, length of the waypoint tour.
     time_step : float, s, plant step (<= ``MAX_TIME_STEP``).
     gain : float, the PD's K (Table I: 50).
-    recorder : ReplayRecorder, optional, attached to the station's scene graph.
+    visualization : Visualization, optional; shows the station in its Meshcat.
 
     Returns
     -------
@@ -79,7 +77,7 @@ def build_arm_demo(*, duration, time_step=MAX_TIME_STEP, gain=50.0, recorder=Non
         )
     scenario = Scenario().replaced([f"plant.time_step={time_step}"], source="build_arm_demo")
     station = make_slave_station(
-        scenario, q0=HOME_POSITIONS, reference="joints", scene=False, recorder=recorder
+        scenario, q0=HOME_POSITIONS, reference="joints", scene=False, visualization=visualization
     )
     builder = DiagramBuilder()
     slave = builder.AddSystem(station.diagram)
@@ -94,23 +92,3 @@ def build_arm_demo(*, duration, time_step=MAX_TIME_STEP, gain=50.0, recorder=Non
     diagram.set_name("arm_demo")
     return diagram, station.plant, station.arm, trajectory
 
-
-def run_arm_demo(out_dir, *, duration=6.0, time_step=MAX_TIME_STEP):
-    """Simulate the waypoint tour and write ``out_dir/replay.html``.
-
-    Parameters
-    ----------
-    out_dir : path-like, created if missing.
-    duration : float, s, simulated time.
-    time_step : float, s, plant step.
-
-    Returns
-    -------
-    Path of the replay (one self-contained HTML file).
-    """
-    recorder = ReplayRecorder(floor_z=FLOOR_Z)
-    diagram, _, _, _ = build_arm_demo(duration=duration, time_step=time_step, recorder=recorder)
-    simulator = Simulator(diagram)
-    recorder.start()
-    simulator.AdvanceTo(duration)
-    return recorder.stop_and_export(Path(out_dir) / "replay.html")

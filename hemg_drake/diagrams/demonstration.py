@@ -16,8 +16,9 @@ only delay it.
 
 :func:`build_demonstration_diagram` builds it from a :class:`~hemg_drake.scenario.Scenario`
 and a seed (and only builds); :func:`run_demonstration` simulates a built diagram and
-returns the logged :class:`~hemg_drake.learning.demos.Demonstration`, with an HTML replay
-when the diagram was built with a recorder.
+returns the logged :class:`~hemg_drake.learning.demos.Demonstration`. Built with a
+``visualization``, the station is shown in its Meshcat; the application records the replay
+(:mod:`hemg_drake.viz.recording`).
 """
 
 import dataclasses as dc
@@ -27,7 +28,7 @@ from pydrake.common import RandomGenerator
 from pydrake.systems.framework import DiagramBuilder
 
 from hemg_drake._validate import as_seed
-from hemg_drake.diagrams.built import StationDiagram, export_replay, make_simulator
+from hemg_drake.diagrams.built import StationDiagram, make_simulator
 from hemg_drake.diagrams.log import add_logger, split_log
 from hemg_drake.diagrams.station import make_slave_station
 from hemg_drake.emg.calibration import EmgCalibration
@@ -61,7 +62,6 @@ class DemonstrationDiagram(StationDiagram):
     mapping : WorkspaceMapping
     logger : VectorLogSink, ``LOGGED_FIELDS`` every ``scenario.log_period``.
     emg_logger : VectorLogSink, [sEMG (8), muscle activation (1)] every 5 ms.
-    recorder : ReplayRecorder or None
     """
 
     scenario: object
@@ -70,7 +70,6 @@ class DemonstrationDiagram(StationDiagram):
     mapping: object
     logger: object
     emg_logger: object
-    recorder: object = None
 
 
 def operator_plan(scenario, seed):
@@ -118,7 +117,7 @@ def make_emg_source(scenario):
 
 
 def build_demonstration_diagram(
-    scenario, *, seed, meshcat=None, recorder=None, scene=True, operator_factory=None
+    scenario, *, seed, visualization=None, scene=True, operator_factory=None
 ):
     """Build the teleoperated demonstration diagram for one seeded demonstration.
 
@@ -127,10 +126,8 @@ def build_demonstration_diagram(
     scenario : Scenario
     seed : int
         Seeds the operator's variability (``plan.perturbed``) and the sEMG noise.
-    meshcat : Meshcat, optional
-        Live view: a ``MeshcatVisualizer`` of the station's scene graph is added.
-    recorder : ReplayRecorder, optional
-        Attached to the station's scene graph, to record an HTML replay.
+    visualization : Visualization, optional
+        Show the station in its (loopback) Meshcat with ``scenario.visualization``.
     scene : bool
         False leaves out the task's scene: the arm in free space, no contact force.
     operator_factory : callable, optional
@@ -153,9 +150,7 @@ def build_demonstration_diagram(
     p_MS_initial = mapping.slave_to_master(start)
 
     builder = DiagramBuilder()
-    station = make_slave_station(
-        scenario, start=start, scene=scene, meshcat=meshcat, recorder=recorder
-    )
+    station = make_slave_station(scenario, start=start, scene=scene, visualization=visualization)
     slave = builder.AddSystem(station.diagram)
 
     def add(name, system):
@@ -246,7 +241,6 @@ def build_demonstration_diagram(
         mapping=mapping,
         logger=logger,
         emg_logger=emg_logger,
-        recorder=recorder,
     )
 
 
@@ -281,7 +275,7 @@ def seed_operator(built, root_context):
         operator.set_seed(operator.GetMyMutableContextFromRoot(root_context), built.seed)
 
 
-def run_demonstration(built, *, duration=None, replay_path=None):
+def run_demonstration(built, *, duration=None):
     """Simulate a built demonstration diagram and read its logs.
 
     Parameters
@@ -289,35 +283,26 @@ def run_demonstration(built, *, duration=None, replay_path=None):
     built : DemonstrationDiagram
     duration : float, optional
         Simulated seconds; default the scenario's ``duration``.
-    replay_path : path-like, optional
-        With a diagram built with a recorder: write the HTML replay there (with the ink
-        for drawing).
 
     Returns
     -------
     Demonstration
     """
-    simulator, duration = make_simulator(built, duration, replay_path)
+    simulator, duration = make_simulator(built, duration)
     # The seed's sEMG noise (the synthetic armband's RandomSource) lives in the Context;
     # seeded first, as SetRandomContext also resets the operator's parameters.
     built.diagram.SetRandomContext(simulator.get_mutable_context(), RandomGenerator(built.seed))
     seed_operator(built, simulator.get_mutable_context())
     simulator.Initialize()
-    if built.recorder is not None:
-        built.recorder.start()
     simulator.AdvanceTo(duration)
     context = simulator.get_context()
-    demo = demonstration_from_logs(
+    return demonstration_from_logs(
         built.logger.FindLog(context), built.emg_logger.FindLog(context), built.seed
     )
-    if replay_path is not None:
-        export_replay(built, replay_path, demo.time, demo.p_WE, demo.f_WE)
-    return demo
 
 
-def record_demonstration(scenario, seed, *, recorder=None, replay_path=None, scene=True):
+def record_demonstration(scenario, seed, *, scene=True):
     """Build and run one demonstration: :func:`build_demonstration_diagram` then
-    :func:`run_demonstration`; with ``recorder`` (a ReplayRecorder), its replay is written
-    to ``replay_path``."""
-    built = build_demonstration_diagram(scenario, seed=seed, recorder=recorder, scene=scene)
-    return run_demonstration(built, replay_path=replay_path)
+    :func:`run_demonstration`."""
+    built = build_demonstration_diagram(scenario, seed=seed, scene=scene)
+    return run_demonstration(built)

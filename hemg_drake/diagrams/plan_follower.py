@@ -27,7 +27,7 @@ class PlanFollower(StationDiagram):
     plan: object
 
 
-def build_plan_follower(scenario, *, gain, plan=None, sample_period=0.005, recorder=None):
+def build_plan_follower(scenario, *, gain, plan=None, sample_period=0.005, visualization=None):
     """Drive the scenario's station along ``plan.position(t)`` at a constant gain K.
 
     The plan is sampled every ``sample_period`` into a piecewise-linear ``TrajectorySource``
@@ -41,7 +41,7 @@ def build_plan_follower(scenario, *, gain, plan=None, sample_period=0.005, recor
     gain : float, the PD's K (constant).
     plan : TaskPlan, optional; default ``scenario.task_plan()``.
     sample_period : float, s.
-    recorder : ReplayRecorder, optional.
+    visualization : Visualization, optional; shows the station in its Meshcat.
 
     Returns
     -------
@@ -55,7 +55,7 @@ def build_plan_follower(scenario, *, gain, plan=None, sample_period=0.005, recor
     trajectory = PiecewisePolynomial.FirstOrderHold(times, plan.position(times).T)
 
     builder = DiagramBuilder()
-    station = make_slave_station(scenario, start=plan.points[0], recorder=recorder)
+    station = make_slave_station(scenario, start=plan.points[0], visualization=visualization)
     slave = builder.AddSystem(station.diagram)
     source = builder.AddNamedSystem("plan", TrajectorySource(trajectory))
     constant = builder.AddNamedSystem("gain", ConstantVectorSource([gain]))

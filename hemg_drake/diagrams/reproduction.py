@@ -40,7 +40,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, Saturation
 
 from hemg_drake._validate import as_vector
-from hemg_drake.diagrams.built import StationDiagram, export_replay, make_simulator
+from hemg_drake.diagrams.built import StationDiagram, make_simulator
 from hemg_drake.diagrams.log import add_logger, split_log
 from hemg_drake.diagrams.station import make_slave_station
 from hemg_drake.learning.systems import HsmmGmrReproducer, HsmmLqrReproducer, TrackingForce
@@ -101,7 +101,6 @@ class ReproductionDiagram(StationDiagram):
     logger : VectorLogSink
     start : array, shape (3,), x*_0 (m), where the arm is held to rest.
     goal : array, shape (3,), x_g of eq. 23 (m).
-    recorder : ReplayRecorder or None
     """
 
     scenario: object
@@ -109,7 +108,6 @@ class ReproductionDiagram(StationDiagram):
     logger: object
     start: np.ndarray
     goal: np.ndarray
-    recorder: object = None
 
     def log(self, context):
         """The :class:`ReproductionLog` recorded so far in the diagram's ``context``."""
@@ -152,11 +150,11 @@ def make_reproducer(scenario, model, start):
     )
 
 
-def _add_station(builder, scenario, start, *, scene, q0=None, recorder=None, meshcat=None):
+def _add_station(builder, scenario, start, *, scene, q0=None, visualization=None):
     """The station, with the reproduced stiffness k* clipped to [k_min, k_max] before its
     gain input. Returns the station and the ``stiffness_limits`` Saturation."""
     station = make_slave_station(
-        scenario, start=start, q0=q0, scene=scene, recorder=recorder, meshcat=meshcat
+        scenario, start=start, q0=q0, scene=scene, visualization=visualization
     )
     slave = builder.AddSystem(station.diagram)
     limits = builder.AddNamedSystem(
@@ -194,7 +192,7 @@ def settled_arm_positions(scenario, start, gain, *, duration=None, q0=None):
 
 
 def build_reproduction_diagram(
-    scenario, model, *, start=None, meshcat=None, recorder=None, scene=True
+    scenario, model, *, start=None, visualization=None, scene=True
 ):
     """Build the reproduction diagram of a learnt task (it only builds; see
     :func:`run_reproduction`).
@@ -212,10 +210,8 @@ def build_reproduction_diagram(
         Fitted over [x, xdot, k] (D = 7).
     start : array, shape (3,), optional
         x*_0 (m); default the task plan's first point, where the demonstrations start.
-    meshcat : Meshcat, optional
-        Live view: a ``MeshcatVisualizer`` is added.
-    recorder : ReplayRecorder, optional
-        Attached to the scene graph, to record an HTML replay.
+    visualization : Visualization, optional
+        Show the station in its (loopback) Meshcat with ``scenario.visualization``.
     scene : bool
         False leaves out the task's scene (free space, no force).
 
@@ -237,7 +233,7 @@ def build_reproduction_diagram(
 
     builder = DiagramBuilder()
     station, limits = _add_station(
-        builder, scenario, start, scene=scene, recorder=recorder, meshcat=meshcat
+        builder, scenario, start, scene=scene, visualization=visualization
     )
     slave = builder.GetSubsystemByName(station.diagram.get_name())
 
@@ -284,7 +280,6 @@ def build_reproduction_diagram(
         logger=logger,
         start=start.copy(),
         goal=goal,
-        recorder=recorder,
     )
 
 
@@ -308,7 +303,7 @@ class ReproductionResult:
     pin_out: bool = None
 
 
-def run_reproduction(built, *, duration=None, replay_path=None, settle=True):
+def run_reproduction(built, *, duration=None, settle=True):
     """Simulate a built reproduction diagram.
 
     Before the reproduction starts, the arm is brought to rest where it settles in the
@@ -324,8 +319,6 @@ def run_reproduction(built, *, duration=None, replay_path=None, settle=True):
     built : ReproductionDiagram
     duration : float, optional
         Simulated seconds; default ``scenario.duration`` (a demonstration's length).
-    replay_path : path-like, optional
-        With a diagram built with a recorder: write the HTML replay there.
     settle : bool
 
     Returns
@@ -333,7 +326,7 @@ def run_reproduction(built, *, duration=None, replay_path=None, settle=True):
     ReproductionResult
     """
     scenario = built.scenario
-    simulator, duration = make_simulator(built, duration, replay_path)
+    simulator, duration = make_simulator(built, duration)
     context = simulator.get_mutable_context()
     station = built.station
     plant_context = station.plant_context(context)
@@ -346,13 +339,9 @@ def run_reproduction(built, *, duration=None, replay_path=None, settle=True):
         q0 = settled_arm_positions(scenario, built.start, gain_0, q0=station.q0)
         station.plant.SetPositions(plant_context, station.arm.model_instance, q0)
     simulator.Initialize()
-    if built.recorder is not None:
-        built.recorder.start()
     # The logger samples at multiples of log_period; reach the last one.
     simulator.AdvanceTo(duration + 1e-9)
     log = built.log(context)
-    if replay_path is not None:
-        export_replay(built, replay_path, log.time, log.p_WE, log.f_WE)
     if not (built.scene is not None and scenario.task == "cotter_pin"):
         return ReproductionResult(log=log, q0=q0)
     return ReproductionResult(

@@ -13,7 +13,10 @@ Inside: the ``MultibodyPlant`` and ``SceneGraph`` (``scenario.plant``), the arm
 ``scenario.X_WT()`` with its own systems (the cotter pin's detent on the pin's actuator, the
 force sensors), the CLIK (eq. 21) and the variable-gain PD (eq. 20), and the tool point's
 kinematics. The plant's ``applied_generalized_force`` input is exported untouched, free for
-the user's own forces.
+the user's own forces. With ``visualization=`` (a loopback Meshcat,
+:class:`~hemg_drake.diagrams.visualization.Visualization`), ``scenario.visualization`` is
+applied inside the station's builder (``ApplyVisualizationConfig``); without, it has no
+visualiser.
 """
 
 import dataclasses as dc
@@ -21,7 +24,6 @@ import dataclasses as dc
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.common.value import AbstractValue
-from pydrake.geometry import MeshcatVisualizer
 from pydrake.math import RigidTransform_
 from pydrake.multibody.math import SpatialVelocity_
 from pydrake.multibody.plant import AddMultibodyPlant
@@ -32,6 +34,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from hemg_drake.control.clik import Clik
 from hemg_drake.control.ik import solve_tool_point_ik
 from hemg_drake.control.pd import add_variable_gain_pd
+from hemg_drake.diagrams.visualization import apply_visualization
 from hemg_drake.robots.baxter import add_baxter_arm, make_arm_controller_plant
 from hemg_drake.tasks.cotter_pin import add_cotter_pin_scene
 from hemg_drake.tasks.drawing import add_drawing_scene
@@ -138,6 +141,8 @@ class SlaveStation:
     arm : BaxterArm
     scene : CotterPinScene, DrawingScene or None (free space).
     q0 : array, shape (7,), the arm's configuration at the start (rad), at rest.
+    meshcat : Meshcat or None
+        Where the station is shown (the ``Visualization``'s), None without visualisation.
     """
 
     diagram: object
@@ -145,6 +150,7 @@ class SlaveStation:
     arm: object
     scene: object
     q0: np.ndarray
+    meshcat: object = None
 
     def plant_context(self, root_context):
         """The plant's context inside the context of the diagram holding the station."""
@@ -174,8 +180,7 @@ def make_slave_station(
     q0=None,
     reference="tool_point",
     scene=True,
-    meshcat=None,
-    recorder=None,
+    visualization=None,
     name="station",
 ):
     """Build the slave station of a scenario.
@@ -194,10 +199,9 @@ def make_slave_station(
         references straight into the PD.
     scene : bool
         False leaves out the task's scene (free space).
-    meshcat : Meshcat, optional
-        Live view: a ``MeshcatVisualizer`` of the station's scene graph.
-    recorder : ReplayRecorder, optional
-        Attached to the station's scene graph, to record an HTML replay.
+    visualization : Visualization, optional
+        Show the station in its Meshcat: ``scenario.visualization`` is applied
+        (``ApplyVisualizationConfig``); to record it, see :mod:`hemg_drake.viz.recording`.
     name : str
         The diagram's name.
 
@@ -287,11 +291,14 @@ def make_slave_station(
         builder.ExportOutput(clik.GetOutputPort("q_desired"), "q_desired")
     builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
     builder.ExportOutput(scene_graph.get_query_output_port(), "query_object")
-    if meshcat is not None:
-        MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
-    if recorder is not None:
-        recorder.add_to_builder(builder, scene_graph)
+    meshcat = None
+    if visualization is not None:
+        apply_visualization(scenario.visualization, builder, plant=plant,
+                            scene_graph=scene_graph, visualization=visualization)  # fmt: skip
+        meshcat = visualization.meshcat
     diagram = builder.Build()
     diagram.set_name(name)
-    return SlaveStation(diagram=diagram, plant=plant, arm=arm, scene=task_scene, q0=q0)
+    return SlaveStation(
+        diagram=diagram, plant=plant, arm=arm, scene=task_scene, q0=q0, meshcat=meshcat
+    )
 

@@ -1,11 +1,11 @@
-"""The teleop page on Meshcat: what the hand cannot feel (:class:`TeleopPage`), and the
-Meshcat server a take is driven from (:func:`start_meshcat`)."""
+"""The teleop page on Meshcat: what the hand cannot feel (:class:`TeleopPage`). The Meshcat
+server a take is driven from is a loopback ``Visualization``
+(:mod:`hemg_drake.diagrams.visualization`)."""
 
-import logging
 import math
 
 import numpy as np
-from pydrake.geometry import Cylinder, Meshcat, MeshcatCone, MeshcatParams, Rgba, Sphere
+from pydrake.geometry import Cylinder, MeshcatCone, Rgba, Sphere
 from pydrake.math import RigidTransform, RotationMatrix
 
 # Read-only sliders that show what the hand cannot feel.
@@ -83,21 +83,3 @@ def _rotation_z_to(direction):
     y = np.cross(z, x)
     return RotationMatrix(np.column_stack([x, y, z]))
 
-
-def start_meshcat(port):
-    """A Meshcat server on localhost:``port`` (0: a free one); ValueError if it is taken."""
-    port = int(port)
-    if not 0 <= port <= 65535:
-        raise ValueError(f"--port must be in 0..65535, got {port}")
-    drake_logger = logging.getLogger("drake")
-    level = drake_logger.level
-    drake_logger.setLevel(logging.WARNING)  # our own first line names the URL
-    try:
-        return Meshcat(MeshcatParams(host="localhost", port=port))
-    except RuntimeError as error:
-        raise ValueError(
-            f"cannot listen on localhost:{port} ({error}): the port is in use; give another "
-            "--port, or --port 0 for a free one"
-        ) from None
-    finally:
-        drake_logger.setLevel(level)

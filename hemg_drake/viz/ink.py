@@ -9,7 +9,8 @@ tool point E is the pen's tip)::
     add_ink_to_recording(recorder.meshcat, times, p_WP, touching, height=paper_z + 5e-4)
 
 :func:`add_ink_to_recording` must run while the visualizer's recording is still open (after
-the simulation, before ``ReplayRecorder.stop_and_export``): Meshcat cannot record
+the simulation, before ``ReplayRecorder.stop_and_export``; ``export_station_replay`` does
+it for a drawing): Meshcat cannot record
 ``SetObject`` mid-animation (Drake issue 23206), so every piece of ink is created at once,
 hidden at time 0 and made visible at the time it was drawn.
 """
@@ -26,8 +27,13 @@ from hemg_drake.analysis.contact import (
 )
 
 # The ink's detection is analysis (hemg_drake.analysis.contact), re-exported here.
-__all__ = ["CONTACT_THRESHOLD", "INK_RGBA", "add_ink_to_recording", "in_contact", "ink_strokes"]
+__all__ = [
+    "CONTACT_THRESHOLD", "INK_PATH", "INK_RGBA", "add_ink_to_recording", "in_contact",
+    "ink_strokes",
+]  # fmt: skip
 INK_RGBA = Rgba(0.05, 0.45, 0.15, 1.0)
+# Meshcat folder of the ink.
+INK_PATH = "/ink"
 
 
 def add_ink_to_recording(
@@ -36,7 +42,7 @@ def add_ink_to_recording(
     p_WP,
     in_contact,
     *,
-    path="/ink",
+    path=INK_PATH,
     height=None,
     max_pieces=100,
     line_width=3.0,

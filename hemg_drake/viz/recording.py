@@ -1,15 +1,19 @@
-"""Record a simulation in Drake's Meshcat and export it as one self-contained HTML replay.
+"""Record a simulation in the Meshcat its visualisation draws in, and export it as one
+self-contained HTML replay.
 
-Usage, for any diagram with a ``SceneGraph``::
+Usage, for a diagram built with a ``Visualization`` (the station applies the scenario's
+``VisualizationConfig``; :mod:`hemg_drake.diagrams.visualization`)::
 
-    recorder = ReplayRecorder()
-    recorder.add_to_builder(builder, scene_graph)
-    diagram = builder.Build()
-    simulator = Simulator(diagram)
-    recorder.start()
-    simulator.AdvanceTo(duration)
+    visualization = Visualization()
+    built = build_demonstration_diagram(scenario, seed=0, visualization=visualization)
+    recorder = ReplayRecorder(title="cotter pin: demonstration 1", view=frame_task(points))
+    recorder.start(built.diagram, visualization.meshcat)
+    demo = run_demonstration(built)
     recorder.stop_and_export(out_dir / "replay.html")
 
+The recording is the one of the illustration ``MeshcatVisualizer`` that
+``ApplyVisualizationConfig`` added (found in the diagram by name): its frames come at the
+config's ``publish_period``. :func:`export_station_replay` adds the drawing's ink first.
 Extra animated objects (ink traces) go through ``recorder.meshcat`` while recording, e.g.
 ``SetLineSegments`` at time 0 and ``SetProperty(path, "visible", True,
 time_in_recording=t)`` (Meshcat cannot record ``SetObject`` mid-animation).
@@ -17,25 +21,25 @@ time_in_recording=t)`` (Meshcat cannot record ``SetObject`` mid-animation).
 Each replay has its own page title (``title``, e.g. "cotter pin: demonstration 2") and
 opens framed on its task: ``ReplayRecorder(view=frame_task(plan.points))`` puts the camera
 where the arm's shoulder and the plan's points fill the view (``camera_framing`` for any
-points). Both are
-written into the exported HTML (the camera as Meshcat's recorded camera commands).
+points). Both are written into the exported HTML (the camera as Meshcat's recorded camera
+commands).
 
 Lifetime: the Meshcat server (a local port and one thread) lives as long as something holds
-the ``Meshcat``: the recorder until ``stop_and_export``/``close``, and the diagram's
-visualizer. pydrake objects form reference cycles, so the server stops once the diagram is
-dropped and the garbage collector has run (``gc.collect()``, or at exit).
+the ``Meshcat``: the ``Visualization``, the recorder until ``stop_and_export``/``close``, and
+the diagram's visualisers. pydrake objects form reference cycles, so the server stops once
+they are dropped and the garbage collector has run (``gc.collect()``, or at exit).
 """
 
 import html as html_text
-import logging
 import re
 from pathlib import Path
 
 import numpy as np
-from pydrake.geometry import Meshcat, MeshcatParams, MeshcatVisualizer, MeshcatVisualizerParams
 from pydrake.math import RigidTransform
 
+from hemg_drake.diagrams.visualization import illustration_visualizer
 from hemg_drake.fileio import write_text_atomic
+from hemg_drake.viz.ink import INK_PATH, add_ink_to_recording, in_contact
 
 # Default view: the right arm's workspace from the robot's front right, slightly above.
 CAMERA_IN_WORLD = (2.0, 0.5, 0.5)
@@ -113,15 +117,10 @@ def frame_task(points_W, **options):
 
 
 class ReplayRecorder:
-    """Attach a localhost-only ``Meshcat`` + ``MeshcatVisualizer`` and record one replay.
+    """Record one run of a visualised diagram and export it as an HTML replay.
 
     Parameters
     ----------
-    port : int
-        Local port for the Meshcat server; 0 picks a free one (nothing needs to connect:
-        the replay is read from the recording, not from a browser session).
-    publish_period : float
-        Seconds between recorded frames.
     camera_in_world, target_in_world : 3 floats, m
         Initial camera position and the point it looks at.
     view : (camera_in_world, target_in_world), optional
@@ -136,16 +135,12 @@ class ReplayRecorder:
     def __init__(
         self,
         *,
-        port=0,
-        publish_period=1 / 32,
         camera_in_world=None,
         target_in_world=None,
         view=None,
         floor_z=0.0,
         title=DEFAULT_TITLE,
     ):
-        if not publish_period > 0:
-            raise ValueError(f"publish_period must be positive, got {publish_period}")
         if view is not None:
             if camera_in_world is not None or target_in_world is not None:
                 raise ValueError("give either view or camera_in_world/target_in_world, not both")
@@ -154,8 +149,6 @@ class ReplayRecorder:
             camera_in_world, target_in_world = view
         camera_in_world = CAMERA_IN_WORLD if camera_in_world is None else camera_in_world
         target_in_world = TARGET_IN_WORLD if target_in_world is None else target_in_world
-        self._port = int(port)
-        self._publish_period = float(publish_period)
         self._camera = (np.asarray(camera_in_world, float), np.asarray(target_in_world, float))
         if any(a.shape != (3,) or not np.all(np.isfinite(a)) for a in self._camera):
             raise ValueError("camera_in_world and target_in_world must be 3 finite numbers each")
@@ -170,41 +163,31 @@ class ReplayRecorder:
 
     @property
     def meshcat(self):
-        """The ``Meshcat`` being recorded into (after ``add_to_builder``)."""
+        """The ``Meshcat`` being recorded into (after ``start``)."""
         self._require_visualizer()
         return self._meshcat
 
-    def add_to_builder(self, builder, scene_graph):
-        """Start a Meshcat server on localhost and add a visualizer of ``scene_graph``.
+    def start(self, diagram, meshcat):
+        """Begin recording ``diagram`` (built with a Visualization whose Meshcat is
+        ``meshcat``): call before advancing its simulator, before or after ``Initialize``.
+
+        Frames go to the recording and to the live scene as well (a page watching the
+        Meshcat keeps moving; the replay's scene starts where the arm is). Ink of an earlier
+        recording in the same Meshcat is removed.
 
         Returns
         -------
-        MeshcatVisualizer
+        MeshcatVisualizer, the illustration visualiser recorded through.
         """
         if self._visualizer is not None:
-            raise ValueError("this ReplayRecorder is already attached to a diagram")
-        # Only localhost: the machine is shared, and nothing remote needs to connect. Its
-        # "listening at http://..." notice would invite users to a page nobody serves later.
-        drake_logger = logging.getLogger("drake")
-        level = drake_logger.level
-        drake_logger.setLevel(logging.WARNING)
-        try:
-            self._meshcat = Meshcat(MeshcatParams(host="localhost", port=self._port))
-        finally:
-            drake_logger.setLevel(level)
-        self._meshcat.SetCameraPose(*self._camera)
-        self._meshcat.SetTransform("/Grid", RigidTransform([0.0, 0.0, self._floor_z]))
-        params = MeshcatVisualizerParams(publish_period=self._publish_period)
-        self._visualizer = MeshcatVisualizer.AddToBuilder(
-            builder, scene_graph, self._meshcat, params
-        )
-        return self._visualizer
-
-    def start(self):
-        """Begin recording frames (call before advancing the simulator)."""
-        self._require_visualizer()
-        # Frames go to the recording only; no browser watches the live scene.
-        self._visualizer.StartRecording(set_transforms_while_recording=False)
+            raise ValueError("this ReplayRecorder is already recording")
+        visualizer = illustration_visualizer(diagram)  # ValueError without one
+        self._meshcat, self._visualizer = meshcat, visualizer
+        meshcat.Delete(INK_PATH)
+        meshcat.SetCameraPose(*self._camera)
+        meshcat.SetTransform("/Grid", RigidTransform([0.0, 0.0, self._floor_z]))
+        visualizer.StartRecording(set_transforms_while_recording=True)
+        return visualizer
 
     def stop_and_export(self, path):
         """Stop recording, write the replay to ``path`` atomically, release the recorder.
@@ -234,7 +217,87 @@ class ReplayRecorder:
 
     def _require_visualizer(self):
         if self._visualizer is None:
-            raise ValueError("call ReplayRecorder.add_to_builder(builder, scene_graph) first")
+            raise ValueError("call ReplayRecorder.start(diagram, meshcat) first")
+
+
+def export_station_replay(recorder, built, path, time, p_WE, f_WE):
+    """Write the replay of a recorded station diagram; for the drawing, with the ink.
+
+    Parameters
+    ----------
+    recorder : ReplayRecorder, started on ``built.diagram``.
+    built : StationDiagram with a ``scenario`` (demonstration, reproduction).
+    path : path-like
+    time : array, shape (T,), s; p_WE, f_WE : arrays, shape (T, 3)
+        The logged tool point (m) and its force (N): the ink is drawn where it touches.
+
+    Returns
+    -------
+    Path
+    """
+    if built.scenario.task == "drawing" and built.scene is not None:
+        # Just above the sheet: the tip's own heights are inside the compliant paper.
+        height = built.scene.paper_height + 5e-4
+        add_ink_to_recording(recorder.meshcat, time, p_WE, in_contact(f_WE), height=height)
+    return recorder.stop_and_export(path)
+
+
+def record_run(built, run, path, *, title):
+    """``run(built)`` with the station's Meshcat recorded, and its replay written to ``path``
+    (the drawing's ink included), framed on the scenario's task and titled ``title``.
+
+    Parameters
+    ----------
+    built : DemonstrationDiagram or ReproductionDiagram, built with a Visualization.
+    run : callable, ``run(built)`` -> a Demonstration, or a result with a ``log`` (a
+        ReproductionLog): its ``time``, ``p_WE`` and ``f_WE`` place the ink.
+    path : path-like
+    title : str, the page's title.
+
+    Returns
+    -------
+    What ``run`` returned.
+    """
+    from hemg_drake.robots.baxter import FLOOR_Z
+
+    if built.meshcat is None:
+        raise ValueError("record_run needs a diagram built with visualization=Visualization()")
+    view = frame_task(built.scenario.task_plan().points)
+    recorder = ReplayRecorder(floor_z=FLOOR_Z, title=title, view=view)
+    recorder.start(built.diagram, built.meshcat)
+    result = run(built)
+    log = getattr(result, "log", result)
+    export_station_replay(recorder, built, path, log.time, log.p_WE, log.f_WE)
+    return result
+
+
+def record_arm_demo(out_dir, *, duration=6.0, time_step=None):
+    """Simulate the arm's waypoint tour (:mod:`hemg_drake.diagrams.arm_demo`) and write
+    ``out_dir/replay.html``.
+
+    Parameters
+    ----------
+    out_dir : path-like, created if missing.
+    duration : float, s, simulated time.
+    time_step : float, s, plant step; default the arm demo's.
+
+    Returns
+    -------
+    Path of the replay (one self-contained HTML file).
+    """
+    from pydrake.systems.analysis import Simulator
+
+    from hemg_drake.diagrams.arm_demo import build_arm_demo
+    from hemg_drake.diagrams.visualization import Visualization
+    from hemg_drake.robots.baxter import FLOOR_Z
+
+    visualization = Visualization()
+    steps = {} if time_step is None else dict(time_step=time_step)
+    diagram, _, _, _ = build_arm_demo(duration=duration, visualization=visualization, **steps)
+    recorder = ReplayRecorder(floor_z=FLOOR_Z)
+    recorder.start(diagram, visualization.meshcat)
+    Simulator(diagram).AdvanceTo(duration)
+    return recorder.stop_and_export(Path(out_dir) / "replay.html")
 
 
 def _with_title(page, title):

@@ -4,12 +4,8 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from hemg_drake.diagrams.arm_demo import (
-    WAYPOINTS,
-    build_arm_demo,
-    run_arm_demo,
-    waypoint_trajectory,
-)
+from hemg_drake.diagrams.arm_demo import WAYPOINTS, build_arm_demo, waypoint_trajectory
+from hemg_drake.viz.recording import record_arm_demo
 
 
 def test_waypoints_are_within_limits():
@@ -69,7 +65,7 @@ def test_arm_follows_the_tour():
 
 
 def test_run_writes_replay(tmp_path):
-    path = run_arm_demo(tmp_path / "out", duration=0.2)
+    path = record_arm_demo(tmp_path / "out", duration=0.2)
     assert path == tmp_path / "out" / "replay.html"
     assert "<html" in path.read_text(encoding="utf-8")[:5000].lower()
 

@@ -15,7 +15,9 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
+from hemg_drake.diagrams.visualization import Visualization, apply_visualization
 from hemg_drake.robots.baxter import FLOOR_Z, add_baxter_arm
+from hemg_drake.scenario import Scenario
 from hemg_drake.viz import screenshot
 from hemg_drake.viz.recording import (
     ELBOW_RISE,
@@ -49,16 +51,20 @@ TITLE = "cotter pin: demonstration 2 <seed 101> & co"
 
 
 def _record_arm(path, duration=0.3, **recorder_options):
-    """Record the bare arm falling under gravity from its home pose; return the server's port."""
+    """Record the bare arm falling under gravity from its home pose, visualised as the
+    scenario's VisualizationConfig says; return the server's port."""
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
     add_baxter_arm(plant)  # starts at home
     plant.Finalize()
+    visualization = Visualization()
+    apply_visualization(Scenario().visualization, builder, plant=plant,
+                        scene_graph=scene_graph, visualization=visualization)  # fmt: skip
+    port = visualization.port()
+    diagram = builder.Build()
     recorder = ReplayRecorder(floor_z=FLOOR_Z, **recorder_options)
-    recorder.add_to_builder(builder, scene_graph)
-    port = recorder.meshcat.port()
-    simulator = Simulator(builder.Build())
-    recorder.start()
+    recorder.start(diagram, visualization.meshcat)
+    simulator = Simulator(diagram)
     simulator.AdvanceTo(duration)
     assert recorder.stop_and_export(path) == path
     return port
@@ -184,12 +190,8 @@ def test_meshcat_server_is_released(tmp_path):
 
 def test_recorder_errors(tmp_path):
     recorder = ReplayRecorder()
-    with pytest.raises(ValueError, match="add_to_builder"):
-        recorder.start()
-    with pytest.raises(ValueError, match="add_to_builder"):
+    with pytest.raises(ValueError, match="start"):
         recorder.stop_and_export(tmp_path / "x.html")
-    with pytest.raises(ValueError, match="publish_period"):
-        ReplayRecorder(publish_period=0.0)
     with pytest.raises(ValueError, match="camera_in_world"):
         ReplayRecorder(camera_in_world=(1.0, 2.0))
     with pytest.raises(ValueError, match="differ"):
@@ -200,10 +202,22 @@ def test_recorder_errors(tmp_path):
         with pytest.raises(ValueError, match="title"):
             ReplayRecorder(title=title)
     builder = DiagramBuilder()
-    _, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
-    recorder.add_to_builder(builder, scene_graph)
-    with pytest.raises(ValueError, match="already attached"):
-        recorder.add_to_builder(builder, scene_graph)
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
+    plant.Finalize()
+    bare = builder.Build()
+    bare.set_name("bare")
+    visualization = Visualization()
+    with pytest.raises(ValueError, match="'bare' has no Meshcat visualiser"):
+        recorder.start(bare, visualization.meshcat)
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
+    plant.Finalize()
+    apply_visualization(Scenario().visualization, builder, plant=plant,
+                        scene_graph=scene_graph, visualization=visualization)  # fmt: skip
+    diagram = builder.Build()
+    recorder.start(diagram, visualization.meshcat)
+    with pytest.raises(ValueError, match="already recording"):
+        recorder.start(diagram, visualization.meshcat)
     recorder.close()
 
 
