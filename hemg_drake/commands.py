@@ -129,20 +129,20 @@ def teleop_command(args):
     scenario = load_scenario(_scenario_path(args.scenario), overrides=args.set)
     check_output_folder(args.out)
     existing_takes(scenario, args.out)  # refuse a mismatched folder before opening a port
-    meshcat = None
+    visualization = None
     if args.replay_inputs is not None:
         if not Path(args.replay_inputs).is_file():
             raise ValueError(f"{args.replay_inputs}: no such inputs log")
         if args.takes != 1:
             raise ValueError("--takes needs a person at the page; --replay-inputs replays one")
     else:
-        from hemg_drake.teleop.browser_page import start_meshcat
+        from hemg_drake.diagrams.visualization import Visualization
 
-        meshcat = start_meshcat(args.port)
-        _print(f"Meshcat: http://localhost:{meshcat.port()}")  # the first line, always
+        visualization = Visualization(args.port)
+        _print(f"Meshcat: http://localhost:{visualization.port()}")  # the first line, always
     for _ in range(args.takes):
         written = teleop(
-            scenario, args.out, meshcat=meshcat, duration=args.duration,
+            scenario, args.out, visualization=visualization, duration=args.duration,
             replay_inputs=args.replay_inputs, replays=not args.no_replay, progress=_print,
         )  # fmt: skip
         _print("wrote " + ", ".join(str(path) for path in written))

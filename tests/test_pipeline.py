@@ -232,7 +232,7 @@ def test_reproduce_into_another_folder_from_an_offset(pin_run, tmp_path):
 
 
 def test_interrupted_demonstrate_leaves_no_partial_output(tmp_path, monkeypatch):
-    import hemg_drake.diagrams.demonstration as demonstration
+    import hemg_drake.pipeline as pipeline
 
     calls = []
 
@@ -242,7 +242,7 @@ def test_interrupted_demonstrate_leaves_no_partial_output(tmp_path, monkeypatch)
             raise KeyboardInterrupt
         replay_path.write_text("<html>demonstration 1</html>\n")  # the first replay, done
 
-    monkeypatch.setattr(demonstration, "record_demonstration", record)
+    monkeypatch.setattr(pipeline, "record_demonstration", record)
     (tmp_path / "notes.txt").write_text("mine\n")
     with pytest.raises(KeyboardInterrupt):
         demonstrate(small("cotter_pin"), tmp_path, replays=True, progress=quiet)

@@ -1,12 +1,8 @@
 """The teleoperated demonstration loop, simulated through Drake at small scale."""
 
-import base64
-import re
-from pathlib import Path
-
 import numpy as np
 import pytest
-from pydrake.geometry import Meshcat, MeshcatParams, MeshcatVisualizer
+from pydrake.geometry import MeshcatVisualizer
 from pydrake.systems.analysis import Simulator
 
 from hemg_drake.diagrams.demonstration import (
@@ -16,6 +12,7 @@ from hemg_drake.diagrams.demonstration import (
     run_demonstration,
     seed_operator,
 )
+from hemg_drake.diagrams.visualization import Visualization
 from hemg_drake.emg.envelope import moving_rms
 from hemg_drake.emg.gain import VariableGain
 from hemg_drake.emg.sources import MYO_PERIOD
@@ -214,17 +211,13 @@ def test_diagram_structure_and_bad_input():
     assert built.scene is None
     assert not np.array_equal(built.plan.points, scenario.task_plan().points)
     assert not any(isinstance(s, MeshcatVisualizer) for s in built.station.diagram.GetSystems())
-    live = build_demonstration_diagram(
-        scenario, seed=0, scene=False, meshcat=Meshcat(MeshcatParams(host="localhost", port=0))
-    )
+    live = build_demonstration_diagram(scenario, seed=0, scene=False, visualization=Visualization())
     assert any(isinstance(s, MeshcatVisualizer) for s in live.station.diagram.GetSystems())
     with pytest.raises(ValueError, match="seed"):
         build_demonstration_diagram(scenario, seed=-1, scene=False)
     far = scenario.replaced(["scene.position=[2.5, 0.0, 0.0]"])
     with pytest.raises(ValueError, match="out of the arm's reach"):
         build_demonstration_diagram(far, seed=0, scene=False)
-    with pytest.raises(ValueError, match="replay_path needs a diagram built with a recorder"):
-        run_demonstration(built, replay_path="replay.html")
     with pytest.raises(ValueError, match="duration"):
         run_demonstration(built, duration=-1.0)
 
@@ -327,27 +320,6 @@ def test_drawing_inks_three_strokes_with_high_stiffness_on_the_paper():
     low = max(demo.gain[lift].mean() for lift in lifts)
     high = min(gain.mean() for gain in drawn)
     assert high > 1.5 * low
-
-
-def _replay_payload(path):
-    """The binary Meshcat messages embedded (base64) in an HTML replay."""
-    html = Path(path).read_text()
-    return b"".join(base64.b64decode(chunk) for chunk in re.findall(r"base64,([A-Za-z0-9+/=]+)", html))
-
-
-def test_drawing_replay_shows_the_ink(tmp_path):
-    from hemg_drake.viz.ink import in_contact
-
-    # The first stroke starts at about 1.4 s: 1.8 s leave a short line of ink.
-    from hemg_drake.viz.recording import ReplayRecorder
-
-    scenario = load_scenario(shipped_scenario("drawing"), overrides=["duration=1.8"])
-    demo = record_demonstration(
-        scenario, scenario.seed, recorder=ReplayRecorder(), replay_path=tmp_path / "replay.html"
-    )
-    assert in_contact(demo.f_WE).sum() > 10
-    payload = _replay_payload(tmp_path / "replay.html")
-    assert b"/ink/stroke_0/piece_0" in payload and b"/ink/stroke_1" not in payload
 
 
 def test_plot_demonstrations_layouts(free_space):

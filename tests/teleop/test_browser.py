@@ -17,6 +17,7 @@ import pytest
 from pydrake.systems.analysis import Simulator
 
 from hemg_drake.cli import main
+from hemg_drake.diagrams.visualization import Visualization
 from hemg_drake.learning.demos import load_dataset
 from hemg_drake.run_folder import RunFolder
 from hemg_drake.scenario import load_scenario, shipped_scenario
@@ -24,7 +25,6 @@ from hemg_drake.teleop.browser import BrowserMaster, dead_zone
 from hemg_drake.teleop.browser_inputs import (
     COLUMNS, END_BUTTON, SLIDER_ACTIVATION, SLIDER_X, LoggedInputs, load_inputs,
 )  # fmt: skip
-from hemg_drake.teleop.browser_page import start_meshcat
 from hemg_drake.teleop_session import run_take, teleop
 from tooling.headless_page import HeadlessPage  # tests/tooling: test tooling, not runtime
 
@@ -42,8 +42,13 @@ def scenario():
 
 
 @pytest.fixture
-def meshcat():
-    return start_meshcat(0)
+def visualization():
+    return Visualization(0)
+
+
+@pytest.fixture
+def meshcat(visualization):
+    return visualization.meshcat
 
 
 def row(slider_mm=(0.0, 0.0, 0.0), activation=0.05, axes=None, buttons=None, clicks=0, pages=0):
@@ -163,7 +168,7 @@ def test_bad_arguments_and_logs_are_refused(tmp_path):
         load_inputs(bad)
 
 
-def test_keyboard_sliders_move_the_stylus_and_the_log_replays_bit_for_bit(scenario, meshcat):
+def test_keyboard_sliders_move_the_stylus_and_the_log_replays_bit_for_bit(scenario, meshcat, visualization):
     # Meshcat's Python API stands in for the key presses: +10 mm in x from t = 0.25 s.
     def script(t):
         if t >= 0.25:
@@ -171,7 +176,7 @@ def test_keyboard_sliders_move_the_stylus_and_the_log_replays_bit_for_bit(scenar
             meshcat.SetSliderValue(SLIDER_ACTIVATION, 0.9)
 
     # In free space (no pin holding the tool), so the stylus settles on the target.
-    take = run_take(scenario, seed=3, meshcat=meshcat, duration=0.75, realtime=False,
+    take = run_take(scenario, seed=3, visualization=visualization, duration=0.75, realtime=False,
                     on_step=script, progress=lambda line: None, scene=False)  # fmt: skip
     demo, log = take.demonstration, take.inputs
     p0 = take.master.p_MS_initial
@@ -194,7 +199,7 @@ def send(ws, **message):
     ws.send_binary(msgpack.packb(message))
 
 
-def test_gamepad_and_button_over_the_websocket(scenario, meshcat):
+def test_gamepad_and_button_over_the_websocket(scenario, meshcat, visualization):
     """Gamepad axes, the trigger, a NaN axis, a disconnect and the End button, as the page
     sends them."""
     ws = websocket.create_connection(meshcat.ws_url(), timeout=5)
@@ -219,7 +224,7 @@ def test_gamepad_and_button_over_the_websocket(scenario, meshcat):
 
     lines = []
     try:
-        take = run_take(scenario, seed=1, meshcat=meshcat, duration=5.0, realtime=False,
+        take = run_take(scenario, seed=1, visualization=visualization, duration=5.0, realtime=False,
                         on_step=script, progress=lines.append, scene=False)  # fmt: skip
     finally:
         ws.close()
@@ -238,14 +243,14 @@ def test_gamepad_and_button_over_the_websocket(scenario, meshcat):
     assert np.all(np.isfinite(demo.p_WE))
 
 
-def test_closed_page_ends_the_take_and_keeps_it(scenario, meshcat):
+def test_closed_page_ends_the_take_and_keeps_it(scenario, meshcat, visualization):
     ws = websocket.create_connection(meshcat.ws_url(), timeout=5)
 
     def script(t):
         if t >= 0.25 and ws.connected:
             ws.close()
 
-    take = run_take(scenario, seed=1, meshcat=meshcat, duration=10.0, realtime=False,
+    take = run_take(scenario, seed=1, visualization=visualization, duration=10.0, realtime=False,
                     on_step=script, progress=lambda line: None)  # fmt: skip
     assert take.inputs.end_reason == "page closed"
     assert 2.0 <= take.inputs.end_time < 2.6
@@ -286,8 +291,8 @@ def _hash(path):
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def test_interrupted_take_writes_nothing_and_keeps_the_old_takes(scenario, meshcat, tmp_path):
-    teleop(scenario, tmp_path, meshcat=meshcat, duration=0.2, replays=False, realtime=False,
+def test_interrupted_take_writes_nothing_and_keeps_the_old_takes(scenario, visualization, tmp_path):
+    teleop(scenario, tmp_path, visualization=visualization, duration=0.2, replays=False, realtime=False,
            progress=lambda line: None)  # fmt: skip
     before = _hash(tmp_path / "dataset.npz")
 
@@ -296,7 +301,7 @@ def test_interrupted_take_writes_nothing_and_keeps_the_old_takes(scenario, meshc
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        teleop(scenario, tmp_path, meshcat=meshcat, duration=5.0, replays=True, realtime=False,
+        teleop(scenario, tmp_path, visualization=visualization, duration=5.0, replays=True, realtime=False,
                on_step=interrupt, progress=lambda line: None)  # fmt: skip
     assert _hash(tmp_path / "dataset.npz") == before
     assert not (tmp_path / "inputs_2.npz").exists() and not (tmp_path / "replay_2.html").exists()
@@ -322,7 +327,7 @@ def test_port_in_use_and_other_scenario_are_one_line_errors(tmp_path, capsys):
 
 @pytest.mark.browser
 def test_keys_in_the_real_page_move_the_stylus_and_escape_ends_the_take(
-    scenario, meshcat, chromium
+    scenario, meshcat, chromium, visualization
 ):
     """Headless Chromium opens the live page; DevTools key presses drive the sliders."""
     import time
@@ -346,7 +351,7 @@ def test_keys_in_the_real_page_move_the_stylus_and_escape_ends_the_take(
             pressed["escape"] = t
 
     with browser_page:
-        take = run_take(scenario, seed=1, meshcat=meshcat, duration=20.0, realtime=True,
+        take = run_take(scenario, seed=1, visualization=visualization, duration=20.0, realtime=True,
                         on_step=script, progress=lambda line: None, scene=False)  # fmt: skip
     assert take.inputs.end_reason == "button" and take.inputs.end_time < 5.0
     slider = take.inputs.rows[:, COLUMNS.index("slider_x_mm")]
@@ -371,7 +376,7 @@ def test_a_take_joins_simulated_demonstrations_and_learn_takes_them(tmp_path, ca
     assert "wrote" in capsys.readouterr().out
 
 
-def test_a_keyboard_take_draws_the_first_stroke_on_the_sheet(meshcat):
+def test_a_keyboard_take_draws_the_first_stroke_on_the_sheet(meshcat, visualization):
     """A person's key presses (2 mm per press, scripted through the page's sliders) steer the
     stylus along the drawing's first stroke: the pen touches the sheet and draws the line."""
     from hemg_drake.evaluation import strokes
@@ -395,7 +400,7 @@ def test_a_keyboard_take_draws_the_first_stroke_on_the_sheet(meshcat):
             meshcat.SetSliderValue(name, press_mm * steps)
         meshcat.SetSliderValue(SLIDER_ACTIVATION, 0.8 if pressing else 0.2)
 
-    take = run_take(scenario, seed=5, meshcat=meshcat, duration=2.9, realtime=False,
+    take = run_take(scenario, seed=5, visualization=visualization, duration=2.9, realtime=False,
                     on_step=script, progress=lambda line: None)  # fmt: skip
     demo = take.demonstration
     drawn = strokes(demo.time, demo.p_WE, demo.f_WE)
@@ -408,7 +413,7 @@ def test_a_keyboard_take_draws_the_first_stroke_on_the_sheet(meshcat):
     assert stroke_errors(drawn[0][:, :2], [line])["shape"] < 0.005
 
 
-def test_takes_with_placements_happen_each_at_its_own_seeds_placement(meshcat, tmp_path):
+def test_takes_with_placements_happen_each_at_its_own_seeds_placement(visualization, tmp_path):
     from hemg_drake.learning.demos import load_dataset
     from hemg_drake.placements import demonstration_scenario, task_frames
 
@@ -418,7 +423,7 @@ def test_takes_with_placements_happen_each_at_its_own_seeds_placement(meshcat, t
     ])  # fmt: skip
     lines = []
     for _ in range(2):
-        teleop(placed, tmp_path, meshcat=meshcat, duration=0.1, replays=False, realtime=False,
+        teleop(placed, tmp_path, visualization=visualization, duration=0.1, replays=False, realtime=False,
                progress=lines.append)  # fmt: skip
     demos, _ = load_dataset(tmp_path / "dataset.npz")
     origins = []
