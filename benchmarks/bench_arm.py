@@ -5,7 +5,8 @@ Prints simulated seconds per wall second for 10 s of simulated time:
   Drake's default discrete solver (SAP, which enforces the joint limits as constraints) and
   with TAMSI (joint limits as penalty forces), for comparison,
 - demo: the waypoint tour under VariableGainPd + gravity compensation (a Python system at 1 kHz),
-each without and with a ReplayRecorder (32 frames/s), plus the cost of exporting the HTML.
+each without and with a replay recording (the scenario's visualization: 32 frames/s), plus the
+cost of exporting the HTML.
 """
 
 import gc
@@ -19,36 +20,43 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from hemg_drake.diagrams.arm_demo import build_arm_demo
+from hemg_drake.diagrams.visualization import Visualization, apply_visualization
 from hemg_drake.robots.baxter import FLOOR_Z, add_baxter_arm
+from hemg_drake.scenario import Scenario
 from hemg_drake.viz.recording import ReplayRecorder
 
 SIMULATED_SECONDS = 10.0
 TIME_STEP = 1e-3
 
 
-def build_bare_arm(recorder, approximation=None):
+def build_bare_arm(visualization, approximation=None):
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=TIME_STEP)
     if approximation is not None:
         plant.set_discrete_contact_approximation(approximation)
     add_baxter_arm(plant)  # starts at home
     plant.Finalize()
-    if recorder is not None:
-        recorder.add_to_builder(builder, scene_graph)
+    if visualization is not None:
+        apply_visualization(Scenario().visualization, builder, plant=plant,
+                            scene_graph=scene_graph, visualization=visualization)  # fmt: skip
     return builder.Build()
 
 
-def build_demo(recorder):
-    return build_arm_demo(duration=SIMULATED_SECONDS, time_step=TIME_STEP, recorder=recorder)[0]
+def build_demo(visualization):
+    return build_arm_demo(
+        duration=SIMULATED_SECONDS, time_step=TIME_STEP, visualization=visualization
+    )[0]
 
 
 def measure(build, record, out_dir, seconds=SIMULATED_SECONDS):
     """Return (real-time factor, export seconds or None)."""
-    recorder = ReplayRecorder(floor_z=FLOOR_Z) if record else None
-    simulator = Simulator(build(recorder))
+    visualization = Visualization() if record else None
+    diagram = build(visualization)
+    simulator = Simulator(diagram)
     simulator.Initialize()
     if record:
-        recorder.start()
+        recorder = ReplayRecorder(floor_z=FLOOR_Z)
+        recorder.start(diagram, visualization.meshcat)
     start = time.perf_counter()
     simulator.AdvanceTo(seconds)
     rate = seconds / (time.perf_counter() - start)

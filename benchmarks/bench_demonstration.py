@@ -43,31 +43,44 @@ SCENARIOS = ("cotter_pin", "drawing")
 REPEATS = 2  # runs per subprocess; the best counts
 
 
-def build(scenario, recorder=None):
-    """The demonstration diagram of the checkout on the path (the seed's keyword or not)."""
+def build(scenario, visualization=None):
+    """The demonstration diagram of the checkout on the path (the seed's keyword or not;
+    visualised through ``visualization=`` or, on older checkouts, a ``recorder=``)."""
     from hemg_drake.diagrams.demonstration import build_demonstration_diagram
 
     parameters = inspect.signature(build_demonstration_diagram).parameters
+    shown = {}
+    if visualization is not None:
+        shown = {"visualization" if "visualization" in parameters else "recorder": visualization}
     if "seed" in parameters:
-        return build_demonstration_diagram(scenario, seed=scenario.seed, recorder=recorder)
-    return build_demonstration_diagram(scenario, recorder=recorder)
+        return build_demonstration_diagram(scenario, seed=scenario.seed, **shown)
+    return build_demonstration_diagram(scenario, **shown)
 
 
 def run(scenario, *, record=False):
     """Simulate one demonstration; (CPU s, wall s, export s or None, bytes)."""
     from pydrake.systems.analysis import Simulator
 
-    recorder = None
+    recorder = visualization = None
     if record:
         from hemg_drake.robots.baxter import FLOOR_Z
         from hemg_drake.viz.recording import ReplayRecorder
 
         recorder = ReplayRecorder(floor_z=FLOOR_Z)
-    built = build(scenario, recorder)
+        try:
+            from hemg_drake.diagrams.visualization import Visualization
+
+            visualization = Visualization()
+        except ImportError:  # an older checkout: the recorder attaches itself
+            visualization = recorder
+    built = build(scenario, visualization)
     simulator = Simulator(built.diagram)
     simulator.Initialize()
     if recorder is not None:
-        recorder.start()
+        if visualization is recorder:
+            recorder.start()
+        else:
+            recorder.start(built.diagram, visualization.meshcat)
     cpu, wall = time.process_time(), time.perf_counter()
     simulator.AdvanceTo(scenario.duration)
     cpu, wall = time.process_time() - cpu, time.perf_counter() - wall

@@ -36,11 +36,10 @@ import msgpack
 import numpy as np
 import websocket
 
+from hemg_drake.diagrams.visualization import Visualization
 from hemg_drake.fileio import write_bytes_atomic
-from hemg_drake.pipeline import replay_recorder
 from hemg_drake.scenario import load_scenario, shipped_scenario
 from hemg_drake.teleop.browser_inputs import COLUMNS
-from hemg_drake.teleop.browser_page import start_meshcat
 from hemg_drake.teleop_session import run_take
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
@@ -86,14 +85,14 @@ class Listener:
 
 def speed(task, seconds, chromium=False):
     scenario = load_scenario(shipped_scenario(task))
-    meshcat = start_meshcat(0)
+    visualization = Visualization(0)
+    meshcat = visualization.meshcat
     listener = Listener(meshcat)
     # The page itself rendering on the same 2 cores (software WebGL: the worst case).
     page = HeadlessPage(meshcat.web_url()) if chromium else contextlib.nullcontext()
     deadline = time.monotonic() + 60
     while chromium and meshcat.GetNumActiveConnections() < 2 and time.monotonic() < deadline:
         time.sleep(0.05)  # the page is open before the take starts
-    recorder = replay_recorder(scenario, f"{task}: bench")
     # A scripted hand on the sliders keeps the arm moving: 20 mm back and forth in x.
     def script(t):
         meshcat.SetSliderValue("stylus x (mm)", 20.0 * math.sin(2 * math.pi * t / 3.0))
@@ -101,14 +100,14 @@ def speed(task, seconds, chromium=False):
     try:
         # The replay is exported too (its cost is part of a take), into a scratch folder.
         with page, tempfile.TemporaryDirectory(prefix="bench-teleop-") as scratch:
-            take = run_take(scenario, seed=1, meshcat=meshcat, duration=seconds,
-                            realtime=False, recorder=recorder,
+            take = run_take(scenario, seed=1, visualization=visualization, duration=seconds,
+                            realtime=False, title=f"{task}: bench",
                             replay_path=Path(scratch) / "replay.html", on_step=script,
                             progress=lambda line: None)  # fmt: skip
     finally:
         listener.close()
     # Each moving body's pose is one set_transform per visualizer publish.
-    arm = [n for p, n in listener.transforms.items() if "visualizer" in str(p)]
+    arm = [n for p, n in listener.transforms.items() if "/drake/illustration" in str(p)]
     print(
         f"{task}: {seconds:g} s simulated in {take.wall_seconds:.2f} s = "
         f"{seconds / take.wall_seconds:.2f}x real time with the live page"
@@ -121,7 +120,8 @@ def speed(task, seconds, chromium=False):
 
 def latency(seconds):
     scenario = load_scenario(shipped_scenario("cotter_pin"))
-    meshcat = start_meshcat(0)
+    visualization = Visualization(0)
+    meshcat = visualization.meshcat
     listener = Listener(meshcat)
     sends = []
 
@@ -139,7 +139,7 @@ def latency(seconds):
     thread = threading.Thread(target=sender, daemon=True)
     thread.start()
     try:
-        take = run_take(scenario, seed=1, meshcat=meshcat, duration=seconds, realtime=True,
+        take = run_take(scenario, seed=1, visualization=visualization, duration=seconds, realtime=True,
                         progress=lambda line: None, scene=False)  # fmt: skip
     finally:
         listener.close()
@@ -173,7 +173,8 @@ def latency(seconds):
 def keyboard_latency(seconds):
     """Key presses in the real page (headless Chromium, DevTools) to the sampled slider."""
     scenario = load_scenario(shipped_scenario("cotter_pin"))
-    meshcat = start_meshcat(0)
+    visualization = Visualization(0)
+    meshcat = visualization.meshcat
     presses = []
     with HeadlessPage(meshcat.web_url()) as page:
 
@@ -188,7 +189,7 @@ def keyboard_latency(seconds):
                 presses.append((time.monotonic(), t))
                 page.press("ArrowRight")
 
-        take = run_take(scenario, seed=1, meshcat=meshcat, duration=seconds, realtime=True,
+        take = run_take(scenario, seed=1, visualization=visualization, duration=seconds, realtime=True,
                         on_step=script, progress=lambda line: None, scene=False)  # fmt: skip
     slider = take.inputs.rows[:, COLUMNS.index("slider_x_mm")]
     walls = take.inputs.wall_time
@@ -206,7 +207,8 @@ def keyboard_latency(seconds):
 
 def screenshot(path):
     scenario = load_scenario(shipped_scenario("cotter_pin"))
-    meshcat = start_meshcat(0)
+    visualization = Visualization(0)
+    meshcat = visualization.meshcat
     state = {}
     with HeadlessPage(meshcat.web_url(), size=(1280, 800)) as page:
 
@@ -226,7 +228,7 @@ def screenshot(path):
             elif "shot" not in state:
                 state["shot"] = page.screenshot()
 
-        run_take(scenario, seed=1, meshcat=meshcat, duration=4.0, realtime=True,
+        run_take(scenario, seed=1, visualization=visualization, duration=4.0, realtime=True,
                  on_step=script, progress=lambda line: None)  # fmt: skip
     write_bytes_atomic(path, state["shot"])
     print(f"wrote {path}")
