@@ -263,3 +263,63 @@ def test_framed_replay_shows_the_arm_near_the_centre(replay, chromium, tmp_path)
     assert len(rows) > 2000  # closer than the old default view (0.3-0.8 % of the picture)
     # The red arm's centroid lies in the middle half of the picture both ways.
     assert abs(columns.mean() - 400) < 200 and abs(rows.mean() - 300) < 150
+
+
+# --- a station's replay, recorded on the visualiser ApplyVisualizationConfig added -------
+
+
+def _replay_payload(path):
+    """The binary Meshcat messages embedded (base64) in an HTML replay."""
+    html = path.read_text()
+    return b"".join(base64.b64decode(chunk) for chunk in re.findall(r"base64,([A-Za-z0-9+/=]+)", html))
+
+
+@pytest.fixture(scope="module")
+def drawing_replay(tmp_path_factory):
+    """1.8 s of the drawing's demonstration (the first stroke starts at about 1.4 s: a short
+    line of ink), recorded with record_run; (path, demonstration)."""
+    from hemg_drake.diagrams.demonstration import build_demonstration_diagram, run_demonstration
+    from hemg_drake.scenario import load_scenario, shipped_scenario
+    from hemg_drake.viz.recording import record_run
+
+    scenario = load_scenario(shipped_scenario("drawing"), overrides=["duration=1.8"])
+    built = build_demonstration_diagram(scenario, seed=scenario.seed, visualization=Visualization())
+    path = tmp_path_factory.mktemp("drawing") / "replay.html"
+    demo = record_run(built, run_demonstration, path, title="drawing: demonstration 1")
+    return path, demo
+
+
+def test_a_station_replay_holds_the_ink_the_title_and_the_frames(drawing_replay):
+    from hemg_drake.viz.ink import in_contact
+
+    path, demo = drawing_replay
+    assert in_contact(demo.f_WE).sum() > 10
+    payload = _replay_payload(path)
+    assert b"/ink/stroke_0/piece_0" in payload and b"/ink/stroke_1" not in payload
+    assert b"/drake/illustration/" in payload  # the arm, from ApplyVisualizationConfig's visualiser
+    assert re.findall(r"<title>(.*?)</title>", path.read_text()) == ["drawing: demonstration 1"]
+    # 32 frames per second (the scenario's visualization.publish_period), over 1.8 s.
+    animation = [c for c in _commands(path.read_text()) if c["type"] == "set_animation"]
+    assert len(animation) == 1 and animation[0]["options"]["play"] is not None
+    times = [key["time"] for clip in animation[0]["animations"]
+             for track in clip["clip"]["tracks"] for key in track["keys"]]  # fmt: skip
+    # Frames 0 .. 57: from the initial publish to the last one at 57 / 32 s <= 1.8 s.
+    assert (min(times), max(times)) == (0, int(1.8 * 32))
+
+
+def test_record_run_needs_a_visualised_diagram(tmp_path):
+    from hemg_drake.diagrams.demonstration import build_demonstration_diagram, run_demonstration
+    from hemg_drake.scenario import load_scenario, shipped_scenario
+    from hemg_drake.viz.recording import record_run
+
+    scenario = load_scenario(shipped_scenario("cotter_pin"), overrides=["duration=0.05"])
+    built = build_demonstration_diagram(scenario, seed=0, scene=False)
+    with pytest.raises(ValueError, match="visualization=Visualization"):
+        record_run(built, run_demonstration, tmp_path / "x.html", title="x")
+
+
+@pytest.mark.browser
+def test_a_station_replay_renders_the_arm(drawing_replay, chromium, tmp_path):
+    path, _ = drawing_replay
+    png = render_html_to_png(path, tmp_path / "drawing.png", size=(800, 600))
+    assert _arm_pixels(png) > 2000  # framed on the task, as the bare arm's replay
