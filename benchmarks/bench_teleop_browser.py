@@ -139,8 +139,8 @@ def latency(seconds):
     thread = threading.Thread(target=sender, daemon=True)
     thread.start()
     try:
-        take = run_take(scenario, seed=1, visualization=visualization, duration=seconds, realtime=True,
-                        progress=lambda line: None, scene=False)  # fmt: skip
+        take = run_take(scenario, seed=1, visualization=visualization, duration=seconds,
+                        realtime=True, progress=lambda line: None, scene=False)  # fmt: skip
     finally:
         listener.close()
         thread.join(timeout=2)
@@ -189,8 +189,9 @@ def keyboard_latency(seconds):
                 presses.append((time.monotonic(), t))
                 page.press("ArrowRight")
 
-        take = run_take(scenario, seed=1, visualization=visualization, duration=seconds, realtime=True,
-                        on_step=script, progress=lambda line: None, scene=False)  # fmt: skip
+        take = run_take(scenario, seed=1, visualization=visualization, duration=seconds,
+                        realtime=True, on_step=script, progress=lambda line: None,
+                        scene=False)  # fmt: skip
     slider = take.inputs.rows[:, COLUMNS.index("slider_x_mm")]
     walls = take.inputs.wall_time
     delays = []

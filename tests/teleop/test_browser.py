@@ -168,7 +168,9 @@ def test_bad_arguments_and_logs_are_refused(tmp_path):
         load_inputs(bad)
 
 
-def test_keyboard_sliders_move_the_stylus_and_the_log_replays_bit_for_bit(scenario, meshcat, visualization):
+def test_keyboard_sliders_move_the_stylus_and_the_log_replays_bit_for_bit(
+    scenario, meshcat, visualization
+):
     # Meshcat's Python API stands in for the key presses: +10 mm in x from t = 0.25 s.
     def script(t):
         if t >= 0.25:
