@@ -368,7 +368,7 @@ def write_diagrams(scenario, model, run_dir, *, progress=print):
     from hemg_drake.viz.run_figures import write_diagram_pictures
 
     diagrams = {
-        "demonstration_diagram": build_demonstration_diagram(scenario, seed=scenario.seed).diagram,
+        "demonstration_diagram": build_demonstration_diagram(scenario).diagram,
         "reproduction_diagram": build_reproduction_diagram(
             scenario, placed_model(model, scenario)
         ).diagram,

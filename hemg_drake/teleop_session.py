@@ -10,7 +10,6 @@ import dataclasses as dc
 import time
 
 import numpy as np
-from pydrake.common import RandomGenerator
 from pydrake.math import RigidTransform
 from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 
@@ -78,6 +77,7 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
     from hemg_drake.diagrams.demonstration import (
         build_demonstration_diagram,
         demonstration_from_logs,
+        seed_context,
     )
     from hemg_drake.analysis.contact import in_contact
     from hemg_drake.viz.ink import add_ink_to_recording
@@ -94,7 +94,7 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
     operator = scenario.operator
     holder = {}
 
-    def factory(*, scenario, mapping, p_MS_initial, seed):
+    def factory(*, scenario, mapping, p_MS_initial):
         inputs = (
             MeshcatInputs(meshcat, p_MS_initial=p_MS_initial,
                           workspace_size=scenario.master.workspace_size,
@@ -112,7 +112,7 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
         return holder["master"]
 
     built = build_demonstration_diagram(
-        scenario, seed=seed, meshcat=meshcat if live else None, recorder=recorder,
+        scenario, meshcat=meshcat if live else None, recorder=recorder,
         operator_factory=factory, scene=scene,
     )  # fmt: skip
     master = holder["master"]
@@ -126,7 +126,7 @@ def run_take(scenario, *, seed, source="meshcat", meshcat=None, duration=None, r
         page = TeleopPage(meshcat, k_min=scenario.emg.k_min, k_max=scenario.emg.k_max)
     diagram = built.diagram
     simulator = Simulator(diagram)
-    diagram.SetRandomContext(simulator.get_mutable_context(), RandomGenerator(seed))  # sEMG noise
+    seed_context(built, simulator.get_mutable_context(), seed)  # the sEMG noise
     ApplySimulatorConfig(scenario.simulator, simulator)
     simulator.set_target_realtime_rate(1.0 if realtime else 0.0)
     simulator.Initialize()
