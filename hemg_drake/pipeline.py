@@ -38,10 +38,10 @@ def record_demonstration(scenario, seed, *, replay_path=None, title=None, visual
     from hemg_drake.viz.recording import record_run
 
     if replay_path is None:
-        return run_demonstration(build_demonstration_diagram(scenario, seed=seed))
+        return run_demonstration(build_demonstration_diagram(scenario), seed)
     visualization = Visualization() if visualization is None else visualization
-    built = build_demonstration_diagram(scenario, seed=seed, visualization=visualization)
-    return record_run(built, run_demonstration, replay_path, title=title)
+    built = build_demonstration_diagram(scenario, visualization=visualization)
+    return record_run(built, lambda b: run_demonstration(b, seed), replay_path, title=title)
 
 
 def check_enough_data(observations, n_states):
@@ -380,7 +380,7 @@ def write_diagrams(scenario, model, run_dir, *, progress=print):
     from hemg_drake.viz.run_figures import write_diagram_pictures
 
     diagrams = {
-        "demonstration_diagram": build_demonstration_diagram(scenario, seed=scenario.seed).diagram,
+        "demonstration_diagram": build_demonstration_diagram(scenario).diagram,
         "reproduction_diagram": build_reproduction_diagram(
             scenario, placed_model(model, scenario)
         ).diagram,

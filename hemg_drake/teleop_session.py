@@ -10,7 +10,6 @@ import dataclasses as dc
 import time
 
 import numpy as np
-from pydrake.common import RandomGenerator
 from pydrake.math import RigidTransform
 from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 
@@ -80,6 +79,7 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
     from hemg_drake.diagrams.demonstration import (
         build_demonstration_diagram,
         demonstration_from_logs,
+        seed_context,
     )
     from hemg_drake.diagrams.visualization import Visualization
     from hemg_drake.robots.baxter import FLOOR_Z
@@ -100,7 +100,7 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
     operator = scenario.operator
     holder = {}
 
-    def factory(*, scenario, mapping, p_MS_initial, seed):
+    def factory(*, scenario, mapping, p_MS_initial):
         inputs = (
             MeshcatInputs(meshcat, p_MS_initial=p_MS_initial,
                           workspace_size=scenario.master.workspace_size,
@@ -118,7 +118,7 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
         return holder["master"]
 
     built = build_demonstration_diagram(
-        scenario, seed=seed, visualization=visualization, operator_factory=factory, scene=scene,
+        scenario, visualization=visualization, operator_factory=factory, scene=scene,
     )  # fmt: skip
     master = holder["master"]
     page = None
@@ -129,7 +129,7 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
         page = TeleopPage(meshcat, k_min=scenario.emg.k_min, k_max=scenario.emg.k_max)
     diagram = built.diagram
     simulator = Simulator(diagram)
-    diagram.SetRandomContext(simulator.get_mutable_context(), RandomGenerator(seed))  # sEMG noise
+    seed_context(built, simulator.get_mutable_context(), seed)  # the sEMG noise
     ApplySimulatorConfig(scenario.simulator, simulator)
     simulator.set_target_realtime_rate(1.0 if realtime else 0.0)
     simulator.Initialize()

@@ -19,6 +19,11 @@ and a seed (and only builds); :func:`run_demonstration` simulates a built diagra
 returns the logged :class:`~hemg_drake.learning.demos.Demonstration`. Built with a
 ``visualization``, the station is shown in its Meshcat; the application records the replay
 (:mod:`hemg_drake.viz.recording`).
+
+Seeds live in the Context, not in the diagram: the seed of a demonstration draws the
+operator's variability (the perturbed plan) and the armband's noise into a fresh context
+(:func:`seed_context`), so one built diagram runs every demonstration of a scenario, its
+clones run in parallel, and Drake's ``MonteCarloSimulation`` can drive it.
 """
 
 import dataclasses as dc
@@ -38,7 +43,7 @@ from hemg_drake.learning.demos import FIELD_WIDTHS, Demonstration
 from hemg_drake.teleop.feedback import ForceFeedback
 from hemg_drake.teleop.mapping import WorkspaceMap
 from hemg_drake.teleop.master import HapticMaster
-from hemg_drake.teleop.operator import SimulatedOperator
+from hemg_drake.teleop.operator import SimulatedOperator, set_operator_seed
 
 # Logged signals after time, in the order of the logger's input vector.
 LOGGED_FIELDS = tuple(name for name in FIELD_WIDTHS if name != "time")
@@ -56,17 +61,12 @@ class DemonstrationDiagram(StationDiagram):
         ``force_feedback``, ``logger`` and ``emg_logger`` (and their muxes).
     station : SlaveStation
     scenario : Scenario
-    seed : int
-    plan : TaskPlan
-        The seeded operator's plan (the task plan perturbed by the seed), in W.
     mapping : WorkspaceMapping
     logger : VectorLogSink, ``LOGGED_FIELDS`` every ``scenario.log_period``.
     emg_logger : VectorLogSink, [sEMG (8), muscle activation (1)] every 5 ms.
     """
 
     scenario: object
-    seed: int
-    plan: object
     mapping: object
     logger: object
     emg_logger: object
@@ -117,15 +117,14 @@ def make_emg_source(scenario):
 
 
 def build_demonstration_diagram(
-    scenario, *, seed, visualization=None, scene=True, operator_factory=None
+    scenario, *, visualization=None, scene=True, operator_factory=None
 ):
-    """Build the teleoperated demonstration diagram for one seeded demonstration.
+    """Build the teleoperated demonstration diagram of a scenario (any seed: see
+    :func:`seed_context`).
 
     Parameters
     ----------
     scenario : Scenario
-    seed : int
-        Seeds the operator's variability (``plan.perturbed``) and the sEMG noise.
     visualization : Visualization, optional
         Show the station in its (loopback) Meshcat with ``scenario.visualization``.
     scene : bool
@@ -133,7 +132,7 @@ def build_demonstration_diagram(
     operator_factory : callable, optional
         Replaces the simulated operator (e.g. a person at the browser,
         :mod:`hemg_drake.teleop.browser`): called as ``operator_factory(scenario=,
-        mapping=, p_MS_initial=, seed=)``, it returns a System with the
+        mapping=, p_MS_initial=)``, it returns a System with the
         SimulatedOperator's ports (inputs ``p_MS``, ``v_MS``, ``feedback_force``; outputs
         ``hand_force``, ``activation``), added as ``operator``.
 
@@ -141,8 +140,6 @@ def build_demonstration_diagram(
     -------
     DemonstrationDiagram
     """
-    seed = as_seed(seed)
-    plan = operator_plan(scenario, seed)
     mapping = scenario.workspace_mapping()
     # Arm and stylus start at rest where the task is set up (the unperturbed plan's first
     # point, e.g. the pin's ring); the operator's own plan varies from there.
@@ -162,7 +159,7 @@ def build_demonstration_diagram(
         )
     else:
         operator_system = operator_factory(
-            scenario=scenario, mapping=mapping, p_MS_initial=p_MS_initial, seed=seed
+            scenario=scenario, mapping=mapping, p_MS_initial=p_MS_initial
         )
     operator = add("operator", operator_system)
     master = add("master", HapticMaster(config=scenario.master, p_MS_initial=p_MS_initial))
@@ -236,8 +233,6 @@ def build_demonstration_diagram(
         diagram=diagram,
         station=station,
         scenario=scenario,
-        seed=seed,
-        plan=plan,
         mapping=mapping,
         logger=logger,
         emg_logger=emg_logger,
@@ -266,21 +261,47 @@ def demonstration_from_logs(log, emg_log, seed):
     )
 
 
-def seed_operator(built, root_context):
-    """Put the draws of ``built.seed`` into the simulated operator's Context (before
-    ``Simulator.Initialize``), so that it follows ``built.plan``; a no-op for another
-    operator (``operator_factory``)."""
-    operator = built.diagram.GetSubsystemByName("operator")
-    if hasattr(operator, "set_seed"):
-        operator.set_seed(operator.GetMyMutableContextFromRoot(root_context), built.seed)
+def seed_context(built, context, seed, *, diagram=None):
+    """Draw demonstration ``seed`` into ``context``, a root context of ``diagram`` (default
+    ``built.diagram``; or a ``Clone()`` of it), before ``Simulator.Initialize``: the
+    armband's noise (its RandomSource, by ``SetRandomContext``) and the simulated operator's
+    variability, so that it follows :func:`operator_plan` (scenario, seed). Another
+    operator (``operator_factory``) keeps its own inputs."""
+    seed = as_seed(seed)
+    diagram = built.diagram if diagram is None else diagram
+    # First: SetRandomContext also redraws the operator's variability at random.
+    diagram.SetRandomContext(context, RandomGenerator(seed))
+    operator = diagram.GetSubsystemByName("operator")
+    if hasattr(operator, "HasSubsystemNamed") and operator.HasSubsystemNamed("normals"):
+        own = operator.GetMyMutableContextFromRoot(context)
+        set_operator_seed(operator, own, built.scenario.task_plan(), seed)
 
 
-def run_demonstration(built, *, duration=None):
-    """Simulate a built demonstration diagram and read its logs.
+def initial_context(built, seed, *, diagram=None):
+    """A root context of ``diagram`` (default ``built.diagram``; or a ``Clone()`` of it)
+    ready to simulate demonstration ``seed``: the arm at rest at its start
+    (``built.station.q0``) and the seed's draws (:func:`seed_context`).
+
+    The start is set here rather than left to the plant's default positions because
+    Drake's scalar conversion of a MultibodyPlant (which ``Clone()`` uses) does not carry
+    the joints' default positions (measured on drake 1.51: a clone starts at q = 0).
+    """
+    diagram = built.diagram if diagram is None else diagram
+    context = diagram.CreateDefaultContext()
+    seed_context(built, context, seed, diagram=diagram)
+    built.station.set_start(context, diagram.GetSubsystemByName("station"))
+    return context
+
+
+def run_demonstration(built, seed, *, duration=None):
+    """Simulate demonstration ``seed`` on a built diagram (a fresh context each call) and
+    read its logs.
 
     Parameters
     ----------
     built : DemonstrationDiagram
+    seed : int
+        Draws the operator's variability and the sEMG noise (:func:`seed_context`).
     duration : float, optional
         Simulated seconds; default the scenario's ``duration``.
 
@@ -289,20 +310,18 @@ def run_demonstration(built, *, duration=None):
     Demonstration
     """
     simulator, duration = make_simulator(built, duration)
-    # The seed's sEMG noise (the synthetic armband's RandomSource) lives in the Context;
-    # seeded first, as SetRandomContext also resets the operator's parameters.
-    built.diagram.SetRandomContext(simulator.get_mutable_context(), RandomGenerator(built.seed))
-    seed_operator(built, simulator.get_mutable_context())
+    simulator.reset_context(initial_context(built, seed))
     simulator.Initialize()
     simulator.AdvanceTo(duration)
     context = simulator.get_context()
     return demonstration_from_logs(
-        built.logger.FindLog(context), built.emg_logger.FindLog(context), built.seed
+        built.logger.FindLog(context), built.emg_logger.FindLog(context), as_seed(seed)
     )
 
 
 def record_demonstration(scenario, seed, *, scene=True):
     """Build and run one demonstration: :func:`build_demonstration_diagram` then
-    :func:`run_demonstration`."""
-    built = build_demonstration_diagram(scenario, seed=seed, scene=scene)
-    return run_demonstration(built)
+    :func:`run_demonstration`. To run several seeds, build once and call
+    :func:`run_demonstration` per seed."""
+    built = build_demonstration_diagram(scenario, scene=scene)
+    return run_demonstration(built, seed)

@@ -25,7 +25,8 @@ low) is integrated into x* by eq. 18, and x* runs away from a slave that cannot 
 (measured on the cotter pin). k* is clipped to the scenario's [k_min, k_max] (Drake's
 ``Saturation``): GMR may extrapolate beyond the demonstrated gains, and the PD is only
 checked inside its range. x*_0 is ``start`` (default: the demonstrations' start, the task
-plan's first point); :func:`run_reproduction` first lets the arm come to rest holding it.
+plan's first point); :func:`run_reproduction` first lets the arm come to rest holding it, in
+this same diagram with the reproducer holding (no second station).
 
 :func:`build_reproduction_diagram` builds it (and only builds); :func:`run_reproduction`
 simulates a built diagram and returns a :class:`ReproductionLog` and the task's outcome.
@@ -43,7 +44,12 @@ from hemg_drake._validate import as_vector
 from hemg_drake.diagrams.built import StationDiagram, make_simulator
 from hemg_drake.diagrams.log import add_logger, split_log
 from hemg_drake.diagrams.station import make_slave_station
-from hemg_drake.learning.systems import HsmmGmrReproducer, HsmmLqrReproducer, TrackingForce
+from hemg_drake.learning.systems import (
+    HsmmGmrReproducer,
+    HsmmLqrReproducer,
+    TrackingForce,
+    set_holding,
+)
 
 # Size of the model's position x (a point in space) and of its stiffness k.
 POSITION_SIZE = 3
@@ -164,31 +170,27 @@ def _add_station(builder, scenario, start, *, scene, q0=None, visualization=None
     return station, limits
 
 
-def settled_arm_positions(scenario, start, gain, *, duration=None, q0=None):
-    """Where the arm comes to rest in the task's scene while the PD holds its tool at ``start``.
+def settled_arm_positions(built):
+    """Where the arm comes to rest in the task's scene while the PD holds its tool at x*_0.
 
-    Simulates the station alone for ``duration`` (default ``reproduction.settle_time``)
-    with the reference held at ``start`` and the gain at ``gain`` (the first k*), from the
-    configuration ``q0`` (default the one that puts the tool point on ``start``). Free of
-    contact this is that configuration; when the scene pulls on the tool there (the cotter
-    pin's grasp, stretched by a start beside the ring) it is the static balance of the PD
-    and the scene's force.
+    Simulates ``built.diagram`` itself, in a context of its own, for
+    ``reproduction.settle_time`` with the reproducer holding (its ``holding`` parameter:
+    x*_0 and the first k* stay put) from the configuration that puts the tool point on
+    x*_0. Free of contact this is that configuration; when the scene pulls on the tool there
+    (the cotter pin's grasp, stretched by a start beside the ring) it is the static balance
+    of the PD and the scene's force.
 
     Returns
     -------
     q : array, shape (7,), rad.
     """
-    duration = scenario.reproduction.settle_time if duration is None else duration
-    builder = DiagramBuilder()
-    station, limits = _add_station(builder, scenario, start, scene=True, q0=q0)
-    reference = builder.AddSystem(ConstantVectorSource(np.asarray(start, dtype=float)))
-    stiffness = builder.AddSystem(ConstantVectorSource(np.atleast_1d(gain).astype(float)))
-    builder.Connect(reference.get_output_port(), station.diagram.GetInputPort("p_WE_desired"))
-    builder.Connect(stiffness.get_output_port(), limits.get_input_port())
-    simulator = Simulator(builder.Build())
-    simulator.AdvanceTo(duration)
-    plant_context = station.plant_context(simulator.get_context())
-    return station.plant.GetPositions(plant_context, station.arm.model_instance)
+    diagram, station = built.diagram, built.station
+    context = diagram.CreateDefaultContext()
+    reproducer = diagram.GetSubsystemByName("reproducer")
+    set_holding(reproducer, reproducer.GetMyMutableContextFromRoot(context), True)
+    simulator = Simulator(diagram, context)
+    simulator.AdvanceTo(built.scenario.reproduction.settle_time)
+    return station.plant.GetPositions(station.plant_context(context), station.arm.model_instance)
 
 
 def build_reproduction_diagram(
@@ -308,7 +310,8 @@ def run_reproduction(built, *, duration=None, settle=True):
 
     Before the reproduction starts, the arm is brought to rest where it settles in the
     task's scene while the PD holds the tool at x*_0 with the first k*
-    (:func:`settled_arm_positions`; ``settle=False`` starts it on x*_0 by inverse
+    (:func:`settled_arm_positions`, a run of this same diagram with the reproducer holding;
+    ``settle=False`` starts it on x*_0 by inverse
     kinematics). Beside the cotter pin's grasped ring, where the PD balances the stretched
     grasp, that is about 1 mm from the ring (the arm is much softer than the grasp);
     started on a point 3 cm aside instead, the grasp (150 N at 3 cm) would snap the tool
@@ -326,18 +329,13 @@ def run_reproduction(built, *, duration=None, settle=True):
     ReproductionResult
     """
     scenario = built.scenario
+    station = built.station
+    # Settled first, in a context of its own: the arm starts this run at rest there.
+    q0 = settled_arm_positions(built) if settle and built.scene is not None else station.q0
     simulator, duration = make_simulator(built, duration)
     context = simulator.get_mutable_context()
-    station = built.station
     plant_context = station.plant_context(context)
-    q0 = station.q0
-    if settle and built.scene is not None:
-        reproducer = built.diagram.GetSubsystemByName("reproducer")
-        gain_0 = reproducer.GetOutputPort("k_star").Eval(
-            reproducer.GetMyContextFromRoot(context)
-        )
-        q0 = settled_arm_positions(scenario, built.start, gain_0, q0=station.q0)
-        station.plant.SetPositions(plant_context, station.arm.model_instance, q0)
+    station.plant.SetPositions(plant_context, station.arm.model_instance, q0)
     simulator.Initialize()
     # The logger samples at multiples of log_period; reach the last one.
     simulator.AdvanceTo(duration + 1e-9)

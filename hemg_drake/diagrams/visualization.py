@@ -5,7 +5,7 @@ A builder takes ``visualization=`` (a :class:`Visualization`, or None for no vis
 all) and the station applies ``scenario.visualization`` inside its own builder::
 
     visualization = Visualization(port=0)        # localhost, a free port
-    built = build_demonstration_diagram(scenario, seed=0, visualization=visualization)
+    built = build_demonstration_diagram(scenario, visualization=visualization)
     print(visualization.web_url())
 
 Why a handle and not a Meshcat or a port: Drake's ``ApplyVisualizationConfig`` creates its

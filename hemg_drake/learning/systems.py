@@ -2,7 +2,7 @@
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
-from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
+from pydrake.systems.framework import BasicVector_, Diagram, DiagramBuilder, LeafSystem_
 from pydrake.systems.primitives import Adder, Gain, MatrixGain
 from pydrake.systems.scalar_conversion import TemplateSystem
 
@@ -19,10 +19,13 @@ from hemg_drake.learning.reproduce import (
 )
 
 
-def _declare_reproducer(system, start, xdot, k, h, predicted, dt):
+def _declare_reproducer(system, T, start, xdot, k, h, predicted, dt):
     """What both reproducers declare: input ``p_WE``; the state groups x*, xdot*, k*, h and
-    the predicted forward variable, updated every ``dt``; the first four as state outputs."""
+    the predicted forward variable, updated every ``dt``; the first four as state outputs;
+    the numeric parameter ``holding`` (1: every update keeps the state, so the reproducer
+    holds x*_0 and k*_0 while the arm settles; 0, the default: it reproduces)."""
     system._forward_shape = predicted.shape
+    system._holding = system.DeclareNumericParameter(BasicVector_[T]([0.0]))
     system._p_WE_input = system.DeclareVectorInputPort("p_WE", len(start))
     system._x_star_state = system.DeclareDiscreteState(start)
     system._xdot_star_state = system.DeclareDiscreteState(xdot)
@@ -39,6 +42,16 @@ def _declare_reproducer(system, start, xdot, k, h, predicted, dt):
         ("h", system._h_state),
     ):
         system.DeclareStateOutputPort(name, index)
+
+
+def set_holding(reproducer, context, holding):
+    """Make ``reproducer`` (either kind, or a clone) hold its start in ``context`` (its own
+    Context), or reproduce: the ``holding`` parameter of :func:`_declare_reproducer`."""
+    context.get_mutable_numeric_parameter(0).SetAtIndex(0, 1.0 if holding else 0.0)
+
+
+def _holding(system, context):
+    return context.get_numeric_parameter(system._holding).GetAtIndex(0) != 0.0
 
 
 def _store(system, discrete_state, x_star, xdot_star, k_star, h, predicted):
@@ -76,7 +89,9 @@ def HsmmGmrReproducer_(T):
         training data's stiffness range.
 
         Every output is a state output, so the system has no direct feedthrough
-        and ``x_star`` can close a loop. Before the first update, ``xdot_star``,
+        and ``x_star`` can close a loop. A numeric parameter ``holding`` (see
+        :func:`set_holding`) freezes the state, so the reproduction diagram can hold x*_0
+        and k*_0 while the arm settles in the scene. Before the first update, ``xdot_star``,
         ``k_star`` and ``h`` hold the step evaluated at the start position, so the
         stiffness is meaningful from t = 0. The discrete state also holds the
         predicted forward variable (residual-duration form, N x d_max values). The
@@ -115,12 +130,14 @@ def HsmmGmrReproducer_(T):
             start = self._policy.check_position(start, "start")
             predicted = self._policy.forward.initial()
             h, xdot, k, _, _ = self._policy.step(start, start, predicted)
-            _declare_reproducer(self, start, xdot, k, h, predicted, dt)
+            _declare_reproducer(self, T, start, xdot, k, h, predicted, dt)
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, **other._arguments, converter=converter)
 
         def _calc_step(self, context, discrete_state):
+            if _holding(self, context):  # the update starts from the current state: keep it
+                return
             p_WE = self._policy.check_position(self._p_WE_input.Eval(context), "p_WE")
             x_star = context.get_discrete_state(self._x_star_state).get_value()
             predicted = context.get_discrete_state(self._forward_state).get_value()
@@ -177,7 +194,8 @@ def HsmmLqrReproducer_(T):
         Every output is a state output (no direct feedthrough). Before the first update
         ``x_star`` is ``start``, ``xdot_star`` zero (the plan starts at rest), and
         ``k_star`` and ``h`` those of step 0. The discrete state also holds the predicted
-        forward variable and the step index. Clones, as :class:`HsmmGmrReproducer`.
+        forward variable and the step index. Clones, and holds with ``holding``, as
+        :class:`HsmmGmrReproducer`.
 
         Parameters
         ----------
@@ -216,13 +234,15 @@ def HsmmLqrReproducer_(T):
             xdot = np.zeros_like(start)
             predicted = self._policy.forward.initial()
             h, k, _, _, _ = self._policy.step(0, start, xdot, predicted)
-            _declare_reproducer(self, start, xdot, k, h, predicted, dt)
+            _declare_reproducer(self, T, start, xdot, k, h, predicted, dt)
             self._step_state = self.DeclareDiscreteState(1)  # index k of the next update
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, **other._arguments, converter=converter)
 
         def _calc_step(self, context, discrete_state):
+            if _holding(self, context):  # the update starts from the current state: keep it
+                return
             p_WE = self._policy.check_position(self._p_WE_input.Eval(context), "p_WE")
             x_star = context.get_discrete_state(self._x_star_state).get_value()
             xdot = context.get_discrete_state(self._xdot_star_state).get_value()

@@ -152,11 +152,12 @@ def _cached_demonstrations(task, scenario, run):
 
 
 def _record_heldout(scenario, count, path):
-    from hemg_drake.diagrams.demonstration import record_demonstration
+    from hemg_drake.diagrams.demonstration import build_demonstration_diagram, run_demonstration
     from hemg_drake.learning.demos import save_dataset
 
     first = scenario.seed + scenario.num_demonstrations
-    demos = [record_demonstration(scenario, first + i) for i in range(count)]
+    built = build_demonstration_diagram(scenario)  # once: the seeds live in the Context
+    demos = [run_demonstration(built, first + i) for i in range(count)]
     save_dataset(path, demos, dict(scenario=scenario.to_yaml(), task=scenario.task,
                                    log_period=scenario.log_period))  # fmt: skip
 

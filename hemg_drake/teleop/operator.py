@@ -293,9 +293,25 @@ class SimulatedOperator(Diagram):
     def set_seed(self, context, seed):
         """Draw the variability of ``plan.perturbed(seed)`` into ``context`` (this diagram's
         context, before ``Simulator.Initialize``): the same seed gives main's plan."""
-        for source, draws in zip(self._sources, self.plan_nominal.perturbation_draws(seed)):
-            self.GetMutableSubsystemContext(source, context).SetDiscreteState(draws)
+        set_operator_seed(self, context, self.plan_nominal, seed)
 
     def plan(self, context):
         """The perturbed plan in W that the operator follows in ``context`` (initialised)."""
         return self._law.plan(self.GetSubsystemContext(self._law, context))
+
+
+def set_operator_seed(operator, context, plan, seed):
+    """Draw the variability of ``plan.perturbed(seed)`` into ``context``, the context of
+    ``operator``: a :class:`SimulatedOperator` or a ``Clone()`` of one, which Drake returns
+    as a plain Diagram (the same subsystems, without this class's methods).
+
+    Parameters
+    ----------
+    operator : Diagram with the subsystems ``normals`` and ``uniforms`` (RandomSources).
+    context : its Context (not the root's), before ``Simulator.Initialize``.
+    plan : TaskPlan, the nominal plan the operator was built with.
+    seed : int
+    """
+    for name, draws in zip(("normals", "uniforms"), plan.perturbation_draws(seed)):
+        source = operator.GetSubsystemByName(name)
+        operator.GetMutableSubsystemContext(source, context).SetDiscreteState(draws)

@@ -5,10 +5,10 @@ Usage, for a diagram built with a ``Visualization`` (the station applies the sce
 ``VisualizationConfig``; :mod:`hemg_drake.diagrams.visualization`)::
 
     visualization = Visualization()
-    built = build_demonstration_diagram(scenario, seed=0, visualization=visualization)
+    built = build_demonstration_diagram(scenario, visualization=visualization)
     recorder = ReplayRecorder(title="cotter pin: demonstration 1", view=frame_task(points))
     recorder.start(built.diagram, visualization.meshcat)
-    demo = run_demonstration(built)
+    demo = run_demonstration(built, seed=1)
     recorder.stop_and_export(out_dir / "replay.html")
 
 The recording is the one of the illustration ``MeshcatVisualizer`` that
@@ -250,7 +250,10 @@ def record_run(built, run, path, *, title):
     ----------
     built : DemonstrationDiagram or ReproductionDiagram, built with a Visualization.
     run : callable, ``run(built)`` -> a Demonstration, or a result with a ``log`` (a
-        ReproductionLog): its ``time``, ``p_WE`` and ``f_WE`` place the ink.
+        ReproductionLog): its ``time``, ``p_WE`` and ``f_WE`` place the ink. Every
+        simulation of the diagram that ``run`` makes is recorded: a reproduction's settling
+        run (``reproduction.settle_time``) goes first, and its frames are overwritten by the
+        reproduction's own when that lasts longer (as a demonstration's length does).
     path : path-like
     title : str, the page's title.
 

@@ -9,8 +9,9 @@ from hemg_drake.diagrams.demonstration import (
     build_demonstration_diagram,
     demonstration_from_logs,
     record_demonstration,
+    operator_plan,
     run_demonstration,
-    seed_operator,
+    seed_context,
 )
 from hemg_drake.diagrams.visualization import Visualization
 from hemg_drake.emg.envelope import moving_rms
@@ -43,9 +44,9 @@ def distance_to_path(points, path):
 
 def simulate(scenario, seed, **kwargs):
     """Build and run one demonstration; also the plant's context at the end."""
-    built = build_demonstration_diagram(scenario, seed=seed, **kwargs)
+    built = build_demonstration_diagram(scenario, **kwargs)
     simulator = Simulator(built.diagram)
-    seed_operator(built, simulator.get_mutable_context())
+    seed_context(built, simulator.get_mutable_context(), seed)
     simulator.AdvanceTo(scenario.duration)
     root = simulator.get_context()
     demo = demonstration_from_logs(
@@ -57,8 +58,8 @@ def simulate(scenario, seed, **kwargs):
 @pytest.fixture(scope="module")
 def free_space():
     scenario = parse_scenario(FREE_SPACE)
-    built = build_demonstration_diagram(scenario, seed=3, scene=False)
-    return scenario, run_demonstration(built)
+    built = build_demonstration_diagram(scenario, scene=False)
+    return scenario, run_demonstration(built, 3)
 
 
 def test_free_space_slave_follows_the_mapped_master(free_space):
@@ -93,8 +94,8 @@ def test_logged_reference_is_what_the_clik_received_after_the_delay():
     # 20 master samples (20 ms, two log periods) of transport delay: the reference the CLIK
     # got at t is the stylus mapped at t - 20 ms.
     scenario = parse_scenario(FREE_SPACE).replaced(["duration=0.9", "mapping.delay_steps=20"])
-    built = build_demonstration_diagram(scenario, seed=3, scene=False)
-    demo = run_demonstration(built)
+    built = build_demonstration_diagram(scenario, scene=False)
+    demo = run_demonstration(built, 3)
     mapped = scenario.workspace_mapping().master_to_slave(demo.p_MS)
     moving = np.linalg.norm(np.diff(mapped, axis=0), axis=1).max()
     assert moving > 1e-3  # the stylus moves more than 1 mm per log period
@@ -102,9 +103,9 @@ def test_logged_reference_is_what_the_clik_received_after_the_delay():
     assert np.abs(demo.p_WE_desired[2:] - mapped[2:]).max() > 0.5 * moving
     # ... and it is what the CLIK reads: its input at 0.6 s in a second run of the same seed
     # (a logger sees its ports as a context after AdvanceTo(t) does: before t's updates).
-    again = build_demonstration_diagram(scenario, seed=3, scene=False)
+    again = build_demonstration_diagram(scenario, scene=False)
     simulator = Simulator(again.diagram)
-    seed_operator(again, simulator.get_mutable_context())
+    seed_context(again, simulator.get_mutable_context(), 3)
     simulator.AdvanceTo(0.6)
     root = simulator.get_context()
     clik = again.station.diagram.GetSubsystemByName("clik")
@@ -158,7 +159,7 @@ def test_the_pd_gain_is_the_variable_gain_output_computed_at_200_hz(monkeypatch)
 
     monkeypatch.setattr(VariableGain, "_calc_gain", counted)
     scenario = parse_scenario(FREE_SPACE).replaced(["duration=1.0"])
-    built = build_demonstration_diagram(scenario, seed=3, scene=False)
+    built = build_demonstration_diagram(scenario, scene=False)
     diagram, station = built.diagram, built.station.diagram
     # No hold between the gain law and the PD: the station's gain input is its output.
     names = {system.get_name() for system in diagram.GetSystems()}
@@ -200,7 +201,7 @@ def test_same_seed_same_demonstration_bitwise():
 
 def test_diagram_structure_and_bad_input():
     scenario = parse_scenario(FREE_SPACE)
-    built = build_demonstration_diagram(scenario, seed=0, scene=False)
+    built = build_demonstration_diagram(scenario, scene=False)
     for name in (
         "station", "operator", "master", "workspace_map", "emg_source", "envelope",
         "variable_gain", "force_feedback", "logger", "emg_logger",
@@ -209,22 +210,22 @@ def test_diagram_structure_and_bad_input():
     for name in ("plant", "scene_graph", "clik", "pd", "tool_point"):
         assert built.station.diagram.HasSubsystemNamed(name), name
     assert built.scene is None
-    assert not np.array_equal(built.plan.points, scenario.task_plan().points)
+    assert not np.array_equal(operator_plan(scenario, 0).points, scenario.task_plan().points)
     assert not any(isinstance(s, MeshcatVisualizer) for s in built.station.diagram.GetSystems())
-    live = build_demonstration_diagram(scenario, seed=0, scene=False, visualization=Visualization())
+    live = build_demonstration_diagram(scenario, scene=False, visualization=Visualization())
     assert any(isinstance(s, MeshcatVisualizer) for s in live.station.diagram.GetSystems())
     with pytest.raises(ValueError, match="seed"):
-        build_demonstration_diagram(scenario, seed=-1, scene=False)
+        run_demonstration(built, -1)
     far = scenario.replaced(["scene.position=[2.5, 0.0, 0.0]"])
     with pytest.raises(ValueError, match="out of the arm's reach"):
-        build_demonstration_diagram(far, seed=0, scene=False)
+        build_demonstration_diagram(far, scene=False)
     with pytest.raises(ValueError, match="duration"):
-        run_demonstration(built, duration=-1.0)
+        run_demonstration(built, 0, duration=-1.0)
 
 
 def test_building_does_not_simulate():
     scenario = parse_scenario(FREE_SPACE)
-    built = build_demonstration_diagram(scenario, seed=0)
+    built = build_demonstration_diagram(scenario)
     context = built.diagram.CreateDefaultContext()
     assert context.get_time() == 0.0
     plant_context = built.plant.GetMyContextFromRoot(context)
@@ -269,9 +270,9 @@ def test_position_error_feedback_pulls_the_stylus_back_to_a_held_slave(pin_scena
     scenario = pin_scenario.replaced(
         ["duration=2.0", "feedback.mode=position_error", "emg.k_min=10.0", "emg.k_max=10.01"]
     )
-    built = build_demonstration_diagram(scenario, seed=1)
+    built = build_demonstration_diagram(scenario)
     simulator = Simulator(built.diagram)
-    seed_operator(built, simulator.get_mutable_context())
+    seed_context(built, simulator.get_mutable_context(), 1)
     simulator.AdvanceTo(scenario.duration)
     root = simulator.get_context()
     assert not built.scene.pin_out(built.plant.GetMyContextFromRoot(root))
@@ -301,9 +302,9 @@ def test_drawing_inks_three_strokes_with_high_stiffness_on_the_paper():
     from hemg_drake.viz.ink import in_contact, ink_strokes
 
     scenario = load_scenario(shipped_scenario("drawing"))
-    built = build_demonstration_diagram(scenario, seed=scenario.seed)
-    plan = built.plan  # what this seeded operator meant to draw
-    demo = run_demonstration(built, duration=plan.end_time)
+    built = build_demonstration_diagram(scenario)
+    plan = operator_plan(scenario, scenario.seed)  # what this seeded operator meant to draw
+    demo = run_demonstration(built, scenario.seed, duration=plan.end_time)
     touching = in_contact(demo.f_WE)
     strokes = ink_strokes(demo.time, demo.p_WE, touching)
     assert len(strokes) == 3
@@ -346,7 +347,7 @@ def test_passive_force_feedback_reads_the_stylus_velocity():
     scenario = load_scenario(
         shipped_scenario("cotter_pin"), overrides=["feedback.passivity=tdpa", "duration=0.05"]
     )
-    built = build_demonstration_diagram(scenario, seed=1)
+    built = build_demonstration_diagram(scenario)
     feedback = built.diagram.GetSubsystemByName("force_feedback")
     context = built.diagram.CreateDefaultContext()
     feedback_context = feedback.GetMyContextFromRoot(context)
@@ -382,7 +383,7 @@ def test_a_scenario_names_a_live_semg_source(monkeypatch):
         shipped_scenario("cotter_pin"),
         overrides=["emg.source=libemg", "emg.libemg_tag=armband", "duration=0.2"],
     )
-    built = build_demonstration_diagram(scenario, seed=1)
+    built = build_demonstration_diagram(scenario)
     source = built.diagram.GetSubsystemByName("emg_source")
     assert isinstance(source, LiveEmgSource) and source.num_input_ports() == 0
     simulator = Simulator(built.diagram)

@@ -131,7 +131,7 @@ def test_a_start_beside_the_grasped_ring_begins_at_rest(scenario, model):
     np.testing.assert_allclose(log.f_WE[0, 0], -5000.0 * aside, rtol=0.1)
     assert np.max(np.abs(log.v_WE[:, 0])) < 0.2
     # With the grasp unstretched, the arm rests with its tool on the start.
-    q = settled_arm_positions(scenario, START, 10.0)
+    q = settled_arm_positions(build_reproduction_diagram(scenario, model))
     built = build_reproduction_diagram(scenario, model, scene=False)
     context = built.plant.CreateDefaultContext()
     arm = built.station.arm
@@ -172,3 +172,23 @@ def test_building_does_not_simulate(scenario, model, monkeypatch):
     result = run_reproduction(built, duration=0.05)
     assert len(simulators) == 2
     assert np.linalg.norm(result.q0 - built.station.q0) > 1e-3
+
+
+def test_the_holding_reproducer_keeps_its_start_and_first_stiffness(scenario, model):
+    # Settling runs the reproduction diagram itself with the reproducer holding: x*_0 and
+    # k*_0 stay put for the whole settle, then the same diagram reproduces from them.
+    from hemg_drake.learning.systems import set_holding
+
+    built = build_reproduction_diagram(scenario, model, start=START + [0.03, 0.0, 0.0])
+    reproducer = built.diagram.GetSubsystemByName("reproducer")
+    context = built.diagram.CreateDefaultContext()
+    own = reproducer.GetMyMutableContextFromRoot(context)
+    first = [reproducer.GetOutputPort(name).Eval(own).copy() for name in ("x_star", "k_star")]
+    set_holding(reproducer, own, True)
+    simulator = Simulator(built.diagram, context)
+    simulator.AdvanceTo(0.3)
+    for name, value in zip(("x_star", "k_star"), first):
+        np.testing.assert_array_equal(reproducer.GetOutputPort(name).Eval(own), value)
+    set_holding(reproducer, own, False)
+    simulator.AdvanceTo(0.5)
+    assert not np.array_equal(reproducer.GetOutputPort("x_star").Eval(own), first[0])

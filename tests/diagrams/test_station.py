@@ -429,7 +429,7 @@ def test_a_station_built_without_visualisation_has_no_visualiser(pin_scenario):
     assert station.meshcat is None
     names = [type(s).__name__ for s in _systems(station.diagram)]
     assert not any("Visualizer" in n or "Lcm" in n for n in names), names
-    built = build_demonstration_diagram(pin_scenario, seed=0, scene=False)
+    built = build_demonstration_diagram(pin_scenario, scene=False)
     assert built.meshcat is None
     assert not [s for s in _systems(built.diagram) if isinstance(s, MeshcatVisualizer)]
 

@@ -283,9 +283,10 @@ def drawing_replay(tmp_path_factory):
     from hemg_drake.viz.recording import record_run
 
     scenario = load_scenario(shipped_scenario("drawing"), overrides=["duration=1.8"])
-    built = build_demonstration_diagram(scenario, seed=scenario.seed, visualization=Visualization())
+    built = build_demonstration_diagram(scenario, visualization=Visualization())
     path = tmp_path_factory.mktemp("drawing") / "replay.html"
-    demo = record_run(built, run_demonstration, path, title="drawing: demonstration 1")
+    demo = record_run(built, lambda b: run_demonstration(b, scenario.seed), path,
+                      title="drawing: demonstration 1")  # fmt: skip
     return path, demo
 
 
@@ -313,9 +314,9 @@ def test_record_run_needs_a_visualised_diagram(tmp_path):
     from hemg_drake.viz.recording import record_run
 
     scenario = load_scenario(shipped_scenario("cotter_pin"), overrides=["duration=0.05"])
-    built = build_demonstration_diagram(scenario, seed=0, scene=False)
+    built = build_demonstration_diagram(scenario, scene=False)
     with pytest.raises(ValueError, match="visualization=Visualization"):
-        record_run(built, run_demonstration, tmp_path / "x.html", title="x")
+        record_run(built, lambda b: run_demonstration(b, 0), tmp_path / "x.html", title="x")
 
 
 @pytest.mark.browser
