@@ -271,6 +271,27 @@ def test_keyboard_sliders_move_the_stylus_and_the_log_replays_bit_for_bit(scenar
     for name in ("time", "wall_time", "rows", "end_time"):  # NaN: no gamepad
         assert np.array_equal(getattr(log, name), getattr(again.inputs, name), equal_nan=True)
     assert (log.seed, log.scenario) == (again.inputs.seed, again.inputs.scenario)
+    # A Clone() of the demonstration diagram, re-driven by the same log from its own context
+    # (the seed's, the arm at its start), gives the same demonstration and log again.
+    from pydrake.systems.analysis import ApplySimulatorConfig
+
+    from hemg_drake.diagrams.demonstration import demonstration_from_logs, initial_context
+
+    built = again.built
+    clone = built.diagram.Clone()
+    simulator = Simulator(clone, initial_context(built, 3, diagram=clone))
+    ApplySimulatorConfig(scenario.simulator, simulator)
+    simulator.AdvanceTo(log.end_time)
+    context = simulator.get_context()
+    logs = [clone.GetSubsystemByName(sink.get_name()).FindLog(context)
+            for sink in (built.logger, built.emg_logger)]  # fmt: skip
+    cloned = demonstration_from_logs(*logs, 3)
+    for field in dc.fields(demo):
+        assert np.array_equal(getattr(demo, field.name), getattr(cloned, field.name))
+    master = clone.GetSubsystemByName(take.master.get_name())
+    for mine, theirs in zip((log.time, log.wall_time, log.rows),
+                            master.inputs_log(master.GetMyContextFromRoot(context))):
+        assert np.array_equal(mine, theirs, equal_nan=True)
 
 
 def send(ws, **message):
