@@ -6,8 +6,10 @@ scenario's ``duration``) without visualisation and reports the best real-time fa
 (simulated seconds per second) by this process's CPU time (the machine is shared: CPU time
 is what other work disturbs least) and by the wall clock:
 
-- ``before``: the code at ``--baseline`` (default ``/work/main``), run in a subprocess with
-  ``PYTHONPATH`` set to it;
+- ``before``: the code at ``--baseline``, a checkout's directory or a git revision of this
+  repository (exported with ``git archive`` to a temporary directory; default 9092e60, the
+  code before issue 22's Drake-native controllers), run in a subprocess with ``PYTHONPATH``
+  set to it;
 - ``after``: this checkout's code, likewise in a subprocess;
 - the floor: the plant and the task's scene alone (no Python system; the arm held by a
   constant gravity-compensating torque), which no change to the Python systems can lower
@@ -255,7 +257,9 @@ def best(rounds, side, name, key):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--baseline", default="/work/main", help="checkout timed as 'before'")
+    parser.add_argument(
+        "--baseline", default="9092e60", help="directory or git revision timed as 'before'"
+    )
     parser.add_argument("--rounds", type=int, default=2, help="turns of before/after")
     parser.add_argument("--variants", action="store_true")
     parser.add_argument("--measure", action="store_true", help=argparse.SUPPRESS)
@@ -266,7 +270,20 @@ def main():
         return
 
     here = Path(__file__).resolve().parents[1]
-    sides = {"before": Path(arguments.baseline), "after": here}
+    with tempfile.TemporaryDirectory() as exported:
+        baseline = Path(arguments.baseline)
+        if not baseline.is_dir():
+            archive = subprocess.run(
+                ["git", "-C", str(here), "archive", arguments.baseline],
+                capture_output=True, check=True,
+            )  # fmt: skip
+            subprocess.run(["tar", "-x", "-C", exported], input=archive.stdout, check=True)
+            baseline = Path(exported)
+        report({"before": baseline, "after": here}, arguments)
+
+
+def report(sides, arguments):
+    """Run both sides in turns and print the figures side by side."""
     rounds = []
     for turn in range(arguments.rounds):
         profile = turn == arguments.rounds - 1
@@ -274,7 +291,7 @@ def main():
     print(
         f"demonstration diagram, 1 ms plant step, whole demonstrations, recorder off; "
         f"best of {arguments.rounds} x {REPEATS} runs per side; real-time factors "
-        f"(CPU time / wall clock); before = {sides['before']}, after = {sides['after']}"
+        f"(CPU time / wall clock); before = {arguments.baseline}, after = {sides['after']}"
     )
     for name in SCENARIOS:
         duration = rounds[0]["after"][name]["duration"]
