@@ -46,27 +46,32 @@ REPEATS = 2  # runs per subprocess; the best counts
 
 
 def build(scenario, recorder=None):
-    """The demonstration diagram of the checkout on the path (the seed's keyword or not)."""
-    from hemg_drake.diagrams.demonstration import build_demonstration_diagram
+    """The demonstration diagram of the checkout on the path and a simulator of the
+    scenario's seed (the seed a keyword of the builder, or drawn into the context)."""
+    from pydrake.systems.analysis import Simulator
 
-    parameters = inspect.signature(build_demonstration_diagram).parameters
+    from hemg_drake.diagrams import demonstration
+
+    parameters = inspect.signature(demonstration.build_demonstration_diagram).parameters
     if "seed" in parameters:
-        return build_demonstration_diagram(scenario, seed=scenario.seed, recorder=recorder)
-    return build_demonstration_diagram(scenario, recorder=recorder)
+        built = demonstration.build_demonstration_diagram(
+            scenario, seed=scenario.seed, recorder=recorder
+        )
+        return built, Simulator(built.diagram)
+    built = demonstration.build_demonstration_diagram(scenario, recorder=recorder)
+    context = demonstration.initial_context(built, scenario.seed)
+    return built, Simulator(built.diagram, context)
 
 
 def run(scenario, *, record=False):
     """Simulate one demonstration; (CPU s, wall s, export s or None, bytes)."""
-    from pydrake.systems.analysis import Simulator
-
     recorder = None
     if record:
         from hemg_drake.robots.baxter import FLOOR_Z
         from hemg_drake.viz.recording import ReplayRecorder
 
         recorder = ReplayRecorder(floor_z=FLOOR_Z)
-    built = build(scenario, recorder)
-    simulator = Simulator(built.diagram)
+    built, simulator = build(scenario, recorder)
     simulator.Initialize()
     if recorder is not None:
         recorder.start()
@@ -180,11 +185,8 @@ class CallbackTimer:
 
 def time_by_system(scenario):
     """(CPU s per simulated s, {callback: (s per simulated s, calls per simulated s)})."""
-    from pydrake.systems.analysis import Simulator
-
     with CallbackTimer() as timer:
-        built = build(scenario)
-        simulator = Simulator(built.diagram)
+        built, simulator = build(scenario)
         simulator.Initialize()
         timer.seconds.clear()
         timer.calls.clear()
