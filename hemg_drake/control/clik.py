@@ -14,14 +14,14 @@ import math
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
-from pydrake.common.value import AbstractValue
 from pydrake.math import sqrt as scalar_sqrt
 from pydrake.multibody.tree import JacobianWrtVariable
-from pydrake.systems.framework import LeafSystem_, ValueProducer
+from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from hemg_drake._validate import as_scalar, as_vector
 from hemg_drake.control.config import CLIK_METHODS, ClikConfig
+from hemg_drake.robots.plant_context import declare_plant_context
 
 # Damping mu of the tool-axis task's solve (dimensionless, as J_w). The task's two singular
 # values are about 0.9 and 0.4 over a sheet within reach, so mu slows the axis there by 1-6 %.
@@ -195,14 +195,10 @@ def Clik_(T):
             self._q_d_index = self.DeclareDiscreteState(n)
             self._v_d_index = self.DeclareDiscreteState(n)
             # The plant's context at q_d: forward kinematics and Jacobians on demand.
-            self._plant_context = self.DeclareCacheEntry(
-                "plant_context",
-                ValueProducer(
-                    allocate=lambda: AbstractValue.Make(self._plant.CreateDefaultContext()),
-                    calc=self._calc_plant_context,
-                ),
-                {self.discrete_state_ticket(self._q_d_index)},
-            )
+            self._plant_context = declare_plant_context(
+                self, self._plant, self.discrete_state_ticket(self._q_d_index),
+                self._set_plant_state,
+            )  # fmt: skip
             self.DeclareInitializationDiscreteUpdateEvent(self._initialize)
             self.DeclarePeriodicDiscreteUpdateEvent(
                 period_sec=self._period,
@@ -215,9 +211,8 @@ def Clik_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, **other._args, converter=converter)
 
-        def _calc_plant_context(self, context, value):
-            q_d = self._q_d(context)
-            self._plant.SetPositions(value.get_mutable_value(), self._model, q_d)
+        def _set_plant_state(self, context, plant_context):
+            self._plant.SetPositions(plant_context, self._model, self._q_d(context))
 
         def _set(self, discrete_state, q_d, v_d):
             discrete_state.set_value(self._q_d_index, np.array(q_d))
