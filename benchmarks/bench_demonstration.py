@@ -6,8 +6,10 @@ scenario's ``duration``) without visualisation and reports the best real-time fa
 (simulated seconds per second) by this process's CPU time (the machine is shared: CPU time
 is what other work disturbs least) and by the wall clock:
 
-- ``before``: the code at ``--baseline`` (default ``/work/main``), run in a subprocess with
-  ``PYTHONPATH`` set to it;
+- ``before``: the code at ``--baseline``, a checkout's directory or a git revision of this
+  repository (exported with ``git archive`` to a temporary directory; default 9092e60, the
+  code before issue 22's Drake-native controllers), run in a subprocess with ``PYTHONPATH``
+  set to it;
 - ``after``: this checkout's code, likewise in a subprocess;
 - the floor: the plant and the task's scene alone (no Python system; the arm held by a
   constant gravity-compensating torque), which no change to the Python systems can lower
@@ -44,23 +46,27 @@ REPEATS = 2  # runs per subprocess; the best counts
 
 
 def build(scenario, visualization=None):
-    """The demonstration diagram of the checkout on the path (the seed's keyword or not;
-    visualised through ``visualization=`` or, on older checkouts, a ``recorder=``)."""
-    from hemg_drake.diagrams.demonstration import build_demonstration_diagram
+    """The demonstration diagram of the checkout on the path and a simulator of the
+    scenario's seed (the seed a keyword of the builder, or drawn into the context);
+    visualised through ``visualization=`` or, on older checkouts, a ``recorder=``."""
+    from pydrake.systems.analysis import Simulator
 
-    parameters = inspect.signature(build_demonstration_diagram).parameters
+    from hemg_drake.diagrams import demonstration
+
+    parameters = inspect.signature(demonstration.build_demonstration_diagram).parameters
     shown = {}
     if visualization is not None:
         shown = {"visualization" if "visualization" in parameters else "recorder": visualization}
     if "seed" in parameters:
-        return build_demonstration_diagram(scenario, seed=scenario.seed, **shown)
-    return build_demonstration_diagram(scenario, **shown)
+        built = demonstration.build_demonstration_diagram(scenario, seed=scenario.seed, **shown)
+        return built, Simulator(built.diagram)
+    built = demonstration.build_demonstration_diagram(scenario, **shown)
+    context = demonstration.initial_context(built, scenario.seed)
+    return built, Simulator(built.diagram, context)
 
 
 def run(scenario, *, record=False):
     """Simulate one demonstration; (CPU s, wall s, export s or None, bytes)."""
-    from pydrake.systems.analysis import Simulator
-
     recorder = visualization = None
     if record:
         from hemg_drake.robots.baxter import FLOOR_Z
@@ -73,8 +79,7 @@ def run(scenario, *, record=False):
             visualization = Visualization()
         except ImportError:  # an older checkout: the recorder attaches itself
             visualization = recorder
-    built = build(scenario, visualization)
-    simulator = Simulator(built.diagram)
+    built, simulator = build(scenario, visualization)
     simulator.Initialize()
     if recorder is not None:
         if visualization is recorder:
@@ -191,11 +196,8 @@ class CallbackTimer:
 
 def time_by_system(scenario):
     """(CPU s per simulated s, {callback: (s per simulated s, calls per simulated s)})."""
-    from pydrake.systems.analysis import Simulator
-
     with CallbackTimer() as timer:
-        built = build(scenario)
-        simulator = Simulator(built.diagram)
+        built, simulator = build(scenario)
         simulator.Initialize()
         timer.seconds.clear()
         timer.calls.clear()
@@ -268,7 +270,9 @@ def best(rounds, side, name, key):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--baseline", default="/work/main", help="checkout timed as 'before'")
+    parser.add_argument(
+        "--baseline", default="9092e60", help="directory or git revision timed as 'before'"
+    )
     parser.add_argument("--rounds", type=int, default=2, help="turns of before/after")
     parser.add_argument("--variants", action="store_true")
     parser.add_argument("--measure", action="store_true", help=argparse.SUPPRESS)
@@ -279,7 +283,20 @@ def main():
         return
 
     here = Path(__file__).resolve().parents[1]
-    sides = {"before": Path(arguments.baseline), "after": here}
+    with tempfile.TemporaryDirectory() as exported:
+        baseline = Path(arguments.baseline)
+        if not baseline.is_dir():
+            archive = subprocess.run(
+                ["git", "-C", str(here), "archive", arguments.baseline],
+                capture_output=True, check=True,
+            )  # fmt: skip
+            subprocess.run(["tar", "-x", "-C", exported], input=archive.stdout, check=True)
+            baseline = Path(exported)
+        report({"before": baseline, "after": here}, arguments)
+
+
+def report(sides, arguments):
+    """Run both sides in turns and print the figures side by side."""
     rounds = []
     for turn in range(arguments.rounds):
         profile = turn == arguments.rounds - 1
@@ -287,7 +304,7 @@ def main():
     print(
         f"demonstration diagram, 1 ms plant step, whole demonstrations, recorder off; "
         f"best of {arguments.rounds} x {REPEATS} runs per side; real-time factors "
-        f"(CPU time / wall clock); before = {sides['before']}, after = {sides['after']}"
+        f"(CPU time / wall clock); before = {arguments.baseline}, after = {sides['after']}"
     )
     for name in SCENARIOS:
         duration = rounds[0]["after"][name]["duration"]

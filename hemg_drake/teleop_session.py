@@ -16,7 +16,6 @@ from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 from hemg_drake._validate import as_scalar
 from hemg_drake.teleop.browser import BrowserMaster
 from hemg_drake.teleop.browser_inputs import (
-    COLUMNS,
     END_KEY,
     KEYS,
     InputsLog,
@@ -106,9 +105,8 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
                           workspace_size=scenario.master.workspace_size,
                           activation=operator.rest_activation)  # fmt: skip
             if live
-            else LoggedInputs(source.time, source.rows)
+            else LoggedInputs(source.time, source.rows, source.wall_time)
         )
-        holder["inputs"] = inputs
         holder["master"] = BrowserMaster(
             source=inputs, p_MS_initial=p_MS_initial,
             workspace_size=scenario.master.workspace_size,
@@ -142,19 +140,22 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
         recorder = ReplayRecorder(floor_z=FLOOR_Z, title=title, view=view)
         recorder.start(diagram, meshcat)
     began = time.perf_counter()
-    k, reason, t = 0, None, 0.0
+    k, reason, t, printed = 0, None, 0.0, 0
+    master_context = master.GetMyContextFromRoot(context)
     while True:
         k += 1
         t = k * PAGE_PERIOD
         if duration is not None and t >= duration:
             t = duration
         simulator.AdvanceTo(t)
-        for line in master.pop_messages():
+        messages = master.messages(master_context)
+        for line in messages[printed:]:
             progress(line)
+        printed = len(messages)
         if page is not None:
             station_context = station.GetMyContextFromRoot(context)
-            p_WT = built.mapping.master_to_slave(master.GetOutputPort("p_MT").Eval(
-                master.GetMyContextFromRoot(context)))  # fmt: skip
+            p_WT = built.mapping.master_to_slave(
+                master.GetOutputPort("p_MT").Eval(master_context))
             page.update(
                 t,
                 station.GetOutputPort("p_WE").Eval(station_context),
@@ -168,7 +169,7 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
         if duration is not None and t >= duration:
             reason = "duration"
             break
-        reason = master.end_reason()
+        reason = master.end_reason(master_context)
         if reason is not None and (live or t >= duration):
             break
     wall = time.perf_counter() - began
@@ -181,10 +182,8 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
         if page is not None:
             meshcat.Delete(TeleopPage.PATH)  # the page's marks are no part of the replay
         export_station_replay(recorder, built, replay_path, demo.time, demo.p_WE, demo.f_WE)
-    times = np.array([row_t for row_t, _ in master.rows])
-    rows = np.array([row for _, row in master.rows]).reshape(-1, len(COLUMNS))
-    wall_times = np.asarray(holder["inputs"].wall_times) if live else source.wall_time
-    log = InputsLog(time=times, wall_time=np.asarray(wall_times, float), rows=rows, end_time=t,
+    times, wall_times, rows = master.inputs_log(master_context)
+    log = InputsLog(time=times, wall_time=wall_times, rows=rows, end_time=t,
                     end_reason=reason if live else source.end_reason, seed=seed,
                     scenario=scenario.to_yaml())  # fmt: skip
     return Take(demo, log, built, master, page.updates if page else 0, wall)

@@ -14,14 +14,14 @@ import math
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
-from pydrake.common.value import AbstractValue
 from pydrake.math import sqrt as scalar_sqrt
 from pydrake.multibody.tree import JacobianWrtVariable
-from pydrake.systems.framework import LeafSystem_, ValueProducer
+from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from hemg_drake._validate import as_scalar, as_vector
 from hemg_drake.control.config import CLIK_METHODS, ClikConfig
+from hemg_drake.robots.plant_context import declare_plant_context
 
 # Damping mu of the tool-axis task's solve (dimensionless, as J_w). The task's two singular
 # values are about 0.9 and 0.4 over a sheet within reach, so mu slows the axis there by 1-6 %.
@@ -195,14 +195,10 @@ def Clik_(T):
             self._q_d_index = self.DeclareDiscreteState(n)
             self._v_d_index = self.DeclareDiscreteState(n)
             # The plant's context at q_d: forward kinematics and Jacobians on demand.
-            self._plant_context = self.DeclareCacheEntry(
-                "plant_context",
-                ValueProducer(
-                    allocate=lambda: AbstractValue.Make(self._plant.CreateDefaultContext()),
-                    calc=self._calc_plant_context,
-                ),
-                {self.discrete_state_ticket(self._q_d_index)},
-            )
+            self._plant_context = declare_plant_context(
+                self, self._plant, self.discrete_state_ticket(self._q_d_index),
+                self._set_plant_state,
+            )  # fmt: skip
             self.DeclareInitializationDiscreteUpdateEvent(self._initialize)
             self.DeclarePeriodicDiscreteUpdateEvent(
                 period_sec=self._period,
@@ -215,9 +211,8 @@ def Clik_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, **other._args, converter=converter)
 
-        def _calc_plant_context(self, context, value):
-            q_d = self._q_d(context)
-            self._plant.SetPositions(value.get_mutable_value(), self._model, q_d)
+        def _set_plant_state(self, context, plant_context):
+            self._plant.SetPositions(plant_context, self._model, self._q_d(context))
 
         def _set(self, discrete_state, q_d, v_d):
             discrete_state.set_value(self._q_d_index, np.array(q_d))
@@ -268,15 +263,15 @@ def Clik_(T):
             if not _finite(p_desired[0] + p_desired[1] + p_desired[2]):
                 return self._hold(context, discrete_state)
             plant_context = self._plant_context.Eval(context)
-            X_WE = self._frame_E.CalcPoseInWorld(plant_context)
+            # One call for R_WE and p_WE (the pose's 4x4 matrix, row-major: 16 scalars).
+            X_WE = self._frame_E.CalcPoseInWorld(plant_context).GetAsMatrix4().ravel().tolist()
             J = self._plant.CalcJacobianSpatialVelocity(
                 plant_context, *self._jacobian_arguments
             )[:, self._columns]
             qdot = axis_task_rates(
                 J,
-                X_WE.rotation().matrix(),
-                X_WE.translation(),
-                np.array(p_desired),
+                X_WE,
+                p_desired,
                 gain=self._gain,
                 dls_damping=self._damping if self._method == "dls" else None,
                 axis_gain=self._orientation_gain,
@@ -324,7 +319,7 @@ Clik = Clik_[None]
 
 
 def axis_task_rates(
-    J, R_WE, p_WoEo_W, p_WE_desired, *, gain, dls_damping, axis_gain, p_EoE_E, axis_E, axis_W,
+    J, X_WE, p_WE_desired, *, gain, dls_damping, axis_gain, p_EoE_E, axis_E, axis_W,
     sqrt=math.sqrt,
 ):
     """The CLIK rates with the tool-axis task in the position task's null space (``Clik``).
@@ -349,7 +344,8 @@ def axis_task_rates(
     Parameters
     ----------
     J : array, shape (6, n), the spatial Jacobian of point E in W (angular rows first).
-    R_WE : array, shape (3, 3); p_WoEo_W, p_WE_desired : arrays, shape (3,).
+    X_WE : sequence of 16 scalars, frame E's pose in W as a row-major 4x4 matrix.
+    p_WE_desired : sequence of 3 scalars.
     gain, axis_gain : scalars; dls_damping : scalar, or None for the transpose law.
     p_EoE_E, axis_E, axis_W : sequences of 3 (axis_E, axis_W unit).
     sqrt : the square root of the scalar type.
@@ -361,10 +357,10 @@ def axis_task_rates(
     (s00, s01, s02, k00, k01, k02), (_, s11, s12, k10, k11, k12), (
         _, _, s22, k20, k21, k22), (_, _, _, g00, g01, g02), (_, _, _, _, g11, g12), (
         _, _, _, _, _, g22) = (J @ J.T).tolist()  # fmt: skip
-    R = R_WE.ravel().tolist()
+    R = (*X_WE[0:3], *X_WE[4:7], *X_WE[8:11])
     p0, p1, p2 = _mv(R, p_EoE_E)
-    q0, q1, q2 = p_WoEo_W.tolist()
-    d0, d1, d2 = p_WE_desired.tolist()
+    q0, q1, q2 = X_WE[3], X_WE[7], X_WE[11]
+    d0, d1, d2 = p_WE_desired
     y = (d0 - (q0 + p0), d1 - (q1 + p1), d2 - (q2 + p2))  # e
     a0, a1, a2 = _mv(R, axis_E)
     G = (g00, g01, g02, g01, g11, g12, g02, g12, g22)

@@ -31,13 +31,13 @@ import math
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
-from pydrake.common.value import AbstractValue
 from pydrake.systems.controllers import InverseDynamics
-from pydrake.systems.framework import LeafSystem_, ValueProducer
+from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from hemg_drake._validate import as_scalar
 from hemg_drake.control.config import GAIN_RANGE, MAX_TIME_STEP, PdConfig  # noqa: F401
+from hemg_drake.robots.plant_context import declare_plant_context
 
 # The default per-joint stiffness per unit of K, s_j (PdConfig's; figures label with it).
 STIFFNESS_SCALE = np.array(PdConfig().stiffness_scale)
@@ -123,13 +123,8 @@ def VariableGainPd_(T):
             self.gain_input = self.DeclareVectorInputPort("gain", 1)
             self.feedforward_input = self.DeclareVectorInputPort("feedforward_torque", n)
             # The controller plant's context at the arm's measured q: M(q) on demand.
-            self._plant_context = self.DeclareCacheEntry(
-                "plant_context",
-                ValueProducer(
-                    allocate=lambda: AbstractValue.Make(self._plant.CreateDefaultContext()),
-                    calc=self._calc_plant_context,
-                ),
-                {self.state_input.ticket()},
+            self._plant_context = declare_plant_context(
+                self, self._plant, self.state_input.ticket(), self._set_plant_state
             )
             self.torque_output = self.DeclareVectorOutputPort(
                 "torque",
@@ -141,9 +136,9 @@ def VariableGainPd_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, **other._args, converter=converter)
 
-        def _calc_plant_context(self, context, value):
+        def _set_plant_state(self, context, plant_context):
             q = self.state_input.Eval(context)[: self._n]
-            self._plant.SetPositions(value.get_mutable_value(), self._model, q)
+            self._plant.SetPositions(plant_context, self._model, q)
 
         def _calc_torque(self, context, output):
             n = self._n

@@ -50,8 +50,15 @@ def set_holding(reproducer, context, holding):
     context.get_mutable_numeric_parameter(0).SetAtIndex(0, 1.0 if holding else 0.0)
 
 
-def _holding(system, context):
-    return context.get_numeric_parameter(system._holding).GetAtIndex(0) != 0.0
+def _step_inputs(system, context):
+    """What a reproducer's update reads: (p_WE, x*, the predicted forward variable), or None
+    while it holds (the update then starts from, and keeps, the current state)."""
+    if context.get_numeric_parameter(system._holding).GetAtIndex(0) != 0.0:
+        return None
+    p_WE = system._policy.check_position(system._p_WE_input.Eval(context), "p_WE")
+    x_star = context.get_discrete_state(system._x_star_state).get_value()
+    predicted = context.get_discrete_state(system._forward_state).get_value()
+    return p_WE, x_star, predicted.reshape(system._forward_shape)
 
 
 def _store(system, discrete_state, x_star, xdot_star, k_star, h, predicted):
@@ -136,14 +143,10 @@ def HsmmGmrReproducer_(T):
             Impl._construct(self, **other._arguments, converter=converter)
 
         def _calc_step(self, context, discrete_state):
-            if _holding(self, context):  # the update starts from the current state: keep it
+            inputs = _step_inputs(self, context)
+            if inputs is None:
                 return
-            p_WE = self._policy.check_position(self._p_WE_input.Eval(context), "p_WE")
-            x_star = context.get_discrete_state(self._x_star_state).get_value()
-            predicted = context.get_discrete_state(self._forward_state).get_value()
-            h, xdot, k, x_star_next, predicted_next = self._policy.step(
-                p_WE, x_star, predicted.reshape(self._forward_shape)
-            )
+            h, xdot, k, x_star_next, predicted_next = self._policy.step(*inputs)
             _store(self, discrete_state, x_star_next, xdot, k, h, predicted_next)
 
     return Impl
@@ -241,12 +244,11 @@ def HsmmLqrReproducer_(T):
             Impl._construct(self, **other._arguments, converter=converter)
 
         def _calc_step(self, context, discrete_state):
-            if _holding(self, context):  # the update starts from the current state: keep it
+            inputs = _step_inputs(self, context)
+            if inputs is None:
                 return
-            p_WE = self._policy.check_position(self._p_WE_input.Eval(context), "p_WE")
-            x_star = context.get_discrete_state(self._x_star_state).get_value()
+            p_WE, x_star, predicted = inputs
             xdot = context.get_discrete_state(self._xdot_star_state).get_value()
-            predicted = context.get_discrete_state(self._forward_state).get_value()
             step = int(context.get_discrete_state(self._step_state).get_value()[0])
             # The plan's position: its own x*_k, kept within max_lead of the measured point.
             lead = x_star - p_WE
@@ -254,7 +256,7 @@ def HsmmLqrReproducer_(T):
             if distance > self._max_lead:
                 x_star = p_WE + lead * (self._max_lead / distance)
             h, k, x_next, xdot_next, predicted_next = self._policy.step(
-                step, x_star, xdot, predicted.reshape(self._forward_shape), observed=p_WE
+                step, x_star, xdot, predicted, observed=p_WE
             )
             _store(self, discrete_state, x_next, xdot_next, k, h, predicted_next)
             discrete_state.set_value(self._step_state, [step + 1.0])

@@ -13,8 +13,10 @@ ForceFeedback` sends back to the master, and what a demonstration logs.
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.plant import ContactResults_
-from pydrake.systems.framework import LeafSystem_, ValueProducer
+from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
+
+from hemg_drake.robots.plant_context import declare_plant_context
 
 
 @TemplateSystem.define("ContactForceSensor_", T_list=[float])
@@ -150,13 +152,8 @@ def BushingForceSensor_(T):
             self.state_input = self.DeclareVectorInputPort(
                 "state", plant.num_positions() + plant.num_velocities()
             )
-            self._plant_context = self.DeclareCacheEntry(
-                "plant_context",
-                ValueProducer(
-                    allocate=lambda: AbstractValue.Make(self._plant.CreateDefaultContext()),
-                    calc=self._calc_plant_context,
-                ),
-                {self.state_input.ticket()},
+            self._plant_context = declare_plant_context(
+                self, self._plant, self.state_input.ticket(), self._set_plant_state
             )
             self.f_WE_output = self.DeclareVectorOutputPort(
                 "f_WE", 3, self._calc_f_WE, prerequisites_of_calc={self.state_input.ticket()}
@@ -165,10 +162,8 @@ def BushingForceSensor_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, **other._args, converter=converter)
 
-        def _calc_plant_context(self, context, value):
-            self._plant.SetPositionsAndVelocities(
-                value.get_mutable_value(), self.state_input.Eval(context)
-            )
+        def _set_plant_state(self, context, plant_context):
+            self._plant.SetPositionsAndVelocities(plant_context, self.state_input.Eval(context))
 
         def _calc_f_WE(self, context, output):
             plant_context = self._plant_context.Eval(context)

@@ -1,6 +1,8 @@
 """The browser master's input sources and their 100 Hz inputs log.
 
-Each source gives one raw row (:data:`COLUMNS`) per ``read(t)``:
+Each source gives one raw row (:data:`COLUMNS`) and the wall time of the reading per
+``read(t)``, and changes nothing by it: the master keeps what it sampled in its Context, so
+a source is a read-only handle that clones of the master may share:
 
 - :class:`MeshcatInputs`: the live page. Keyboard through Meshcat sliders with key bindings
   (:data:`KEYS`), limited to the Touch X's 160 x 120 x 120 mm workspace, and two keys for the
@@ -76,7 +78,6 @@ class MeshcatInputs:
                  activation=0.05, clock=time.monotonic):  # fmt: skip
         self.meshcat = meshcat
         self.clock = clock
-        self.wall_times = []
         half_mm = 500.0 * as_vector("workspace_size", workspace_size, 3)
         start_mm = 1000.0 * as_vector("p_MS_initial", p_MS_initial, 3)
         existing = set(meshcat.GetSliderNames())
@@ -93,6 +94,7 @@ class MeshcatInputs:
         meshcat.AddButton(END_BUTTON, keycode=END_KEY)  # (again: resets its clicks)
 
     def read(self, t):
+        """The page's inputs now: (row of len(COLUMNS) floats, wall time in s)."""
         m = self.meshcat
         row = [m.GetSliderValue(n) for n in (SLIDER_X, SLIDER_Y, SLIDER_Z, SLIDER_ACTIVATION)]
         pad = m.GetGamepad()
@@ -110,45 +112,50 @@ class MeshcatInputs:
                 index = -1.0  # the page sends an empty gamepad once it is disconnected
         row += [index, *axes, *buttons]
         row += [float(m.GetButtonClicks(END_BUTTON)), float(m.GetNumActiveConnections())]
-        self.wall_times.append(self.clock())
-        return row
+        return row, float(self.clock())
 
 
 class LoggedInputs:
-    """An input source reading back a log's rows in order, checking each row's time.
+    """An input source reading back a log's rows: the row logged at exactly the time asked.
 
     Parameters
     ----------
-    times : array, shape (N,), s
+    times : array, shape (N,), s, increasing
     rows : array, shape (N, len(COLUMNS))
+    wall_times : array, shape (N,), s, optional
+        Returned with each row (NaN without).
     """
 
-    def __init__(self, times, rows):
+    def __init__(self, times, rows, wall_times=None):
         self.times = np.asarray(times, dtype=float)
         self.rows = np.asarray(rows, dtype=float)
+        self.wall_times = (np.full(self.times.shape, math.nan) if wall_times is None
+                           else np.asarray(wall_times, dtype=float))  # fmt: skip
         if self.rows.ndim != 2 or self.rows.shape[1] != len(COLUMNS):
             raise ValueError(
                 f"input rows must have shape (N, {len(COLUMNS)}), got {self.rows.shape}"
             )
-        if self.times.shape != (len(self.rows),):
-            raise ValueError("input times must have one entry per row")
-        self._next = 0
+        if self.times.shape != (len(self.rows),) or self.wall_times.shape != self.times.shape:
+            raise ValueError("input times and wall times must have one entry per row")
+        if np.any(np.diff(self.times) <= 0):
+            raise ValueError("input times must increase")
 
     def read(self, t):
-        k = self._next
+        """The row logged at time ``t`` (s) and its wall time; ValueError if there is none."""
+        k = int(np.searchsorted(self.times, t))
         if k >= len(self.rows):
+            end = f"t = {self.times[-1]:.3f} s" if len(self.times) else "no sample"
             raise ValueError(
-                f"the inputs log ends at sample {k} (t = {self.times[-1]:.3f} s) but the "
-                f"diagram asks for t = {t:.3f} s: the log does not belong to this take"
+                f"the inputs log ends at {end} but the diagram asks for t = {t:.3f} s: the "
+                "log does not belong to this take"
             )
         if self.times[k] != t:
             raise ValueError(
-                f"inputs log sample {k} is at t = {float(self.times[k])!r} s, the diagram's at "
-                f"{t!r} s: "
-                "recorded with another input period or scenario"
+                f"the inputs log has no sample at t = {t!r} s (the next is at "
+                f"t = {float(self.times[k])!r} s): recorded with another input period or "
+                "scenario"
             )
-        self._next = k + 1
-        return self.rows[k].tolist()
+        return self.rows[k].tolist(), float(self.wall_times[k])
 
 
 @dc.dataclass(frozen=True, eq=False)

@@ -23,7 +23,7 @@ from hemg_drake.run_folder import RunFolder
 from hemg_drake.scenario import load_scenario, shipped_scenario
 from hemg_drake.teleop.browser import BrowserMaster, dead_zone
 from hemg_drake.teleop.browser_inputs import (
-    COLUMNS, END_BUTTON, SLIDER_ACTIVATION, SLIDER_X, LoggedInputs, load_inputs,
+    COLUMNS, END_BUTTON, KEY_STEP_MM, SLIDER_ACTIVATION, SLIDER_X, LoggedInputs, load_inputs,
 )  # fmt: skip
 from hemg_drake.teleop_session import run_take, teleop
 from tooling.headless_page import HeadlessPage  # tests/tooling: test tooling, not runtime
@@ -65,7 +65,8 @@ def row(slider_mm=(0.0, 0.0, 0.0), activation=0.05, axes=None, buttons=None, cli
 
 
 def master_after(rows, p_MS, v_MS, **parameters):
-    """The BrowserMaster fed ``rows`` at 0, 10, 20 ms ..., its outputs just after the last."""
+    """The BrowserMaster fed ``rows`` at 0, 10, 20 ms ..., its context and outputs just after
+    the last."""
     times = 0.01 * np.arange(len(rows))
     master = BrowserMaster(source=LoggedInputs(times, rows), p_MS_initial=P0, **parameters)
     simulator = Simulator(master)
@@ -76,7 +77,7 @@ def master_after(rows, p_MS, v_MS, **parameters):
     simulator.AdvanceTo(times[-1] + 0.005)
     force = master.GetOutputPort("hand_force").Eval(context)
     activation = master.GetOutputPort("activation").Eval(context)[0]
-    return master, force, activation
+    return master, context, force, activation
 
 
 def test_dead_zone_by_hand():
@@ -100,7 +101,7 @@ def test_keyboard_and_gamepad_target_and_hand_force_by_hand():
         row((14.0, 0.0, -6.0), **pad),
     ]
     p_MS, v_MS = [0.0, 0.0, 0.0], [0.01, 0.0, -0.02]
-    _, force, activation = master_after(rows, p_MS, v_MS)
+    _, _, force, activation = master_after(rows, p_MS, v_MS)
     # Target: start + keyboard offset + three gamepad samples of T * v.
     p_T = [0.01 + 0.004 + 3 * 0.01 * 0.05, -0.02 + 3 * 0.01 * 0.1, 0.03 - 0.006]
     v_T = [0.05, 0.1, 0.0]
@@ -116,10 +117,10 @@ def test_target_stays_in_the_workspace_and_hand_force_saturates():
     rows = [row()] + [row(**pad)] * 120
     p_T = [HALF[0], P0[1], P0[2]]
     expected = [K_H * (p_T[i] - P0[i]) for i in range(3)]  # 21 N along x
-    _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0], max_hand_force=1000.0)
+    _, _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0], max_hand_force=1000.0)
     np.testing.assert_allclose(force, expected, rtol=1e-12, atol=1e-12)
     # With the default 15 N limit, the same push saturates in norm.
-    _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0])
+    _, _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0])
     norm = math.sqrt(sum(f * f for f in expected))
     np.testing.assert_allclose(force, [f * F_MAX / norm for f in expected], rtol=1e-12)
 
@@ -131,10 +132,10 @@ def test_missing_or_nan_gamepad_moves_nothing_and_is_reported():
         row(axes=[0.0] * 4, buttons=[0.0] * 8),
         row(activation=0.4),  # the page stopped sending the gamepad
     ]
-    master, force, activation = master_after(rows, P0, [0.0, 0.0, 0.0])
+    master, context, force, activation = master_after(rows, P0, [0.0, 0.0, 0.0])
     np.testing.assert_allclose(force, [0.0, 0.0, 0.0], atol=1e-15)
     assert activation == pytest.approx(0.4)
-    messages = " | ".join(master.pop_messages())
+    messages = " | ".join(master.messages(context))
     assert "gamepad 0 connected" in messages and "NaN" in messages
     assert "disconnected" in messages
 
@@ -142,13 +143,92 @@ def test_missing_or_nan_gamepad_moves_nothing_and_is_reported():
 def test_nan_slider_holds_its_axis():
     rows = [row((4.0, 0.0, 0.0)), row((8.0, math.nan, 0.0)), row((math.nan, 2.0, 0.0)),
             row((math.nan, 2.0, 0.0))]  # fmt: skip
-    _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0])
+    _, _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0])
     # x holds its last finite offset (+4 mm), y moved +2 mm, z did not move.
     np.testing.assert_allclose(force, [K_H * 0.004, K_H * 0.002, 0.0], rtol=1e-9, atol=1e-12)
     # A first sample that is NaN: the zero is taken where the target is when it turns finite.
     rows = [row((math.nan, 0.0, 0.0)), row((30.0, 0.0, 0.0)), row((36.0, 0.0, 0.0))]
-    _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0])
+    _, _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0])
     np.testing.assert_allclose(force, [K_H * 0.006, 0.0, 0.0], rtol=1e-9, atol=1e-12)
+
+
+def test_two_contexts_hold_independent_logs_and_a_clone_samples_the_same():
+    """Everything the master samples lives in its Context: two contexts of one diagram (and
+    a Clone() of the diagram, or of a context) run apart without sharing a sample."""
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import ConstantVectorSource
+
+    # Sample 0 without a gamepad, then the left stick at 0.575 (0.05 m/s in x), and a page
+    # open from sample 2 on.
+    pad = dict(axes=[0.575, 0.0, 0.0, 0.0], buttons=[0.0] * 8)
+    rows = [row(), row(**pad)] + [row(pages=1, **pad)] * 8
+    times, walls = 0.01 * np.arange(len(rows)), 100.0 + 0.5 * np.arange(len(rows))
+    builder = DiagramBuilder()
+    master = builder.AddSystem(BrowserMaster(source=LoggedInputs(times, rows, walls),
+                                             p_MS_initial=P0))  # fmt: skip
+    for name, value in (("p_MS", P0), ("v_MS", [0.0] * 3), ("feedback_force", [0.0] * 3)):
+        source = builder.AddSystem(ConstantVectorSource(value))
+        builder.Connect(source.get_output_port(), master.GetInputPort(name))
+    builder.ExportOutput(master.GetOutputPort("hand_force"), "hand_force")
+    diagram = builder.Build()
+
+    def run(system, context, t):
+        simulator = Simulator(system, context)
+        simulator.AdvanceTo(t)
+        return simulator.get_context()
+
+    def force_x(n):  # n samples taken: (n - 1) samples of 0.5 mm in x, v_T = 0.05 m/s
+        return K_H * (n - 1) * 0.0005 + (D_H * 0.05 if n >= 2 else 0.0)
+
+    def expect(system, context, n):
+        sub = system.GetMyContextFromRoot(context)
+        t, wall, logged = system.inputs_log(sub)
+        np.testing.assert_array_equal(t, times[:n])
+        np.testing.assert_array_equal(wall, walls[:n])
+        np.testing.assert_array_equal(logged, np.array(rows[:n]))
+        hand = diagram.GetOutputPort("hand_force").Eval(context)
+        assert hand[0] == pytest.approx(force_x(n), rel=1e-12)
+        np.testing.assert_allclose(hand[1:], 0.0, atol=1e-15)
+
+    a = run(diagram, diagram.CreateDefaultContext(), 0.055)  # samples at 0 .. 50 ms
+    b = run(diagram, diagram.CreateDefaultContext(), 0.025)  # 0 .. 20 ms
+    expect(master, a, 6)
+    expect(master, b, 3)
+    assert master.messages(b) == master.messages(a) == ("t = 0.01 s: gamepad 0 connected",)
+    assert master.end_reason(master.GetMyContextFromRoot(a)) is None
+    # A copy of context a advanced further leaves a as it was.
+    c = run(diagram, a.Clone(), 0.085)
+    expect(master, c, 9)
+    expect(master, a, 6)
+    # Clone() of the diagram (double -> double): the same samples, bit for bit; the clone
+    # reads the same (read-only) source.
+    clone = diagram.Clone()
+    clone_master = clone.GetSubsystemByName(master.get_name())
+    assert clone_master.source is master.source
+    d = run(clone, clone.CreateDefaultContext(), 0.055)
+    for mine, theirs in zip(master.inputs_log(master.GetMyContextFromRoot(a)),
+                            clone_master.inputs_log(clone_master.GetMyContextFromRoot(d))):
+        np.testing.assert_array_equal(mine, theirs)
+    np.testing.assert_array_equal(
+        clone.GetOutputPort("hand_force").Eval(d), diagram.GetOutputPort("hand_force").Eval(a)
+    )
+    # ToAutoDiffXd: the hand force's derivative in p_MS is -K_h (unsaturated), by hand.
+    from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, InitializeAutoDiff
+    from pydrake.systems.analysis import Simulator_
+
+    ad = master.ToAutoDiffXd()
+    e = ad.CreateDefaultContext()
+    ad.GetInputPort("p_MS").FixValue(e, InitializeAutoDiff(np.array(P0)).ravel())
+    for name in ("v_MS", "feedback_force"):
+        ad.GetInputPort(name).FixValue(e, [AutoDiffXd(0.0)] * 3)
+    simulator = Simulator_[AutoDiffXd](ad, e)
+    simulator.AdvanceTo(0.025)
+    hand = ad.GetOutputPort("hand_force").Eval(e)
+    assert hand[0].value() == pytest.approx(force_x(3), rel=1e-12)
+    np.testing.assert_allclose(ExtractGradient(hand), -K_H * np.eye(3), rtol=1e-12)
+    # A log that ends before the diagram asks: refused, naming the times.
+    with pytest.raises(ValueError, match="ends at t = 0.090"):
+        run(diagram, diagram.CreateDefaultContext(), 0.15)
 
 
 def test_bad_arguments_and_logs_are_refused(tmp_path):
@@ -195,6 +275,30 @@ def test_keyboard_sliders_move_the_stylus_and_the_log_replays_bit_for_bit(
     again = run_take(scenario, seed=3, source=log, realtime=False, scene=False)
     for field in dc.fields(demo):
         assert np.array_equal(getattr(demo, field.name), getattr(again.demonstration, field.name))
+    for name in ("time", "wall_time", "rows", "end_time"):  # NaN: no gamepad
+        assert np.array_equal(getattr(log, name), getattr(again.inputs, name), equal_nan=True)
+    assert (log.seed, log.scenario) == (again.inputs.seed, again.inputs.scenario)
+    # A Clone() of the demonstration diagram, re-driven by the same log from its own context
+    # (the seed's, the arm at its start), gives the same demonstration and log again.
+    from pydrake.systems.analysis import ApplySimulatorConfig
+
+    from hemg_drake.diagrams.demonstration import demonstration_from_logs, initial_context
+
+    built = again.built
+    clone = built.diagram.Clone()
+    simulator = Simulator(clone, initial_context(built, 3, diagram=clone))
+    ApplySimulatorConfig(scenario.simulator, simulator)
+    simulator.AdvanceTo(log.end_time)
+    context = simulator.get_context()
+    logs = [clone.GetSubsystemByName(sink.get_name()).FindLog(context)
+            for sink in (built.logger, built.emg_logger)]  # fmt: skip
+    cloned = demonstration_from_logs(*logs, 3)
+    for field in dc.fields(demo):
+        assert np.array_equal(getattr(demo, field.name), getattr(cloned, field.name))
+    master = clone.GetSubsystemByName(take.master.get_name())
+    for mine, theirs in zip((log.time, log.wall_time, log.rows),
+                            master.inputs_log(master.GetMyContextFromRoot(context))):
+        assert np.array_equal(mine, theirs, equal_nan=True)
 
 
 def send(ws, **message):
@@ -346,7 +450,7 @@ def test_keys_in_the_real_page_move_the_stylus_and_escape_ends_the_take(
                     raise RuntimeError("the page never showed its controls")
                 time.sleep(0.05)
             for _ in range(5):
-                browser_page.press("ArrowRight")  # +2 mm each
+                browser_page.press("ArrowRight")  # +KEY_STEP_MM (2 mm) each
             pressed["right"] = t
         elif t - pressed["right"] > 0.5 and "escape" not in pressed:
             browser_page.press("Escape")
@@ -357,10 +461,19 @@ def test_keys_in_the_real_page_move_the_stylus_and_escape_ends_the_take(
                         on_step=script, progress=lambda line: None, scene=False)  # fmt: skip
     assert take.inputs.end_reason == "button" and take.inputs.end_time < 5.0
     slider = take.inputs.rows[:, COLUMNS.index("slider_x_mm")]
-    assert slider[-1] - slider[0] == pytest.approx(10.0)
-    assert take.demonstration.p_MS[-1, 0] - take.master.p_MS_initial[0] == pytest.approx(
-        0.010, abs=5e-4
-    )
+    assert KEY_STEP_MM == 2.0  # the step docs/teleop_browser.md states
+    assert slider[-1] - slider[0] == pytest.approx(5 * KEY_STEP_MM)
+    # The take's log re-driving a master on its own: the target moved by exactly the five
+    # steps; in the take, the stylus followed it.
+    p0 = take.master.p_MS_initial
+    master = BrowserMaster(source=LoggedInputs(take.inputs.time, take.inputs.rows),
+                           p_MS_initial=p0)  # fmt: skip
+    simulator = Simulator(master)
+    simulator.AdvanceTo(take.inputs.end_time)
+    target = master.GetOutputPort("p_MT").Eval(simulator.get_context())
+    assert target[0] - p0[0] == pytest.approx(5e-3 * KEY_STEP_MM, abs=1e-12)
+    np.testing.assert_allclose(target[1:], p0[1:], atol=1e-12)
+    assert take.demonstration.p_MS[-1, 0] - p0[0] == pytest.approx(0.010, abs=5e-4)
 
 
 def test_a_take_joins_simulated_demonstrations_and_learn_takes_them(tmp_path, capsys):
