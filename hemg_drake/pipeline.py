@@ -30,17 +30,14 @@ def _demonstrate_hint(folder):
     return f"hemg-drake demonstrate SCENARIO --out {folder.path}"
 
 
-def record_demonstration(scenario, seed, *, replay_path=None, title=None, visualization=None):
-    """Build and run one demonstration; with ``replay_path``, shown in ``visualization`` (a
-    new loopback Meshcat if None) and recorded into an HTML replay titled ``title``."""
-    from hemg_drake.diagrams.demonstration import build_demonstration_diagram, run_demonstration
-    from hemg_drake.diagrams.visualization import Visualization
+def demonstrate_seed(built, seed, *, replay_path=None, title=None):
+    """Run demonstration ``seed`` on a built diagram; with ``replay_path`` (the diagram built
+    with a Visualization), recorded into an HTML replay titled ``title``."""
+    from hemg_drake.diagrams.demonstration import run_demonstration
     from hemg_drake.viz.recording import record_run
 
     if replay_path is None:
-        return run_demonstration(build_demonstration_diagram(scenario), seed)
-    visualization = Visualization() if visualization is None else visualization
-    built = build_demonstration_diagram(scenario, visualization=visualization)
+        return run_demonstration(built, seed)
     return record_run(built, lambda b: run_demonstration(b, seed), replay_path, title=title)
 
 
@@ -159,19 +156,23 @@ def _demonstrate(scenario, folder, replays, progress, placed):
     import dataclasses as dc
 
     from hemg_drake.placements import describe_placement, has_placements, task_frames
-    from hemg_drake.diagrams.demonstration import operator_plan
+    from hemg_drake.diagrams.demonstration import build_demonstration_diagram, operator_plan
     from hemg_drake.diagrams.visualization import Visualization
     from hemg_drake.learning.demos import save_dataset
     from hemg_drake.viz.run_figures import write_demonstration_figures
 
     demos, replay_files = [], []
     visualization = Visualization() if replays else None  # one server for every replay
+    # One diagram per placement (the seeds live in the Context): without placements, one.
+    diagrams = {}
     for c, (seed, here) in enumerate(zip(scenario.seeds(), placed, strict=True), start=1):
         replay = folder / f"replay_{c}.html" if replays else None
         title = f"{scenario.task.replace('_', ' ')}: demonstration {c} (seed {seed})"
         start = time.perf_counter()
-        demos.append(record_demonstration(here, seed, replay_path=replay, title=title,
-                                          visualization=visualization))  # fmt: skip
+        key = here.to_yaml()
+        if key not in diagrams:
+            diagrams[key] = build_demonstration_diagram(here, visualization=visualization)
+        demos.append(demonstrate_seed(diagrams[key], seed, replay_path=replay, title=title))
         if has_placements(scenario):
             progress(f"demonstration {c}: {describe_placement(here)}")
         if replay is not None:

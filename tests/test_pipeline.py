@@ -236,13 +236,13 @@ def test_interrupted_demonstrate_leaves_no_partial_output(tmp_path, monkeypatch)
 
     calls = []
 
-    def record(scenario, seed, *, replay_path=None, **kwargs):
+    def record(built, seed, *, replay_path=None, **kwargs):
         calls.append(seed)
         if len(calls) == 2:
             raise KeyboardInterrupt
         replay_path.write_text("<html>demonstration 1</html>\n")  # the first replay, done
 
-    monkeypatch.setattr(pipeline, "record_demonstration", record)
+    monkeypatch.setattr(pipeline, "demonstrate_seed", record)
     (tmp_path / "notes.txt").write_text("mine\n")
     with pytest.raises(KeyboardInterrupt):
         demonstrate(small("cotter_pin"), tmp_path, replays=True, progress=quiet)
