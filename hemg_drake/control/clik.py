@@ -16,7 +16,7 @@ import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.math import sqrt as scalar_sqrt
 from pydrake.multibody.tree import JacobianWrtVariable
-from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.framework import BasicVector_, LeafSystem_, NumericParameterIndex
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from hemg_drake._validate import as_scalar, as_vector
@@ -115,6 +115,14 @@ def Clik_(T):
         :class:`~hemg_drake.control.pd.VariableGainPd`; they are the two discrete-state
         groups themselves (state output ports, no computation per evaluation).
 
+        Parameters in the Context: one numeric parameter [gain, damping,
+        orientation_gain, q_lower (n), q_upper (n), v_max (n)] (the limits as enforced:
+        the plant's position limits moved ``limit_margin`` inwards, its velocity limits),
+        so one built diagram runs several gains or limits: :meth:`set_gains`,
+        :meth:`set_limits`, :meth:`get_parameters`. ``period``, ``method`` and whether
+        the tool-axis task is on (``orientation_gain > 0`` in ``config``) are structural:
+        they choose the events and the update.
+
         Scalar types: double and AutoDiffXd (the kinematics of ``plant`` converted). The
         kinematics at ``q_d`` come from a context of ``plant`` kept in a cache entry that
         depends on the discrete state.
@@ -152,21 +160,15 @@ def Clik_(T):
                     f"Clik method must be one of {CLIK_METHODS}, got {config.method!r}"
                 )
             self._method = config.method
-            self._gain = as_scalar("Clik gain", config.gain)
+            gain = as_scalar("Clik gain", config.gain)
             self._period = as_scalar("Clik period", config.period)
-            self._damping = as_scalar("Clik damping", config.damping, strict=False)
+            damping = as_scalar("Clik damping", config.damping, strict=False)
             margin = as_scalar("Clik limit_margin", config.limit_margin, strict=False)
             p_EoE_E = np.zeros(3) if p_EoE_E is None else as_vector("Clik p_EoE_E", p_EoE_E, 3)
             self._axis_E = unit_direction("Clik axis_E", config.axis_E).tolist()
             self._axis_W = unit_direction("Clik axis_W_desired", config.axis_W_desired).tolist()
-            self._orientation_gain = as_scalar(
-                "Clik orientation_gain", config.orientation_gain, strict=False
-            )
-            if self._orientation_gain * self._period > 1.0:
-                raise ValueError(
-                    f"Clik orientation_gain * period must be <= 1 (a stable step), got "
-                    f"{self._orientation_gain} * {self._period}"
-                )
+            orientation_gain = self._checked_orientation_gain(config.orientation_gain)
+            self._axis_task = orientation_gain > 0.0
             nq = plant.num_positions(model_instance)
             if nq != plant.num_velocities(model_instance):
                 raise ValueError("Clik needs a model instance with one velocity per position")
@@ -184,10 +186,13 @@ def Clik_(T):
             self._columns = velocity_columns(plant, model_instance)
             lower = plant.GetPositionsFromArray(model_instance, plant.GetPositionLowerLimits())
             upper = plant.GetPositionsFromArray(model_instance, plant.GetPositionUpperLimits())
-            self._q_lower = (lower + margin).tolist()
-            self._q_upper = (upper - margin).tolist()
-            self._v_max = plant.GetVelocityUpperLimits()[self._columns].tolist()
+            v_max = plant.GetVelocityUpperLimits()[self._columns]
             self._sqrt = math.sqrt if T is float else scalar_sqrt
+            self._double = T is float
+            # [gain, damping, orientation_gain, q_lower, q_upper, v_max]: one read per step.
+            law = [gain, damping, orientation_gain]
+            law += (lower + margin).tolist() + (upper - margin).tolist() + v_max.tolist()
+            self._parameter = self.DeclareNumericParameter(BasicVector_[T](law))
 
             self._p_desired = self.DeclareVectorInputPort("p_WE_desired", 3)
             self._state = self.DeclareVectorInputPort("state", 2 * n)
@@ -203,7 +208,7 @@ def Clik_(T):
             self.DeclarePeriodicDiscreteUpdateEvent(
                 period_sec=self._period,
                 offset_sec=0.0,
-                update=self._update_axis if self._orientation_gain > 0.0 else self._update,
+                update=self._update_axis if self._axis_task else self._update,
             )
             self.DeclareStateOutputPort("q_desired", self._q_d_index)
             self.DeclareStateOutputPort("v_desired", self._v_d_index)
@@ -211,10 +216,96 @@ def Clik_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, **other._args, converter=converter)
 
+        def _checked_orientation_gain(self, value):
+            value = as_scalar("Clik orientation_gain", value, strict=False)
+            if value * self._period > 1.0:
+                raise ValueError(
+                    f"Clik orientation_gain * period must be <= 1 (a stable step), got "
+                    f"{value} * {self._period}"
+                )
+            return value
+
+        def set_gains(self, context, *, gain=None, damping=None, orientation_gain=None):
+            """Write the law's gains into ``context`` (this system's own context, e.g.
+            ``clik.GetMyMutableContextFromRoot(root_context)``); None keeps a value.
+
+            Parameters
+            ----------
+            gain : float, K_sp (positive; 1/(m^2 s) transpose, 1/s dls).
+            damping : float, the DLS damping (m, >= 0).
+            orientation_gain : float, the tool-axis rate (1/s); positive with
+                ``period * orientation_gain <= 1`` where the task is on, and only there
+                (whether it is on is structural: the config's ``orientation_gain > 0``).
+            """
+            values = context.get_mutable_numeric_parameter(self._parameter)
+            if gain is not None:
+                values.SetAtIndex(0, as_scalar("Clik gain", gain))
+            if damping is not None:
+                values.SetAtIndex(1, as_scalar("Clik damping", damping, strict=False))
+            if orientation_gain is not None:
+                value = self._checked_orientation_gain(orientation_gain)
+                if (value > 0.0) != self._axis_task:
+                    raise ValueError(
+                        "Clik orientation_gain: the tool-axis task is "
+                        f"{'on' if self._axis_task else 'off'} in this system (its config), "
+                        f"so it must be {'> 0' if self._axis_task else '0'}, got {value}"
+                    )
+                values.SetAtIndex(2, value)
+
+        def set_limits(self, context, *, q_lower=None, q_upper=None, v_max=None):
+            """Write the enforced joint limits into ``context``; None keeps a value.
+
+            Parameters
+            ----------
+            q_lower, q_upper : n finite floats (rad), the range ``q_d`` is kept in (any
+                margin included), q_lower < q_upper.
+            v_max : n positive floats (rad/s), the joint rate bounds.
+            """
+            n = self._n
+            values = context.get_mutable_numeric_parameter(self._parameter)
+            current = values.CopyToVector()
+            lower = current[3 : 3 + n] if q_lower is None else as_vector("Clik q_lower", q_lower, n)
+            upper = (
+                current[3 + n : 3 + 2 * n] if q_upper is None
+                else as_vector("Clik q_upper", q_upper, n)
+            )  # fmt: skip
+            if not np.all(np.asarray(lower, dtype=float) < np.asarray(upper, dtype=float)):
+                raise ValueError(f"Clik q_lower must be below q_upper, got {lower}, {upper}")
+            if v_max is not None:
+                v_max = as_vector("Clik v_max", v_max, n)
+                if not np.all(v_max > 0.0):
+                    raise ValueError(f"Clik v_max must be positive, got {v_max}")
+                for j in range(n):
+                    values.SetAtIndex(3 + 2 * n + j, v_max[j])
+            for j in range(n):
+                values.SetAtIndex(3 + j, lower[j])
+                values.SetAtIndex(3 + n + j, upper[j])
+
+        def get_parameters(self, context):
+            """The gains and limits in ``context``: a dict of ``gain``, ``damping``,
+            ``orientation_gain``, ``q_lower``, ``q_upper``, ``v_max`` (arrays)."""
+            n = self._n
+            values = context.get_numeric_parameter(self._parameter).CopyToVector()
+            return dict(
+                gain=values[0], damping=values[1], orientation_gain=values[2],
+                q_lower=values[3 : 3 + n], q_upper=values[3 + n : 3 + 2 * n],
+                v_max=values[3 + 2 * n :],
+            )  # fmt: skip
+
+        def _law(self, context):
+            """The numeric parameter as a list (a view's for doubles, a copy for
+            AutoDiffXd)."""
+            group = context.get_numeric_parameter(self._parameter)
+            return (group.get_value() if self._double else group.CopyToVector()).tolist()
+
         def _set_plant_state(self, context, plant_context):
             self._plant.SetPositions(plant_context, self._model, self._q_d(context))
 
         def _set(self, discrete_state, q_d, v_d):
+            if self._double:  # into the buffers' views: no array built
+                discrete_state.get_mutable_value(self._q_d_index)[:] = q_d
+                discrete_state.get_mutable_value(self._v_d_index)[:] = v_d
+                return
             discrete_state.set_value(self._q_d_index, np.array(q_d))
             discrete_state.set_value(self._v_d_index, np.array(v_d))
 
@@ -226,8 +317,11 @@ def Clik_(T):
             return context.get_discrete_state(self._q_d_index).CopyToVector()
 
         def _initialize(self, context, discrete_state):
-            q = self._state.Eval(context)[: self._n].tolist()
-            q = [min(max(q[j], self._q_lower[j]), self._q_upper[j]) for j in range(self._n)]
+            n = self._n
+            law = self._law(context)
+            lower, upper = law[3 : 3 + n], law[3 + n : 3 + 2 * n]
+            q = self._state.Eval(context)[:n].tolist()
+            q = [min(max(q[j], lower[j]), upper[j]) for j in range(n)]
             self._set(discrete_state, q, [T(0.0)] * self._n)
 
         def _hold(self, context, discrete_state):
@@ -239,6 +333,8 @@ def Clik_(T):
             p_desired = self._p_desired.Eval(context).tolist()
             if not _finite(p_desired[0] + p_desired[1] + p_desired[2]):
                 return self._hold(context, discrete_state)
+            group = context.get_numeric_parameter(self._parameter)  # as _law, inline
+            law = (group.get_value() if self._double else group.CopyToVector()).tolist()
             plant_context = self._plant_context.Eval(context)
             # The Jacobian reuses the forward kinematics of the point's position.
             p_WE = self._plant.CalcPointsPositions(plant_context, *self._point_arguments)
@@ -250,18 +346,21 @@ def Clik_(T):
             e0, e1, e2 = p_desired[0] - p0, p_desired[1] - p1, p_desired[2] - p2
             if self._method == "dls":
                 G = (J @ J.T).ravel().tolist()
-                e0, e1, e2 = _mv(_inverse3(G, self._damping * self._damping), (e0, e1, e2))
+                damping = law[1]
+                e0, e1, e2 = _mv(_inverse3(G, damping * damping), (e0, e1, e2))
             J0, J1, J2 = J.tolist()
-            gain = self._gain
+            gain = law[0]
             qdot = [gain * (J0[j] * e0 + J1[j] * e1 + J2[j] * e2) for j in range(self._n)]
             q_d = self._q_d(context).tolist()
-            self._set(discrete_state, *self._limited_step(q_d, qdot))
+            self._set(discrete_state, *self._limited_step(q_d, qdot, law))
 
         def _update_axis(self, context, discrete_state):
             """The update with the tool-axis task (the class docstring's law)."""
             p_desired = self._p_desired.Eval(context).tolist()
             if not _finite(p_desired[0] + p_desired[1] + p_desired[2]):
                 return self._hold(context, discrete_state)
+            group = context.get_numeric_parameter(self._parameter)  # as _law, inline
+            law = (group.get_value() if self._double else group.CopyToVector()).tolist()
             plant_context = self._plant_context.Eval(context)
             # One call for R_WE and p_WE (the pose's 4x4 matrix, row-major: 16 scalars).
             X_WE = self._frame_E.CalcPoseInWorld(plant_context).GetAsMatrix4().ravel().tolist()
@@ -272,18 +371,18 @@ def Clik_(T):
                 J,
                 X_WE,
                 p_desired,
-                gain=self._gain,
-                dls_damping=self._damping if self._method == "dls" else None,
-                axis_gain=self._orientation_gain,
+                gain=law[0],
+                dls_damping=law[1] if self._method == "dls" else None,
+                axis_gain=law[2],
                 p_EoE_E=self._p_EoE_E,
                 axis_E=self._axis_E,
                 axis_W=self._axis_W,
                 sqrt=self._sqrt,
             )
             q_d = self._q_d(context).tolist()
-            self._set(discrete_state, *self._limited_step(q_d, qdot))
+            self._set(discrete_state, *self._limited_step(q_d, qdot, law))
 
-        def _limited_step(self, q_d, qdot):
+        def _limited_step(self, q_d, qdot, law):
             """One integration step within the position and velocity limits: (q, v) lists.
 
             First each joint's rate is bounded by the room to its own position limits over
@@ -292,19 +391,20 @@ def Clik_(T):
             (direction kept). Finally q = q_d + period * rate (clipped to the limits against
             rounding) and v = (q - q_d) / period.
             """
-            period, lower, upper, v_max = self._period, self._q_lower, self._q_upper, self._v_max
+            n, period = self._n, self._period
+            lower, upper, v_max = law[3 : 3 + n], law[3 + n : 3 + 2 * n], law[3 + 2 * n :]
             # Conditional expressions rather than min/max: a third of the cost at 1 kHz, and
-            # the same lines run on floats and AutoDiffXd.
+            # the same lines run on floats and AutoDiffXd (indices beat zip here, measured).
             rates = []
             ratio = 0.0
-            for j in range(self._n):
+            for j in range(n):
                 rate, low, high = qdot[j], (lower[j] - q_d[j]) / period, (upper[j] - q_d[j]) / period
                 rate = low if rate < low else high if rate > high else rate
                 rates.append(rate)
                 excess = abs(rate) / v_max[j]
                 ratio = excess if excess > ratio else ratio
             q_next, v_next = [], []
-            for j in range(self._n):
+            for j in range(n):
                 rate = rates[j] / ratio if ratio > 1.0 else rates[j]
                 q = q_d[j] + period * rate
                 q = lower[j] if q < lower[j] else upper[j] if q > upper[j] else q
