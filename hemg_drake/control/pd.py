@@ -32,10 +32,11 @@ import math
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.controllers import InverseDynamics
-from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.framework import BasicVector_, LeafSystem_, NumericParameterIndex
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from hemg_drake._validate import as_scalar
+from hemg_drake.control.clik import velocity_columns
 from hemg_drake.control.config import GAIN_RANGE, MAX_TIME_STEP, PdConfig  # noqa: F401
 from hemg_drake.robots.plant_context import declare_plant_context
 
@@ -78,6 +79,13 @@ def VariableGainPd_(T):
         make_arm_controller_plant`, or a plant holding it) on a context kept in a cache
         entry that depends on ``state``.
 
+        Parameters in the Context: one numeric parameter [K, s_0..s_{n-1}, zeta,
+        effort_limit_0..effort_limit_{n-1}] (K the gain used while ``gain`` is not
+        connected; defaults ``config.gain``, ``config.stiffness_scale``,
+        ``config.damping_ratio`` and ``arm.effort_limit``), so one built diagram runs
+        several gains: :meth:`set_gains` writes them into a context, :meth:`get_gains`
+        reads them.
+
         Timing: stateless and direct-feedthrough; a discrete plant samples it once per
         step. Table I's K = 50 lies inside the tested range ``GAIN_RANGE``. Scalar types:
         double and AutoDiffXd.
@@ -95,11 +103,7 @@ def VariableGainPd_(T):
             LeafSystem_[T].__init__(self, converter)
             config = PdConfig() if config is None else config
             n = len(arm.joint_names)
-            scale = np.asarray(config.stiffness_scale, dtype=float)
-            if scale.shape != (n,) or not (np.isfinite(scale) & (scale > 0)).all():
-                raise ValueError(
-                    f"stiffness_scale must be {n} positive finite numbers, got {scale}"
-                )
+            scale = _check_positive(config.stiffness_scale, n, "stiffness_scale")
             _check_gain(config.gain, "gain")
             damping_ratio = as_scalar("damping_ratio", config.damping_ratio)
             if not plant.is_finalized():
@@ -108,13 +112,15 @@ def VariableGainPd_(T):
             self._plant = plant_for_scalar(plant, T)
             self._model = arm.model_instance
             self._n = n
-            self._default_gain = [T(float(config.gain))]
-            self._scale = scale.tolist()
-            self._twice_zeta = 2.0 * damping_ratio
-            self._limit = np.asarray(arm.effort_limit, dtype=float).tolist()
-            # The arm's joints among the plant's velocities (M is the plant's, full size).
-            velocities = np.arange(plant.num_velocities(), dtype=float)
-            self._columns = plant.GetVelocitiesFromArray(self._model, velocities).astype(int)
+            limit = np.asarray(arm.effort_limit, dtype=float)
+            _check_positive(limit, n, "effort_limit")
+            # [K, s (n), zeta, effort limit (n)]: one parameter, one read per call.
+            values = np.concatenate([[float(config.gain)], scale, [damping_ratio], limit])
+            self._parameter = self.DeclareNumericParameter(BasicVector_[T](values.tolist()))
+            # The arm's joints among the plant's velocities (M is the plant's, full size): a
+            # slice where contiguous (a view, cheaper than an index array's copy).
+            self._columns = velocity_columns(plant, self._model)
+            self._double = T is float
             self._zeros = [T(0.0)] * n
 
             self.q_desired_input = self.DeclareVectorInputPort("q_desired", n)
@@ -130,11 +136,52 @@ def VariableGainPd_(T):
                 "torque",
                 n,
                 self._calc_torque,
-                prerequisites_of_calc={self.all_input_ports_ticket()},
+                prerequisites_of_calc={
+                    self.all_input_ports_ticket(),
+                    self.numeric_parameter_ticket(NumericParameterIndex(self._parameter)),
+                },
             )
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, **other._args, converter=converter)
+
+        def set_gains(
+            self, context, *, gain=None, stiffness_scale=None, damping_ratio=None,
+            effort_limit=None,
+        ):
+            """Write the law's constants into ``context`` (this system's own context, e.g.
+            ``pd.GetMyMutableContextFromRoot(root_context)``); None keeps a value.
+
+            Parameters
+            ----------
+            gain : float, K while the ``gain`` input is not connected (positive).
+            stiffness_scale : n positive floats, s_j (N m/rad per unit of K).
+            damping_ratio : float, zeta (positive).
+            effort_limit : n positive floats, the torque limits (N m).
+            """
+            n = self._n
+            values = context.get_mutable_numeric_parameter(self._parameter)
+            if gain is not None:
+                _check_gain(gain, "gain")
+                values.SetAtIndex(0, float(gain))
+            if stiffness_scale is not None:
+                for j, s_j in enumerate(_check_positive(stiffness_scale, n, "stiffness_scale")):
+                    values.SetAtIndex(1 + j, s_j)
+            if damping_ratio is not None:
+                values.SetAtIndex(1 + n, as_scalar("damping_ratio", damping_ratio))
+            if effort_limit is not None:
+                for j, limit in enumerate(_check_positive(effort_limit, n, "effort_limit")):
+                    values.SetAtIndex(2 + n + j, limit)
+
+        def get_gains(self, context):
+            """The law's constants in ``context``: a dict of ``gain``, ``stiffness_scale``
+            (array), ``damping_ratio``, ``effort_limit`` (array), as ``set_gains`` takes."""
+            n = self._n
+            values = context.get_numeric_parameter(self._parameter).CopyToVector()
+            return dict(
+                gain=values[0], stiffness_scale=values[1 : 1 + n],
+                damping_ratio=values[1 + n], effort_limit=values[2 + n :],
+            )  # fmt: skip
 
         def _set_plant_state(self, context, plant_context):
             q = self.state_input.Eval(context)[: self._n]
@@ -154,25 +201,33 @@ def VariableGainPd_(T):
                 if self.feedforward_input.HasValue(context)
                 else self._zeros
             )
+            group = context.get_numeric_parameter(self._parameter)
+            # A view's list for doubles (a copy costs more); CopyToVector for AutoDiffXd.
+            law = (
+                group.get_value() if self._double else group.CopyToVector()
+            ).tolist()
             gain = (
-                self.gain_input.Eval(context).tolist()
+                self.gain_input.Eval(context).tolist()[0]
                 if self.gain_input.HasValue(context)
-                else self._default_gain
-            )[0]
+                else law[0]
+            )
             _check_gain(gain, "gain input")
             if not _finite(sum(q_desired) + sum(v_desired)):
                 raise ValueError("VariableGainPd: q_desired/v_desired contain NaN or inf")
             M = self._plant.CalcMassMatrix(self._plant_context.Eval(context))
             mass = M.diagonal()[self._columns].tolist()
             torque = []
-            twice_zeta, scale, limit = self._twice_zeta, self._scale, self._limit
+            scale, twice_zeta, limit = law[1 : n + 1], 2.0 * law[n + 1], law[n + 2 :]
             # Scalar arithmetic on 7 joints (numpy's per-call cost exceeds the sums here);
-            # the same lines run on floats and on AutoDiffXd.
+            # the same lines run on floats and on AutoDiffXd. The clip is written as
+            # conditional expressions (what min(max(...)) returns, NaN kept, at less cost).
             for j in range(n):
                 k = gain * scale[j]
                 d = twice_zeta * (k * mass[j]) ** 0.5
                 tau = k * (q_desired[j] - x[j]) + d * (v_desired[j] - x[n + j]) + feedforward[j]
-                torque.append(min(max(tau, -limit[j]), limit[j]))
+                high = limit[j]
+                low = -high
+                torque.append(low if tau < low else high if tau > high else tau)
             output.SetFromVector(torque)
 
     return Impl
@@ -220,6 +275,14 @@ def add_variable_gain_pd(builder, *, plant, arm, state_port, config=None, name="
 def _finite(value):
     """True for a finite float or AutoDiffXd (NaN fails both comparisons)."""
     return -math.inf < value < math.inf
+
+
+def _check_positive(values, n, name):
+    """``values`` as an array of n positive finite floats, or ValueError naming it."""
+    array = np.asarray(values, dtype=float)
+    if array.shape != (n,) or not (np.isfinite(array) & (array > 0)).all():
+        raise ValueError(f"{name} must be {n} positive finite numbers, got {array}")
+    return array
 
 
 def _check_gain(gain, name):

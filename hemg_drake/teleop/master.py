@@ -9,7 +9,8 @@ import math
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.math import sqrt as drake_sqrt
-from pydrake.systems.framework import Context_, LeafSystem_
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import BasicVector_, Context_, LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 from scipy.linalg import expm
 
@@ -23,6 +24,8 @@ TOUCH_X_WORKSPACE = tuple(MasterConfig().workspace_size)  # m, width x height x 
 
 # Resolved once: a template lookup per call would cost microseconds at 1 kHz.
 _DOUBLE_CONTEXT = Context_[float]
+# The master's numeric parameter, in this order (SI units, MasterConfig's fields).
+MASTER_PARAMETERS = ("mass", "damping", "friction", "peak_force", "wall_stiffness", "wall_damping")
 
 
 def saturate_norm(force, limit):
@@ -140,6 +143,14 @@ def HapticMaster_(T):
         direct feedthrough), so the master closes loops with the operator and the force
         feedback without algebraic loops. A NaN or infinite input raises ValueError.
 
+        Parameters in the Context: one numeric parameter ``MASTER_PARAMETERS`` (mass,
+        damping, friction, peak_force, wall_stiffness, wall_damping), defaults from
+        ``config``; :meth:`set_parameters` / :meth:`get_parameters`. The exact
+        discretisation (``expm``) is a cache entry that depends on that parameter only, so
+        it is recomputed when the parameter changes, not per step; under AutoDiffXd the
+        parameters enter as constants (their values). The workspace box and the period are
+        structural.
+
         Scalar types: double and AutoDiffXd (``ToAutoDiffXd()``, ``Clone()``), so the
         teleoperation loop can be linearised; the wall and saturation switches are
         piecewise, their derivative that of the active piece.
@@ -159,14 +170,18 @@ def HapticMaster_(T):
             self._config = config
             self._p_MS_initial = as_vector("p_MS_initial", p_MS_initial, 3)
             values = _checked_config(config)
-            self._friction = values["friction"]
-            self._peak_force = values["peak_force"]
-            self._wall_stiffness = values["wall_stiffness"]
+            self._period = values["period"]
             self._half_size = (0.5 * values["workspace_size"]).tolist()
-            self._mode_coefficients = mode_coefficients(
-                values["mass"], values["damping"], values["wall_stiffness"],
-                values["wall_damping"], values["period"],
-            )  # fmt: skip
+            self._parameter = self.DeclareNumericParameter(
+                BasicVector_[T]([values[name] for name in MASTER_PARAMETERS])
+            )
+            # (coefficients of both modes, friction, peak force, wall stiffness) as floats,
+            # recomputed (expm) only when the parameter changes.
+            self._law = self.DeclareCacheEntry(
+                "law",
+                ValueProducer(allocate=lambda: AbstractValue.Make(()), calc=self._calc_law),
+                {self.all_parameters_ticket()},
+            )
             self._hand_force_input = self.DeclareVectorInputPort("hand_force", 3)
             self._motor_force_input = self.DeclareVectorInputPort("motor_force", 3)
             # p_MS and v_MS in two state groups: their output ports are the state itself.
@@ -187,24 +202,50 @@ def HapticMaster_(T):
                 converter=converter,
             )  # fmt: skip
 
-        def _step(self, p_MS, v_MS, hand_force, motor_force):
-            """One sample of the tip from lists of 3 scalars; returns (p_MS, v_MS) lists."""
-            motor = saturate_norm(motor_force, self._peak_force)
+        def set_parameters(self, context, **values):
+            """Write ``MASTER_PARAMETERS`` given by keyword (SI units) into ``context``
+            (this system's own, e.g. ``master.GetMyMutableContextFromRoot(root)``)."""
+            parameter = context.get_mutable_numeric_parameter(self._parameter)
+            for name, value in values.items():
+                if name not in MASTER_PARAMETERS:
+                    raise ValueError(f"unknown master parameter {name!r}: {MASTER_PARAMETERS}")
+                value = as_scalar(name, value, strict=name == "mass")
+                parameter.SetAtIndex(MASTER_PARAMETERS.index(name), value)
+
+        def get_parameters(self, context):
+            """``MASTER_PARAMETERS`` of ``context`` as a dict of floats."""
+            values = context.get_numeric_parameter(self._parameter).CopyToVector()
+            return {name: _value(x) for name, x in zip(MASTER_PARAMETERS, values)}
+
+        def _calc_law(self, context, value):
+            mass, damping, friction, peak_force, wall_stiffness, wall_damping = (
+                self.get_parameters(context).values()
+            )
+            coefficients = mode_coefficients(
+                mass, damping, wall_stiffness, wall_damping, self._period
+            )
+            value.set_value((coefficients, friction, peak_force, wall_stiffness))
+
+        def _step(self, law, p_MS, v_MS, hand_force, motor_force):
+            """One sample of the tip from lists of 3 scalars and the cached ``law``
+            (coefficients, friction, peak force, wall stiffness); returns (p_MS, v_MS)."""
+            coefficients, friction, peak_force, wall_stiffness = law
+            motor = saturate_norm(motor_force, peak_force)
             force = [h + m for h, m in zip(hand_force, motor)]
-            if self._friction > 0.0:
+            if friction > 0.0:
                 # The force that stops the tip within one free-space step; friction supplies
                 # up to its limit of the difference (stick), else it slides at its limit.
-                free = self._mode_coefficients[0]
+                free = coefficients[0]
                 a11, b1 = free[3], free[5]
                 stop = [-a11 * v / b1 - f for v, f in zip(v_MS, force)]
-                force = [f + s for f, s in zip(force, saturate_norm(stop, self._friction))]
+                force = [f + s for f, s in zip(force, saturate_norm(stop, friction))]
             p_next, v_next = [], []
             for p, v, f, half in zip(p_MS, v_MS, force, self._half_size):
                 outside = p > half or p < -half
-                a00, a01, a10, a11, b0, b1 = self._mode_coefficients[outside]
+                a00, a01, a10, a11, b0, b1 = coefficients[outside]
                 if outside:
                     # -k (x - x_wall) = -k x + k x_wall: the constant joins the input.
-                    f = f + self._wall_stiffness * (half if p > half else -half)
+                    f = f + wall_stiffness * (half if p > half else -half)
                 p_next.append(a00 * p + a01 * v + b0 * f)
                 v_next.append(a10 * p + a11 * v + b1 * f)
             return p_next, v_next
@@ -216,12 +257,17 @@ def HapticMaster_(T):
                 for name, force in (("hand_force", hand_force), ("motor_force", motor_force)):
                     if not all_finite(force):
                         raise ValueError(f"{name} must be finite, got {force}")
-            p_MS = _state_vector(context, self._p_index).tolist()
-            v_MS = _state_vector(context, self._v_index).tolist()
-            p_MS, v_MS = self._step(p_MS, v_MS, hand_force, motor_force)
-            if T == float:
-                discrete_state.set_value(self._p_index, p_MS)
-                discrete_state.set_value(self._v_index, v_MS)
+            if T is float:  # views: no copy, no array built (this is the 1 kHz path)
+                p_MS = context.get_discrete_state(self._p_index).value().tolist()
+                v_MS = context.get_discrete_state(self._v_index).value().tolist()
+            else:
+                p_MS = context.get_discrete_state(self._p_index).CopyToVector().tolist()
+                v_MS = context.get_discrete_state(self._v_index).CopyToVector().tolist()
+            law = self._law.Eval(context)  # cached: recomputed when the parameter changes
+            p_MS, v_MS = self._step(law, p_MS, v_MS, hand_force, motor_force)
+            if T is float:
+                discrete_state.get_mutable_value(self._p_index)[:] = p_MS
+                discrete_state.get_mutable_value(self._v_index)[:] = v_MS
             else:
                 discrete_state.set_value(self._p_index, np.array(p_MS, dtype=object))
                 discrete_state.set_value(self._v_index, np.array(v_MS, dtype=object))
@@ -235,3 +281,8 @@ def HapticMaster_(T):
 
 
 HapticMaster = HapticMaster_[None]
+
+
+def _value(x):
+    """A parameter as a float (its AutoDiffXd value: the law's constants are not inputs)."""
+    return x.value() if isinstance(x, AutoDiffXd) else float(x)

@@ -531,3 +531,82 @@ def test_autodiff_step_slope_matches_finite_differences(changes):
     )
     assert np.abs(slope).max() > 1e-3
     np.testing.assert_allclose(slope, numeric, rtol=1e-5, atol=1e-8)
+
+
+def test_gains_and_limits_are_parameters_of_each_context():
+    """Two contexts of one DLS diagram, one with set_gains and set_limits: one update of each
+    is the documented step by hand (J by finite differences) with its own gain, damping and
+    limits; a context's Clone keeps them; the AutoDiffXd diagram takes them with
+    SetTimeStateAndParametersFrom."""
+    diagram, clik, _ = make_clik(method="dls", gain=2.0, damping=0.3)
+    q0 = np.array([0.2, -0.5, 0.1, 0.8, 0.0, 1.0, 0.0])
+    target = p_WE(q0) + np.array([0.05, -0.03, 0.02])
+    J = finite_difference_jacobian(q0)
+    e = target - p_WE(q0)
+
+    def dls(gain, damping):
+        return gain * J.T @ np.linalg.solve(J @ J.T + damping**2 * np.eye(3), e)
+
+    # Context 1: K = 40 1/s, damping 0.1 m; the joint moving fastest up has its upper limit
+    # 0.1 mrad above q0, and every joint's rate bound is 0.3 rad/s.
+    qdot = dls(40.0, 0.1)
+    k = int(np.argmax(qdot))
+    q_lower, q_upper = _ARM.position_lower - 1.0, _ARM.position_upper + 1.0
+    q_upper[k] = q0[k] + 1e-4
+    v_max = np.full(7, 0.3)
+    rates = np.minimum(np.maximum(qdot, (q_lower - q0) / 1e-3), (q_upper - q0) / 1e-3)
+    assert rates[k] < qdot[k]  # the position limit stops joint k
+    ratio = np.abs(rates / v_max).max()
+    assert ratio > 1.0  # and the rate bound scales every joint
+    expected = [q0 + 1e-3 * dls(2.0, 0.3), q0 + 1e-3 * rates / ratio]
+    assert np.abs(expected[0] - expected[1]).max() > 1e-5
+
+    contexts = [diagram.CreateDefaultContext() for _ in range(2)]
+    clik_context = clik.GetMyMutableContextFromRoot(contexts[1])
+    clik.set_gains(clik_context, gain=40.0, damping=0.1)
+    clik.set_limits(clik_context, q_lower=q_lower, q_upper=q_upper, v_max=v_max)
+    parameters = clik.get_parameters(clik_context)
+    assert (parameters["gain"], parameters["damping"]) == (40.0, 0.1)
+    np.testing.assert_array_equal(parameters["v_max"], v_max)
+    clone = contexts[1].Clone()
+    finals = []
+    for context in (*contexts, clone):
+        diagram.GetInputPort("p_WE_desired").FixValue(context, target)
+        diagram.GetInputPort("state").FixValue(context, np.concatenate([q0, np.zeros(7)]))
+        Simulator(diagram, context).AdvanceTo(0.5e-3)  # the update at t = 0
+        finals.append(diagram.GetOutputPort("q_desired").Eval(context).copy())
+    np.testing.assert_allclose(finals[0], expected[0], rtol=0, atol=1e-11)
+    np.testing.assert_allclose(finals[1], expected[1], rtol=0, atol=1e-11)
+    np.testing.assert_array_equal(finals[2], finals[1])
+
+    ad = diagram.ToAutoDiffXd()
+    context = ad.CreateDefaultContext()
+    context.SetTimeStateAndParametersFrom(diagram.CreateDefaultContext())
+    clik_ad = ad.GetSubsystemByName(clik.get_name())
+    ad_parameters = clik_ad.get_parameters(clik_ad.GetMyContextFromRoot(context))
+    assert ad_parameters["gain"].value() == 2.0  # the default, before the copy
+    context.SetTimeStateAndParametersFrom(contexts[1])  # its state is after the update
+    context.SetTime(0.0)
+    ad.GetInputPort("p_WE_desired").FixValue(context, [AutoDiffXd(x) for x in target])
+    ad.GetInputPort("state").FixValue(
+        context, [AutoDiffXd(x) for x in np.concatenate([q0, np.zeros(7)])]
+    )
+    Simulator_[AutoDiffXd](ad, context).AdvanceTo(0.5e-3)  # initialises at q0, one update
+    q_d = [x.value() for x in ad.GetOutputPort("q_desired").Eval(context)]
+    np.testing.assert_allclose(q_d, finals[1], rtol=1e-13, atol=1e-15)
+
+
+@pytest.mark.parametrize(
+    "call, kwargs, message",
+    [
+        ("set_gains", {"gain": 0.0}, "gain"),
+        ("set_gains", {"damping": -1.0}, "damping"),
+        ("set_gains", {"orientation_gain": 5.0}, "tool-axis task is off"),
+        ("set_limits", {"q_lower": np.full(7, 1.0), "q_upper": np.full(7, 0.5)}, "below"),
+        ("set_limits", {"v_max": np.zeros(7)}, "v_max"),
+    ],
+)
+def test_bad_gains_and_limits_are_named(call, kwargs, message):
+    _, clik, _ = make_clik()
+    with pytest.raises(ValueError, match=message):
+        getattr(clik, call)(clik.CreateDefaultContext(), **kwargs)

@@ -94,10 +94,12 @@ Q_DESIRED = np.array([0.0, -0.55, 0.0, 1.05, 0.0, 1.26, 0.0])
 V_DESIRED = np.array([0.0, 0.1, 0.0, 0.0, -0.2, 0.0, 0.5])
 
 
-def _hand_law(K, zeta, M_jj, feedforward, limit, q=Q, v=V, q_d=Q_DESIRED, v_d=V_DESIRED):
+def _hand_law(
+    K, zeta, M_jj, feedforward, limit, q=Q, v=V, q_d=Q_DESIRED, v_d=V_DESIRED, scale=SCALE
+):
     expected = np.empty(7)
     for j in range(7):
-        k_j = K * SCALE[j]
+        k_j = K * scale[j]
         d_j = 2.0 * zeta * np.sqrt(k_j * M_jj[j])
         tau = k_j * (q_d[j] - q[j]) + d_j * (v_d[j] - v[j]) + feedforward[j]
         expected[j] = min(max(tau, -limit[j]), limit[j])
@@ -182,6 +184,75 @@ def test_autodiff_slopes_are_the_laws_derivatives():
     dtau_dK = SCALE * (q_desired - Q) + d / (2.0 * K) * (V_DESIRED - V)
     np.testing.assert_allclose(gradient[:, 0], dtau_dK, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(gradient[:, 1:], np.diag(k), rtol=1e-12, atol=1e-12)
+
+
+def test_gains_are_parameters_of_each_context():
+    """Two contexts of one diagram, one with set_gains: each gives the hand law with its own
+    K, s_j, zeta and limits; a context's Clone keeps them; the AutoDiffXd diagram takes them
+    with SetTimeStateAndParametersFrom and gives the same torque."""
+    builder = DiagramBuilder()
+    controller_plant, arm = make_arm_controller_plant()
+    state = builder.AddSystem(ConstantVectorSource(np.concatenate([Q, V])))
+    pd = add_variable_gain_pd(
+        builder, plant=controller_plant, arm=arm, state_port=state.get_output_port()
+    )
+    builder.ExportInput(pd.q_desired_input, "q_desired")
+    builder.ExportInput(pd.v_desired_input, "v_desired")
+    builder.ExportOutput(pd.torque_output, "torque")  # gain unconnected: K is the parameter
+    diagram = builder.Build()
+    contexts = [diagram.CreateDefaultContext() for _ in range(2)]
+    for context in contexts:
+        diagram.GetInputPort("q_desired").FixValue(context, Q_DESIRED)
+        diagram.GetInputPort("v_desired").FixValue(context, V_DESIRED)
+    scale = np.array([15.0, 25.0, 8.0, 12.0, 3.0, 1.0, 0.2])
+    limit = np.array([40.0, 30.0, 20.0, 10.0, 5.0, 4.0, 3.0])
+    pd.set_gains(
+        pd.GetMyMutableContextFromRoot(contexts[1]), gain=70.0, stiffness_scale=scale,
+        damping_ratio=0.6, effort_limit=limit,
+    )  # fmt: skip
+    M_jj, g = _reference_plant()(Q)
+    expected = [
+        _hand_law(50.0, 1.0, M_jj, -g, np.asarray(arm.effort_limit)),
+        _hand_law(70.0, 0.6, M_jj, -g, limit, scale=scale),
+    ]
+    assert np.abs(expected[0] - expected[1]).min() > 1e-3  # the two laws differ everywhere
+    assert 1 <= (np.abs(expected[1]) == limit).sum() < 7  # the new limits clip, not all
+    for context, torque in zip(contexts, expected):
+        np.testing.assert_allclose(
+            diagram.GetOutputPort("torque").Eval(context), torque, rtol=1e-12, atol=1e-12
+        )
+    clone = contexts[1].Clone()
+    np.testing.assert_array_equal(
+        diagram.GetOutputPort("torque").Eval(clone),
+        diagram.GetOutputPort("torque").Eval(contexts[1]),
+    )
+    gains = pd.get_gains(pd.GetMyContextFromRoot(clone))
+    assert gains["gain"] == 70.0 and gains["damping_ratio"] == 0.6
+    np.testing.assert_array_equal(gains["stiffness_scale"], scale)
+    np.testing.assert_array_equal(gains["effort_limit"], limit)
+    diagram_ad = diagram.ToAutoDiffXd()
+    context_ad = diagram_ad.CreateDefaultContext()
+    context_ad.SetTimeStateAndParametersFrom(contexts[1])
+    diagram_ad.GetInputPort("q_desired").FixValue(context_ad, [AutoDiffXd(x) for x in Q_DESIRED])
+    diagram_ad.GetInputPort("v_desired").FixValue(context_ad, [AutoDiffXd(x) for x in V_DESIRED])
+    torque_ad = ExtractValue(diagram_ad.GetOutputPort("torque").Eval(context_ad)).ravel()
+    np.testing.assert_allclose(torque_ad, expected[1], rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "changes, message",
+    [
+        ({"gain": 0.0}, "gain"),
+        ({"stiffness_scale": [1.0] * 6}, "stiffness_scale"),
+        ({"damping_ratio": float("nan")}, "damping_ratio"),
+        ({"effort_limit": [1.0] * 6 + [-1.0]}, "effort_limit"),
+    ],
+)
+def test_bad_gains_are_named(changes, message):
+    controller_plant, arm = make_arm_controller_plant()
+    pd = VariableGainPd(plant=controller_plant, arm=arm)
+    with pytest.raises(ValueError, match=message):
+        pd.set_gains(pd.CreateDefaultContext(), **changes)
 
 
 def test_clones_run_bit_identical():

@@ -270,3 +270,68 @@ def test_nan_input_is_rejected():
         run_master([np.nan, 0.0, 0.0], duration=0.01)
     with pytest.raises(ValueError, match="motor_force must be finite"):
         run_master([0.0, 0.0, 0.0], motor_force=[0.0, np.inf, 0.0], duration=0.01)
+
+
+def _mass_damper(force, mass, damping, t):
+    """p(t), v(t) of m xddot + b xdot = force from rest at 0 (closed form)."""
+    decay = np.exp(-damping * t / mass)
+    v = force / damping * (1.0 - decay)
+    p = force / damping * (t - mass / damping * (1.0 - decay))
+    return p, v
+
+
+def test_parameters_of_each_context_give_their_own_mass_damper():
+    """Two contexts of one diagram, one with set_parameters (mass, damping, peak force):
+    after 50 ms each tip is the closed-form mass-damper under its own force; a context's
+    Clone keeps them; the AutoDiffXd system takes them with SetTimeStateAndParametersFrom."""
+    builder = DiagramBuilder()
+    master = builder.AddSystem(make_master())
+    hand = builder.AddSystem(ConstantVectorSource(np.array([0.5, -0.2, 0.1])))
+    motor = builder.AddSystem(ConstantVectorSource(np.array([1.0, 0.0, 0.0])))
+    builder.Connect(hand.get_output_port(), master.GetInputPort("hand_force"))
+    builder.Connect(motor.get_output_port(), master.GetInputPort("motor_force"))
+    diagram = builder.Build()
+    contexts = [diagram.CreateDefaultContext() for _ in range(2)]
+    # An update evaluated before the change: the discretisation it caches must follow.
+    master.EvalUniquePeriodicDiscreteUpdate(master.GetMyContextFromRoot(contexts[1]))
+    master.set_parameters(
+        master.GetMyMutableContextFromRoot(contexts[1]), mass=0.1, damping=0.5, peak_force=0.4
+    )
+    assert master.get_parameters(master.GetMyContextFromRoot(contexts[1])) == {
+        "mass": 0.1, "damping": 0.5, "friction": 0.0, "peak_force": 0.4,
+        "wall_stiffness": 5000.0, "wall_damping": 20.0,
+    }  # fmt: skip
+    clone = contexts[1].Clone()
+    # Default: m 0.045 kg, b 0.1 N s/m, the 1 N motor below the 7.9 N peak; context 1: the
+    # motor saturated at 0.4 N. The tip stays inside the box (no wall).
+    forces = [np.array([1.5, -0.2, 0.1]), np.array([0.9, -0.2, 0.1])]
+    for context, force, (mass, damping) in zip(
+        (*contexts, clone), (*forces, forces[1]), ((0.045, 0.1), (0.1, 0.5), (0.1, 0.5))
+    ):
+        Simulator(diagram, context).AdvanceTo(0.05 - 0.5 * PERIOD)  # 50 samples
+        p, v = _mass_damper(force, mass, damping, 0.05)
+        own = master.GetMyContextFromRoot(context)
+        np.testing.assert_allclose(master.GetOutputPort("p_MS").Eval(own), p, rtol=1e-9)
+        np.testing.assert_allclose(master.GetOutputPort("v_MS").Eval(own), v, rtol=1e-9)
+    assert np.all(np.abs(master.GetOutputPort("p_MS").Eval(master.GetMyContextFromRoot(
+        contexts[0])) - master.GetOutputPort("p_MS").Eval(master.GetMyContextFromRoot(
+        contexts[1]))) > 1e-5)  # fmt: skip
+
+    master_ad = master.ToAutoDiffXd()
+    context_ad = master_ad.CreateDefaultContext()
+    context_ad.SetTimeStateAndParametersFrom(master.GetMyContextFromRoot(contexts[1]))
+    assert master_ad.get_parameters(context_ad)["mass"] == 0.1
+    p_ad = [x.value() for x in master_ad.GetOutputPort("p_MS").Eval(context_ad)]
+    np.testing.assert_array_equal(
+        p_ad, master.GetOutputPort("p_MS").Eval(master.GetMyContextFromRoot(contexts[1]))
+    )
+
+
+@pytest.mark.parametrize(
+    "values, message", [({"mass": 0.0}, "mass"), ({"damping": -1.0}, "damping"),
+                        ({"period": 1e-3}, "unknown master parameter")],
+)  # fmt: skip
+def test_bad_master_parameters_are_named(values, message):
+    master = make_master()
+    with pytest.raises(ValueError, match=message):
+        master.set_parameters(master.CreateDefaultContext(), **values)
