@@ -49,7 +49,9 @@ def free_run(scenario, model):
     return run_reproduction(build_reproduction_diagram(scenario, model, scene=False))
 
 
-def test_reference_is_the_numpy_rollout_and_the_arm_tracks_it(scenario, free_run, model):
+def test_wiring_reference_is_the_policys_rollout_and_the_arm_tracks_it(scenario, free_run, model):
+    # The reference part is wiring (the reproducer runs the policy that reproduce() runs; the
+    # maths is pinned in tests/learning/test_learning_systems.py); the tracking is physics.
     log = free_run.log
     assert free_run.pin_out is None  # no scene, no pin
     settings = scenario.reproduction
