@@ -8,25 +8,17 @@ page in headless Chromium.
 """
 
 import dataclasses as dc
-import hashlib
 import math
-import socket
 
 import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from hemg_drake.cli import main
-from hemg_drake.diagrams.visualization import Visualization
-from hemg_drake.learning.demos import load_dataset
-from hemg_drake.run_folder import RunFolder
-from hemg_drake.scenario import load_scenario, shipped_scenario
 from hemg_drake.teleop.browser import BrowserMaster, dead_zone
 from hemg_drake.teleop.browser_inputs import (
-    COLUMNS, END_BUTTON, KEY_STEP_MM, SLIDER_ACTIVATION, SLIDER_X, LoggedInputs, load_inputs,
+    COLUMNS, END_BUTTON, SLIDER_ACTIVATION, SLIDER_X, LoggedInputs, load_inputs,
 )  # fmt: skip
-from hemg_drake.teleop_session import run_take, teleop
-from tooling.headless_page import HeadlessPage  # tests/tooling: test tooling, not runtime
+from hemg_drake.teleop_session import run_take
 
 websocket = pytest.importorskip("websocket", reason="websocket-client is in the dev extra")
 msgpack = pytest.importorskip("msgpack")
@@ -34,21 +26,6 @@ msgpack = pytest.importorskip("msgpack")
 P0 = [0.01, -0.02, 0.03]
 HALF = [0.08, 0.06, 0.06]  # the Touch X's box, half sizes (m)
 K_H, D_H, F_MAX = 300.0, 5.0, 15.0
-
-
-@pytest.fixture(scope="module")
-def scenario():
-    return load_scenario(shipped_scenario("cotter_pin"))
-
-
-@pytest.fixture
-def visualization():
-    return Visualization(0)
-
-
-@pytest.fixture
-def meshcat(visualization):
-    return visualization.meshcat
 
 
 def row(slider_mm=(0.0, 0.0, 0.0), activation=0.05, axes=None, buttons=None, clicks=0, pages=0):
@@ -360,198 +337,3 @@ def test_closed_page_ends_the_take_and_keeps_it(scenario, meshcat, visualization
                     on_step=script, progress=lambda line: None)  # fmt: skip
     assert take.inputs.end_reason == "page closed"
     assert 2.0 <= take.inputs.end_time < 2.6
-
-
-def _first_line(capsys):
-    return capsys.readouterr().out.splitlines()
-
-
-def test_cli_appends_takes_that_learn_accepts_and_replays_them(tmp_path, capsys):
-    out = tmp_path / "run"
-    args = ["teleop", "cotter_pin", "--out", str(out), "--port", "0", "--no-replay"]
-    assert main([*args, "--duration", "0.3"]) == 0
-    lines = _first_line(capsys)
-    assert lines[0].startswith("Meshcat: http://localhost:")
-    assert int(lines[0].rsplit(":", 1)[1]) > 0
-    assert main([*args, "--duration", "0.2", "--takes", "2"]) == 0  # two on one page
-    lines = _first_line(capsys)
-    assert lines[0].startswith("Meshcat: ") and sum(x.startswith("Meshcat") for x in lines) == 1
-    log = load_inputs(out / "inputs_1.npz")
-    assert len(log.time) == 30  # 100 Hz
-    # Re-driven headless from take 1's log: a third take equal to the first, bit for bit.
-    assert main(["teleop", "cotter_pin", "--out", str(out), "--no-replay",
-                 "--replay-inputs", str(out / "inputs_1.npz")]) == 0  # fmt: skip
-    demos, metadata = load_dataset(out / "dataset.npz")
-    assert len(demos) == 4 and metadata["operators"][:3] == ["browser"] * 3
-    assert metadata["seeds"] == [1, 2, 3, 1]  # scenario.seed + c - 1; the replay: the log's
-    assert [len(d) for d in demos] == [31, 21, 21, 31]  # the log period, both ends
-    for field in dc.fields(demos[0]):
-        assert np.array_equal(getattr(demos[0], field.name), getattr(demos[3], field.name))
-    folder = RunFolder(out)
-    folder.check("demonstrate", folder.dataset, run_hint="x")
-    for name in ("inputs_1.npz", "inputs_2.npz", "inputs_3.npz", "inputs_4.npz"):
-        folder.check("demonstrate", out / name, run_hint="x")
-
-
-def _hash(path):
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
-def test_interrupted_take_writes_nothing_and_keeps_the_old_takes(scenario, visualization, tmp_path):
-    teleop(scenario, tmp_path, visualization=visualization, duration=0.2, replays=False, realtime=False,
-           progress=lambda line: None)  # fmt: skip
-    before = _hash(tmp_path / "dataset.npz")
-
-    def interrupt(t):
-        if t > 0.1:
-            raise KeyboardInterrupt
-
-    with pytest.raises(KeyboardInterrupt):
-        teleop(scenario, tmp_path, visualization=visualization, duration=5.0, replays=True, realtime=False,
-               on_step=interrupt, progress=lambda line: None)  # fmt: skip
-    assert _hash(tmp_path / "dataset.npz") == before
-    assert not (tmp_path / "inputs_2.npz").exists() and not (tmp_path / "replay_2.html").exists()
-    assert not list(tmp_path.glob(".*.tmp"))
-
-
-def test_port_in_use_and_other_scenario_are_one_line_errors(tmp_path, capsys):
-    with socket.socket() as taken:
-        taken.bind(("localhost", 0))
-        taken.listen(1)
-        port = taken.getsockname()[1]
-        code = main(["teleop", "cotter_pin", "--out", str(tmp_path), "--port", str(port)])
-    err = capsys.readouterr().err
-    assert code == 2 and "in use" in err and len(err.strip().splitlines()) == 1
-    assert not (tmp_path / "dataset.npz").exists()
-    assert main(["teleop", "cotter_pin", "--out", str(tmp_path), "--port", "0", "--no-replay",
-                 "--duration", "0.05"]) == 0  # fmt: skip
-    capsys.readouterr()
-    code = main(["teleop", "drawing", "--out", str(tmp_path), "--port", "0"])
-    err = capsys.readouterr().err
-    assert code == 2 and "another scenario" in err
-
-
-@pytest.mark.browser
-def test_keys_in_the_real_page_move_the_stylus_and_escape_ends_the_take(
-    scenario, meshcat, chromium, visualization
-):
-    """Headless Chromium opens the live page; DevTools key presses drive the sliders."""
-    import time
-
-    browser_page = HeadlessPage(meshcat.web_url())
-    pressed = {}
-
-    def script(t):
-        if "right" not in pressed:
-            # Wait (in wall time; the simulation waits too) for the page and its controls.
-            deadline = time.monotonic() + 60
-            while not browser_page.evaluate(f"document.body.innerText.includes('{SLIDER_X}')"):
-                if time.monotonic() > deadline:
-                    raise RuntimeError("the page never showed its controls")
-                time.sleep(0.05)
-            for _ in range(5):
-                browser_page.press("ArrowRight")  # +KEY_STEP_MM (2 mm) each
-            pressed["right"] = t
-        elif t - pressed["right"] > 0.5 and "escape" not in pressed:
-            browser_page.press("Escape")
-            pressed["escape"] = t
-
-    with browser_page:
-        take = run_take(scenario, seed=1, visualization=visualization, duration=20.0, realtime=True,
-                        on_step=script, progress=lambda line: None, scene=False)  # fmt: skip
-    assert take.inputs.end_reason == "button" and take.inputs.end_time < 5.0
-    slider = take.inputs.rows[:, COLUMNS.index("slider_x_mm")]
-    assert KEY_STEP_MM == 2.0  # the step docs/teleop_browser.md states
-    assert slider[-1] - slider[0] == pytest.approx(5 * KEY_STEP_MM)
-    # The take's log re-driving a master on its own: the target moved by exactly the five
-    # steps; in the take, the stylus followed it.
-    p0 = take.master.p_MS_initial
-    master = BrowserMaster(source=LoggedInputs(take.inputs.time, take.inputs.rows),
-                           p_MS_initial=p0)  # fmt: skip
-    simulator = Simulator(master)
-    simulator.AdvanceTo(take.inputs.end_time)
-    target = master.GetOutputPort("p_MT").Eval(simulator.get_context())
-    assert target[0] - p0[0] == pytest.approx(5e-3 * KEY_STEP_MM, abs=1e-12)
-    np.testing.assert_allclose(target[1:], p0[1:], atol=1e-12)
-    assert take.demonstration.p_MS[-1, 0] - p0[0] == pytest.approx(0.010, abs=5e-4)
-
-
-def test_a_take_joins_simulated_demonstrations_and_learn_takes_them(tmp_path, capsys):
-    out = str(tmp_path / "run")
-    short = ["--set", "duration=0.4"]
-    assert main(["demonstrate", "cotter_pin", "--out", out, "--demos", "1", "--no-replay",
-                 *short]) == 0  # fmt: skip
-    # The shipped scenario as it is: only the length and count differ, which takes ignore.
-    assert main(["teleop", "cotter_pin", "--out", out, "--port", "0", "--duration", "0.3",
-                 "--no-replay"]) == 0  # fmt: skip
-    demos, metadata = load_dataset(tmp_path / "run" / "dataset.npz")
-    assert metadata["operators"] == ["simulated", "browser"]
-    assert (demos[0].frame_A is None) == (demos[1].frame_A is None)
-    assert main(["learn", out, "--set", "learning.num_states=2"]) == 0
-    assert "wrote" in capsys.readouterr().out
-
-
-def test_a_keyboard_take_draws_the_first_stroke_on_the_sheet(meshcat, visualization):
-    """A person's key presses (2 mm per press, scripted through the page's sliders) steer the
-    stylus along the drawing's first stroke: the pen touches the sheet and draws the line."""
-    from hemg_drake.evaluation import strokes
-    from hemg_drake.tasks.metrics import stroke_errors
-    from hemg_drake.teleop.browser_inputs import SLIDER_Y, SLIDER_Z
-
-    scenario = load_scenario(shipped_scenario("drawing"), overrides=["duration=2.9"])
-    plan, mapping = scenario.task_plan(), scenario.workspace_mapping()
-    end = 2.8  # the first stroke is drawn and the pen lifted by then
-    press_mm = 2.0  # one key press moves the target 2 mm
-
-    def script(t):
-        target_mm = 1e3 * mapping.slave_to_master(plan.position(min(t + 0.1, end)))
-        pressing = plan.segment(min(t, end)).pen_down
-        for name, value in zip((SLIDER_X, SLIDER_Y, SLIDER_Z), target_mm):
-            # While drawing, the person keeps the pen pressed: the vertical key (SLIDER_Y,
-            # W/S) rounds down, into the sheet; the others to the nearest press.
-            steps = math.floor(value / press_mm) if name == SLIDER_Y and pressing else round(
-                value / press_mm
-            )
-            meshcat.SetSliderValue(name, press_mm * steps)
-        meshcat.SetSliderValue(SLIDER_ACTIVATION, 0.8 if pressing else 0.2)
-
-    take = run_take(scenario, seed=5, visualization=visualization, duration=2.9, realtime=False,
-                    on_step=script, progress=lambda line: None)  # fmt: skip
-    demo = take.demonstration
-    drawn = strokes(demo.time, demo.p_WE, demo.f_WE)
-    assert len(drawn) == 1
-    # The plan's line, seen from above, against the ink: the same 11 cm line within 5 mm.
-    first, second = [i for i, down in enumerate(plan.pen_down) if down][:2]
-    line = plan.points[[first + 1, second + 1], :2]  # pressed at the line's start, its end
-    length = np.linalg.norm(drawn[0][-1, :2] - drawn[0][0, :2])
-    assert length == pytest.approx(np.linalg.norm(line[-1] - line[0]), abs=0.015)
-    assert stroke_errors(drawn[0][:, :2], [line])["shape"] < 0.005
-
-
-def test_takes_with_placements_happen_each_at_its_own_seeds_placement(visualization, tmp_path):
-    from hemg_drake.learning.demos import load_dataset
-    from hemg_drake.placements import demonstration_scenario, task_frames
-
-    placed = load_scenario(shipped_scenario("cotter_pin"), overrides=[
-        "scene.placements.position_range=[[0.62,-0.86,0.11],[0.67,-0.81,0.13]]",
-        "scene.placements.yaw_range_deg=[-20,20]",
-    ])  # fmt: skip
-    lines = []
-    for _ in range(2):
-        teleop(placed, tmp_path, visualization=visualization, duration=0.1, replays=False, realtime=False,
-               progress=lines.append)  # fmt: skip
-    demos, _ = load_dataset(tmp_path / "dataset.npz")
-    origins = []
-    for c, demo in enumerate(demos):
-        # Take c has seed scenario.seed + c: its frames are that seed's drawn placement, and
-        # the arm starts at that placement's ring (the grasp), not at the shipped one.
-        A, b = task_frames(demonstration_scenario(placed, placed.seed + c))
-        np.testing.assert_array_equal(demo.frame_A, A)
-        np.testing.assert_array_equal(demo.frame_b, b)
-        np.testing.assert_allclose(demo.p_WE[0], b[1], atol=0.005)
-        origins.append(b[1])
-        here = demonstration_scenario(placed, placed.seed + c)
-        yaw = here.scene.yaw_deg
-        said = f"take {c + 1}: scene at {np.round(b[1], 3).tolist()} m, yaw {yaw:.1f}"
-        assert any(line.startswith(said) for line in lines), lines
-    assert np.linalg.norm(origins[0] - origins[1]) > 0.003  # two placements, not one
