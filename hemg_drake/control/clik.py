@@ -329,8 +329,7 @@ def Clik_(T):
             p_desired = self._p_desired.Eval(context).tolist()
             if not _finite(p_desired[0] + p_desired[1] + p_desired[2]):
                 return self._hold(context, discrete_state)
-            group = context.get_numeric_parameter(self._parameter)  # as _law, inline
-            law = (group.get_value() if self._double else group.CopyToVector()).tolist()
+            law = self._law(context)
             plant_context = self._plant_context.Eval(context)
             # The Jacobian reuses the forward kinematics of the point's position.
             p_WE = self._plant.CalcPointsPositions(plant_context, *self._point_arguments)
@@ -355,8 +354,7 @@ def Clik_(T):
             p_desired = self._p_desired.Eval(context).tolist()
             if not _finite(p_desired[0] + p_desired[1] + p_desired[2]):
                 return self._hold(context, discrete_state)
-            group = context.get_numeric_parameter(self._parameter)  # as _law, inline
-            law = (group.get_value() if self._double else group.CopyToVector()).tolist()
+            law = self._law(context)
             plant_context = self._plant_context.Eval(context)
             # One call for R_WE and p_WE (the pose's 4x4 matrix, row-major: 16 scalars).
             X_WE = self._frame_E.CalcPoseInWorld(plant_context).GetAsMatrix4().ravel().tolist()
