@@ -9,6 +9,7 @@ from pydrake.systems.analysis import MonteCarloSimulation, RandomSimulation, Sim
 from hemg_drake.diagrams.demonstration import (
     build_demonstration_diagram,
     initial_context,
+    operator_plan,
     record_demonstration,
     run_demonstration,
 )
@@ -98,3 +99,18 @@ def test_monte_carlo_simulation_draws_demonstrations_from_one_diagram(pin):
         simulator.Initialize()
         plans.append(operator.plan(operator.GetMyContextFromRoot(simulator.get_context())))
     assert not np.array_equal(plans[0].times, plans[1].times)
+
+
+def test_the_seed_gives_the_operator_the_plan_that_seed_perturbs(pin):
+    # The draws put into the Context reproduce TaskPlan.perturbed(seed), numpy's draws, on
+    # the diagram and on a clone (whose operator is a plain Diagram).
+    scenario, built = pin
+    for diagram in (built.diagram, built.diagram.Clone()):
+        context = initial_context(built, 9, diagram=diagram)
+        simulator = Simulator(diagram, context)
+        simulator.Initialize()
+        law = diagram.GetSubsystemByName("operator").GetSubsystemByName("law")
+        plan = law.plan(law.GetMyContextFromRoot(context))
+        expected = operator_plan(scenario, 9)
+        np.testing.assert_array_equal(plan.times, expected.times)
+        np.testing.assert_array_equal(plan.points, expected.points)
