@@ -139,3 +139,21 @@ def test_a_failed_check_names_the_override_at_fault():
             empty = Path(folder) / "empty.yaml"
             empty.write_text("{}\n")
             load_scenario(empty)
+
+
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        ("pd.stiffness_scale=[1, 2]", "key 'pd.stiffness_scale' must hold 7 numbers"),
+        ("pd.stiffness_scale=[20, 20, 10, 10, 2, 2, 0]", "key 'pd.stiffness_scale' must be positive"),
+        ("pd.damping_ratio=-1", "key 'pd.damping_ratio' must be positive"),
+        ("pd.gain=.nan", "key 'pd.gain' must be finite"),
+        ("clik.limit_margin=-0.1", "key 'clik.limit_margin' must not be negative"),
+    ],
+)
+def test_the_controllers_new_keys_refuse_bad_values_naming_the_override(override, message):
+    # The pd section and clik.limit_margin came with the configs beside their systems.
+    with pytest.raises(ValueError) as error:
+        load_scenario(shipped_scenario("cotter_pin"), overrides=[override])
+    text = str(error.value)
+    assert text.startswith(f"--set {override}: ") and message in text and "\n" not in text
