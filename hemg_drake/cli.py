@@ -1,12 +1,14 @@
 """hemg-drake: demonstrate, learn and reproduce teleoperated tasks in Drake.
 
 Every mistake is answered in one line on stderr with exit status 2 (a bad value, a missing
-or unwritable file); Ctrl-C stops with one line and exit status 130, leaving no partial
-output. Sub-commands import their modules lazily so that ``hemg-drake --help`` is instant.
+or unwritable file); Ctrl-C stops with one line and exit status 130 (SIGTERM: 143), leaving
+no partial output. Sub-commands import their modules lazily so that ``hemg-drake --help``
+is instant.
 """
 
 import argparse
 import math
+import signal
 import sys
 
 from hemg_drake.commands import (
@@ -18,6 +20,7 @@ from hemg_drake.commands import (
     export_command,
     import_robomimic_command,
     learn_command,
+    repair_command,
     reproduce_command,
     stability_command,
     sweep_command,
@@ -227,6 +230,12 @@ def build_parser():
     imports.add_argument("--out", required=True, help="run folder to write dataset.npz into")
     imports.set_defaults(func=import_robomimic_command)
 
+    repair = command(
+        "repair", "rebuild a run folder's manifest from the files there (changes nothing else)"
+    )
+    repair.add_argument("run", help="run folder, e.g. runs/pin/")
+    repair.set_defaults(func=repair_command)
+
     teleop = command(
         "teleop", "drive the arm yourself in the browser (Meshcat); append the take to a dataset"
     )
@@ -299,13 +308,25 @@ def _one_line(error):
     return text.splitlines()[0]
 
 
+class Terminated(BaseException):
+    """SIGTERM, raised where the command is, so that it unwinds as Ctrl-C does."""
+
+
+def _terminate(signum, frame):
+    raise Terminated()
+
+
 def main(argv=None):
     args = build_parser().parse_args(argv)
+    previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         args.func(args)
     except KeyboardInterrupt:
         print(f"hemg-drake {args.command}: interrupted; no partial output kept", file=sys.stderr)
         return 130
+    except Terminated:
+        print(f"hemg-drake {args.command}: terminated; no partial output kept", file=sys.stderr)
+        return 143
     except ImportError as error:
         # An optional dependency (pyproject.toml's extras) that this install lacks.
         extra = OPTIONAL_EXTRAS.get((error.name or "").split(".")[0])
@@ -320,6 +341,8 @@ def main(argv=None):
         # Bad input and unwritable or missing files are reported in one line.
         print(f"hemg-drake {args.command}: error: {_one_line(error)}", file=sys.stderr)
         return 2
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     return 0
 
 

@@ -226,14 +226,22 @@ def import_robomimic_command(args):
 
     demos, metadata = load_robomimic(args.input)  # read and checked before the folder
     check_output_folder(args.out)
-    folder = RunFolder(args.out, create=True)
     metadata["imported_from"] = str(args.input)
-    with folder.stage("demonstrate"):
+    with RunFolder.output(args.out).transaction("demonstrate", progress=_print) as folder:
         save_dataset(folder.dataset, demos, metadata)
-        folder.finish("demonstrate", [folder.dataset])
-    _print(f"wrote {folder.dataset} ({len(demos)} demonstrations from {args.input})")
+        folder.finish("demonstrate", [folder.dataset], command="import")
+    _print(f"wrote {folder.shown(folder.dataset)} ({len(demos)} demonstrations from {args.input})")
 
 
+def repair_command(args):
+    """``hemg-drake repair``: rebuild a run folder's manifest from the files there."""
+    from hemg_drake.learning.demos import load_dataset
+    from hemg_drake.run_folder import repair
+
+    recorded = repair(args.run, check_dataset=load_dataset)
+    for stage, names in recorded.items():
+        _print(f"{stage}: {len(names)} file(s) recorded: {', '.join(names)}")
+    _print(f"wrote {Path(args.run) / 'manifest.json'} (no other file was changed)")
 
 
 def stability_command(args):

@@ -29,9 +29,12 @@ def atomic_open(path, mode="w", **kwargs):
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as error:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(error, OSError) and error.filename is None:
+            # A write's error (a full disk) names no file: name the one being written.
+            raise OSError(error.errno, error.strerror or str(error), str(path)) from None
         raise
 
 

@@ -13,6 +13,7 @@ change any of them for one call. :func:`run_demo` runs the three stages for both
 scenarios (``make demo``).
 """
 
+import contextlib
 import functools
 import json
 import time
@@ -145,11 +146,9 @@ def demonstrate(scenario, run_dir, *, replays=True, progress=print):
 
     # Every placement drawn and checked within reach before anything is written.
     placed = [demonstration_scenario(scenario, seed) for seed in scenario.seeds()]
-    folder = RunFolder(run_dir, create=True)
-    with folder.stage("demonstrate") as removed:
-        if removed:
-            progress(f"removed {len(removed)} file(s) of an older run from {folder.path}/")
-        return _demonstrate(scenario, folder, replays, progress, placed)
+    with RunFolder.output(run_dir).transaction("demonstrate", progress=progress) as folder:
+        written = _demonstrate(scenario, folder, replays, progress, placed)
+    return [folder.shown(path) for path in written]
 
 
 def _demonstrate(scenario, folder, replays, progress, placed):
@@ -181,7 +180,7 @@ def _demonstrate(scenario, folder, replays, progress, placed):
         progress(
             f"demonstration {c}/{scenario.num_demonstrations} (seed {seed}): "
             f"{scenario.duration:g} s simulated in {time.perf_counter() - start:.1f} s"
-            + (f", replay {replay}" if replay else "")
+            + (f", replay {folder.shown(replay)}" if replay else "")
             + (
                 f"; cut short: the operator's plan ends at {plan_end:.2f} s"
                 if plan_end > scenario.duration
@@ -198,7 +197,7 @@ def _demonstrate(scenario, folder, replays, progress, placed):
     return written
 
 
-def learn(run_dir, *, overrides=(), n_iter=None, progress=print):
+def learn(run_dir, *, overrides=(), n_iter=None, diagrams=False, progress=print):
     """Fit the HSMM of a run folder's dataset; write ``model.npz`` and Fig. 8 (c).
 
     N and every other setting are the scenario's ``learning`` section (stored with the
@@ -211,16 +210,25 @@ def learn(run_dir, *, overrides=(), n_iter=None, progress=print):
         ``key=value`` changes to the dataset's scenario (e.g. ``"learning.num_states=6"``).
     n_iter : int, optional
         Largest number of EM iterations; default ``learning.n_iter``.
+    diagrams : bool
+        Also draw the demonstration and reproduction diagrams (:func:`write_diagrams`).
     progress : callable taking one line of text.
 
     Returns
     -------
     HSMM, the fitted model.
     """
+    from hemg_drake.folder_lock import folder_lock
+
+    folder = RunFolder(run_dir)
+    with folder_lock(folder.path):
+        return _learn(folder, overrides, n_iter, diagrams, progress)
+
+
+def _learn(folder, overrides, n_iter, diagrams, progress):
     from hemg_drake.placements import last_frames
     from hemg_drake.viz.run_figures import write_state_activations_figure
 
-    folder = RunFolder(run_dir)
     folder.check("demonstrate", folder.dataset, run_hint=_demonstrate_hint(folder))
     demos, scenario = load_demonstrations(folder.dataset)
     scenario = scenario.replaced(overrides)
@@ -236,15 +244,18 @@ def learn(run_dir, *, overrides=(), n_iter=None, progress=print):
         f"{time.perf_counter() - start:.1f} s"
         + ("" if model.converged_ else " (stopped before converging: raise --iterations)")
     )
-    with folder.stage("learn"):
-        first = model
-        if hasattr(model, "at"):  # a TP-HSMM: its HSMM where demonstration 1 was
-            first = model.at(*last_frames(frames[0], model.n_frames_))
-        h = first.forward_variable(data[0])
-        model.save(folder.model)
-        figure = write_state_activations_figure(demos[0].time, h, scenario.task, folder.path)
-        folder.finish("learn", [folder.model, figure], inputs=[folder.dataset])
-    progress(f"wrote {folder.model}, {figure}")
+    first = model
+    if hasattr(model, "at"):  # a TP-HSMM: its HSMM where demonstration 1 was
+        first = model.at(*last_frames(frames[0], model.n_frames_))
+    h = first.forward_variable(data[0])
+    with folder.transaction("learn", progress=progress) as new:
+        model.save(new.model)
+        written = [new.model]
+        written.append(write_state_activations_figure(demos[0].time, h, scenario.task, new.path))
+        if diagrams:
+            written += write_diagrams(scenario, model, new.path, progress=progress)
+        new.finish("learn", written, inputs=[new.dataset])
+    progress("wrote " + ", ".join(str(new.shown(path)) for path in written))
     return model
 
 
@@ -300,9 +311,19 @@ def reproduce(
     -------
     dict, the metrics written to ``metrics.json``.
     """
-    from hemg_drake.placements import moved_demonstration, scene_frame, task_frames
+    from hemg_drake.folder_lock import folder_lock
 
     folder = RunFolder(run_dir)
+    same = out_dir is None or Path(out_dir).resolve() == folder.path.resolve()
+    out = folder if same else RunFolder.output(out_dir)
+    # The run is read throughout: no other command may replace it meanwhile.
+    with folder_lock(folder.path, shared=out is not folder):
+        return _checked_reproduce(folder, out, overrides, start_offset, replay, progress)
+
+
+def _checked_reproduce(folder, out, overrides, start_offset, replay, progress):
+    from hemg_drake.placements import moved_demonstration, scene_frame, task_frames
+
     demos, recorded = load_demonstrations(folder.dataset)
     scenario = recorded.replaced(overrides)
     model = _checked_model(folder, scenario)
@@ -318,14 +339,13 @@ def reproduce(
     ]
     offset_W = scenario.X_WT().rotation().matrix() @ offset
     start = np.mean([demo.p_WE[0] for demo in demos], axis=0) + offset_W
-    out = folder if out_dir is None else RunFolder(out_dir, create=True)
-    if out.path.resolve() != folder.path.resolve() and (out.dataset.exists() or out.model.exists()):
+    if out is not folder and (out.dataset.exists() or out.model.exists()):
         raise ValueError(
             f"--out {out.path} holds a run of its own ({DATASET} or {MODEL}); write the "
             f"reproduction into a new folder or the run folder itself"
         )
-    with out.stage("reproduce"):
-        return _reproduce(scenario, model, demos, folder, out, start, offset, replay, progress)
+    with out.transaction("reproduce", progress=progress) as new:
+        return _reproduce(scenario, model, demos, folder, new, start, offset, replay, progress)
 
 
 def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progress):
@@ -337,7 +357,7 @@ def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progr
 
     duration = float(np.mean([demo.time[-1] for demo in demos]))
     began = time.perf_counter()
-    title = f"{scenario.task.replace('_', ' ')}: reproduction from {out.path.name}"
+    title = f"{scenario.task.replace('_', ' ')}: reproduction from {out.final.name}"
     visualization = Visualization() if replay else None
     built = build_reproduction_diagram(scenario, model, start=start, visualization=visualization)
     replay_path = out / "reproduction.html" if replay else None
@@ -369,7 +389,7 @@ def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progr
         written.append(replay_path)
     out.finish("reproduce", written, inputs=[folder.model, folder.dataset])
     progress(format_metrics({scenario.task: metrics}))
-    progress(f"wrote {out.path}/: " + ", ".join(p.name for p in written))
+    progress(f"wrote {out.final}/: " + ", ".join(p.name for p in written))
     return metrics
 
 
@@ -463,11 +483,47 @@ def run_demo(
     from hemg_drake.evaluation import format_metrics
     from hemg_drake.scenario import load_scenario, shipped_scenario
 
+    from hemg_drake.folder_lock import folder_lock
+
     unknown = [task for task in tasks if task not in TASKS]
     if unknown or not tasks:
         raise ValueError(f"tasks must be among {TASKS}, got {list(tasks)}")
     out_dir = Path(out_dir)
     scenarios = {task: load_scenario(shipped_scenario(task), overrides=overrides) for task in tasks}
+    summary = out_dir / "metrics.json"
+    made = not out_dir.exists()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        with folder_lock(out_dir):
+            _check_demo_summary(out_dir, summary)
+            results = _run_demo(scenarios, out_dir, replays, placements, progress)
+            # The folder holds the tasks' runs and other folders: its manifest lists only
+            # the summary (it is not a run folder of its own).
+            write_text_atomic(summary, json.dumps(results, indent=2) + "\n")
+            RunFolder(out_dir).finish("demo", [summary])
+    except BaseException:
+        if made:
+            with contextlib.suppress(OSError):
+                out_dir.rmdir()
+        raise
+    progress(format_metrics(results))
+    progress(f"wrote {summary}")
+    return results
+
+
+def _check_demo_summary(out_dir, summary):
+    """Refuse to overwrite a ``metrics.json`` that no demo recorded writing."""
+    from hemg_drake.run_folder import MANIFEST
+
+    listed = RunFolder(out_dir).manifest().get("demo", {}).get("files", {})
+    if summary.exists() and "metrics.json" not in listed:
+        raise ValueError(
+            f"{summary}: not written by hemg-drake demo (no demo in {out_dir / MANIFEST} "
+            "lists it), and the demo writes that name: move it away or choose another --out"
+        )
+
+
+def _run_demo(scenarios, out_dir, replays, placements, progress):
     results, began = {}, time.perf_counter()
     for task, scenario in scenarios.items():
         run_dir = out_dir / task
@@ -477,7 +533,7 @@ def run_demo(
         )
         for path in demonstrate(scenario, run_dir, replays=replays, progress=progress):
             progress(f"wrote {path}")
-        model = learn(run_dir, progress=progress)
+        learn(run_dir, diagrams=True, progress=progress)
         results[task] = reproduce(run_dir, replay=replays, progress=progress)
         offsets = scenario.reproduction.start_offsets
         for i, offset in enumerate(offsets):
@@ -487,14 +543,9 @@ def run_demo(
                 run_dir, start_offset=offset, out_dir=run_dir / name, replay=False,
                 progress=progress,
             )  # fmt: skip
-        for path in write_diagrams(scenario, model, run_dir, progress=progress):
-            progress(f"wrote {path}")
         if placements:
             results.update(
                 placement_demo(scenario, run_dir / "placements", replays=replays, progress=progress)
             )
         progress(f"== {task} done after {time.perf_counter() - began:.0f} s")
-    write_text_atomic(out_dir / "metrics.json", json.dumps(results, indent=2) + "\n")
-    progress(format_metrics(results))
-    progress(f"wrote {out_dir / 'metrics.json'}; total {time.perf_counter() - began:.0f} s")
     return results

@@ -7,23 +7,37 @@
     reproduce     reproduction.html/.npz, metrics.json, figures (from model.npz)
 
 Provenance lives in ``manifest.json``: for each finished stage, the SHA-256 of every file
-it wrote and of every file it read. A stage first removes its own old outputs and those of
-the stages after it (so a folder never mixes runs, and a reproduction without a replay
-leaves no old replay behind), writes its files (each atomically), and records its entry
-last: a stage killed midway leaves no entry, which the next stage detects. Stale temporary
-files of an interrupted atomic write (``.NAME.*.tmp``) are removed when a stage begins.
+it wrote and of every file it read. A folder is a run folder if it has a manifest; the tool
+writes only into a new or empty folder or a run folder, and removes only files a manifest
+lists (its own outputs).
+
+A stage never edits the folder in place (:meth:`RunFolder.transaction`): it builds the new
+version of the whole folder beside it (``.NAME.hemg-drake-new-PID``: hard links to every
+file it keeps, its own outputs, the manifest last), then swaps the two folders in one atomic
+``renameat2(RENAME_EXCHANGE)``. A failure, Ctrl-C, SIGTERM or SIGKILL at any moment leaves
+the previous folder exactly as it was; the next command removes what was left beside it. The
+files a stage replaces are its own older outputs and those of the stages after it, and
+reproductions in sub-folders made from a model or dataset it replaces (``start_offset/``,
+``reproduce --out runs/pin/lqr``): they no longer match. A user's own files are kept.
+
+A command holds an exclusive lock on the folder it writes (:mod:`hemg_drake.folder_lock`):
+a second writer is refused in one line.
 
 A reproduction written to another folder (``reproduce --out``) gets a manifest of its own
-there, naming the model and dataset it came from.
+there, naming the model and dataset it came from (by path and hash).
 """
 
 import contextlib
+import ctypes
+import errno
 import hashlib
 import json
+import os
 import shutil
 from pathlib import Path
 
 from hemg_drake.fileio import write_text_atomic
+from hemg_drake.folder_lock import folder_lock, held_lock, lock_new_folder
 
 MANIFEST = "manifest.json"
 DATASET, MODEL = "dataset.npz", "model.npz"
@@ -32,19 +46,24 @@ STAGES = ("demonstrate", "learn", "reproduce")
 OUTPUTS = {
     "demonstrate": (
         DATASET, "replay_*.html", "inputs_*.npz", "demonstrations.png", "fig6_emg.png",
-        "demonstration_diagram.svg", "demonstration_diagram.dot",
     ),
-    "learn": (MODEL, "state_activations.png", "reproduction_diagram.svg", "reproduction_diagram.dot"),
+    # The diagrams (run_demo) are drawn with the model.
+    "learn": (MODEL, "state_activations.png", "demonstration_diagram.svg",
+              "demonstration_diagram.dot", "reproduction_diagram.svg", "reproduction_diagram.dot"),
     "reproduce": (
         "reproduction.html", "reproduction.npz", "metrics.json", "fig8_reproduction.png",
         "fig10_reproduction.png", "fig11_strokes.png",
     ),
 }  # fmt: skip
-# Sub-folders of extra reproductions (``start_offset``, ``start_offset_<i>``).
-REPRODUCTION_FOLDERS = "start_offset*"
+# The files of a stage that later stages read: replacing them invalidates what was made
+# from them (in this folder and in reproductions in its sub-folders).
+READ_BY_LATER = {"demonstrate": (DATASET,), "learn": (MODEL,), "reproduce": ()}
 # Sub-folder of the full demo's placements run (pipeline.placement_demo): a run of its own,
-# made from this folder's scenario, removed with the folder's demonstrations.
+# made from this folder's scenario, replaced with the folder's demonstrations.
 PLACEMENTS_FOLDER = "placements"
+# The versions of a folder a stage builds beside it: .NAME.hemg-drake-new-PID (being
+# built) and .NAME.hemg-drake-old-PID (the replaced version, being removed).
+NEW, OLD = "hemg-drake-new", "hemg-drake-old"
 
 
 def file_hash(path):
@@ -56,6 +75,123 @@ def file_hash(path):
     return digest.hexdigest()
 
 
+def _is_temporary(name):
+    # fileio.atomic_open's temporary files: ".NAME.<random>.tmp"
+    return name.startswith(".") and name.endswith(".tmp")
+
+
+_RENAME_EXCHANGE = 2
+_AT_FDCWD = -100
+
+
+def _renameat2():
+    return getattr(ctypes.CDLL(None, use_errno=True), "renameat2", None)
+
+
+def exchange(a, b):
+    """Swap the folders ``a`` and ``b`` in one atomic step (Linux ``renameat2``).
+
+    Where the call or the filesystem lacks it, falls back to two renames (``b`` aside, then
+    ``a`` into place): a crash between them leaves ``b`` beside, under the old name, where
+    :func:`recover` puts it back.
+    """
+    function = _renameat2()
+    if function is not None:
+        if function(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+            return
+        code = ctypes.get_errno()
+        if code not in (errno.EINVAL, errno.ENOSYS, errno.ENOTSUP):
+            raise OSError(code, os.strerror(code), str(b))
+    aside = Path(b).parent / f".{Path(b).name}.{OLD}-{os.getpid()}"
+    os.rename(b, aside)
+    os.rename(a, b)
+    os.rename(aside, a)
+
+
+def _walk_files(root):
+    """Relative paths of every file and symlink under ``root`` (not following links)."""
+    found = []
+    for base, dirs, files in os.walk(root):
+        for name in files + [d for d in dirs if os.path.islink(os.path.join(base, d))]:
+            found.append(os.path.relpath(os.path.join(base, name), root))
+    return sorted(found)
+
+
+def _listed(folder):
+    """Relative paths the manifests under ``folder`` list as written by the tool (its own
+    and its sub-folders'), with the manifests themselves."""
+    listed = set()
+    for base, _dirs, files in os.walk(folder):
+        if MANIFEST in files:
+            rel = os.path.relpath(base, folder)
+            prefix = "" if rel == "." else rel + os.sep
+            listed.add(prefix + MANIFEST)
+            for entry in RunFolder.read_manifest(Path(base) / MANIFEST, strict=False).values():
+                listed.update(prefix + name for name in entry.get("files", {}))
+    return listed
+
+
+def _same_file(a, b):
+    try:
+        if os.path.samestat(os.lstat(a), os.lstat(b)):
+            return True
+        return os.path.isfile(a) and os.path.isfile(b) and file_hash(a) == file_hash(b)
+    except OSError:
+        return False
+
+
+def discard_old(old, new):
+    """Remove the replaced version ``old`` of the folder ``new``: files ``new`` still has
+    (hard links, or equal bytes) and files the tool wrote (a manifest lists them) go; any
+    other file (one a person put there while the command ran) is moved into ``new``. Returns
+    the relative paths kept in ``old`` because ``new`` has another file of that name."""
+    listed, kept = _listed(old), []
+    for rel in _walk_files(old):
+        path, there = Path(old) / rel, Path(new) / rel
+        if rel in listed or _is_temporary(path.name) or _same_file(path, there):
+            path.unlink()
+        elif not os.path.lexists(there):
+            there.parent.mkdir(parents=True, exist_ok=True)
+            os.rename(path, there)
+        else:
+            kept.append(rel)
+    if not kept:
+        shutil.rmtree(old, ignore_errors=True)
+    return kept
+
+
+def recover(target):
+    """Tidy what an interrupted stage left beside ``target`` (call with its lock held, or
+    before it exists): a version being built is removed; a replaced version is discarded
+    (:func:`discard_old`), or put back if ``target`` is missing (a crash inside the two-rename
+    fallback of :func:`exchange`)."""
+    target = Path(target)
+    for sibling in sorted(target.parent.glob(f".{target.name}.{OLD}-*")):
+        if not target.exists():
+            os.rename(sibling, target)
+        elif sibling.is_dir():
+            discard_old(sibling, target)
+    for sibling in sorted(target.parent.glob(f".{target.name}.{NEW}-*")):
+        if sibling.is_dir() and not _locked_elsewhere(sibling):
+            shutil.rmtree(sibling, ignore_errors=True)
+
+
+def _locked_elsewhere(path):
+    import fcntl
+
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        return False
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)
+
+
 class RunFolder:
     """A run folder and its manifest.
 
@@ -64,16 +200,34 @@ class RunFolder:
     path : path-like
     create : bool
         Create the folder if missing; otherwise a missing folder is a FileNotFoundError.
+    final : path-like, optional
+        For the version of a folder a stage is building: the folder it will become (paths
+        in the manifest are named relative to it).
     """
 
-    def __init__(self, path, *, create=False):
+    def __init__(self, path, *, create=False, final=None):
         self.path = Path(path)
+        self.final = Path(final) if final is not None else self.path
         if self.path.exists() and not self.path.is_dir():
             raise ValueError(f"{self.path}: is a file, not a run folder")
         if create:
             self.path.mkdir(parents=True, exist_ok=True)
         elif not self.path.is_dir():
             raise FileNotFoundError(f"run folder not found: {self.path}")
+
+    @classmethod
+    def output(cls, path):
+        """A folder a stage writes: it may not exist yet (:meth:`transaction` makes it)."""
+        self = cls.__new__(cls)
+        self.path = self.final = Path(path)
+        if self.path.exists() and not self.path.is_dir():
+            raise ValueError(f"{self.path}: is a file, not a run folder")
+        return self
+
+    def shown(self, path):
+        """Where ``path``, written into this version of the folder, will be once it is in
+        place (the name to show a person)."""
+        return self.final / Path(path).relative_to(self.path)
 
     def __truediv__(self, name):
         return self.path / name
@@ -86,85 +240,182 @@ class RunFolder:
     def model(self):
         return self.path / MODEL
 
-    def manifest(self):
-        """The manifest's entries by stage ({} for a folder without one)."""
-        path = self.path / MANIFEST
+    @staticmethod
+    def read_manifest(path, *, strict=True):
+        """The entries of the manifest file ``path`` ({} if missing; unreadable: ValueError,
+        or {} when not ``strict``)."""
+        path = Path(path)
         if not path.is_file():
             return {}
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-            raise ValueError(f"{path}: not a readable manifest; remove it and run again") from None
-        return data if isinstance(data, dict) else {}
+            if not strict:
+                return {}
+            raise ValueError(
+                f"{path}: not a readable manifest; hemg-drake repair {path.parent} rebuilds "
+                "it from the files there"
+            ) from None
+        if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
+            if not strict:
+                return {}
+            raise ValueError(f"{path}: not a hemg-drake manifest (a JSON object of stages)")
+        return data
+
+    def manifest(self):
+        """The manifest's entries by stage ({} for a folder without one)."""
+        return self.read_manifest(self.path / MANIFEST)
+
+    def is_run(self):
+        """Whether the folder has a manifest (the tool made it)."""
+        return (self.path / MANIFEST).is_file()
 
     def _write_manifest(self, entries):
         write_text_atomic(self.path / MANIFEST, json.dumps(entries, indent=2, sort_keys=True) + "\n")
 
-    def clean_temporaries(self):
-        """Remove temporary files left by interrupted atomic writes; return their names."""
-        stale = sorted(self.path.glob(".*.tmp"))
-        for sub in self.path.glob(REPRODUCTION_FOLDERS):
-            stale += sorted(sub.glob(".*.tmp"))
-        for path in stale:
-            path.unlink(missing_ok=True)
-        return [p.name for p in stale]
+    def takes(self):
+        """Whether the dataset holds takes a person recorded (``teleop``)."""
+        return self.manifest().get("demonstrate", {}).get("command") == "teleop"
 
-    def begin(self, stage):
-        """Start ``stage``: remove its outputs and those of the later stages, and their
-        manifest entries. Returns the names of the files removed."""
-        later = STAGES[STAGES.index(stage) :]
-        self.clean_temporaries()
-        removed = []
-        placements = self.path / PLACEMENTS_FOLDER
-        if stage == "demonstrate" and placements.is_dir():
-            removed += [f"{PLACEMENTS_FOLDER}/{p.relative_to(placements)}"
-                        for p in sorted(placements.rglob("*")) if p.is_file()]  # fmt: skip
-            shutil.rmtree(placements)
-        for name in later:
+    def check_writable(self, stage):
+        """Raise ValueError unless ``stage`` may write here: a new or empty folder, or a run
+        folder in which no file the stage would write is a file the tool did not write."""
+        if not self.path.exists():
+            return
+        present = [n for n in os.listdir(self.path) if not n.startswith(f".{NEW}")]
+        if not self.is_run():
+            if present:
+                raise ValueError(
+                    f"{self.path}: holds files hemg-drake did not write (no {MANIFEST}): "
+                    "give a new or empty folder"
+                )
+            return
+        listed = _listed(self.path)
+        for name in STAGES[STAGES.index(stage) :]:
             for pattern in OUTPUTS[name]:
-                for path in self.path.glob(pattern):
-                    path.unlink()
-                    removed.append(path.name)
-        # The extra reproductions (start offsets) were made from the model: they go when the
-        # model or its data do, not when the main reproduction is run again.
-        if "learn" in later:
-            for sub in self.path.glob(REPRODUCTION_FOLDERS):
-                if sub.is_dir():
-                    removed += [f"{sub.name}/{n}" for n in RunFolder(sub).begin("reproduce")]
-                    (sub / MANIFEST).unlink(missing_ok=True)
+                for path in sorted(self.path.glob(pattern)):
+                    if path.name not in listed:
+                        raise ValueError(
+                            f"{path}: not written by hemg-drake (no stage in {MANIFEST} lists "
+                            f"it) and the {stage} stage writes that name: move it away first"
+                        )
+
+    def _dropped(self, stage, keep_own):
+        """Relative paths that the new version of the folder does not keep (the outputs of
+        the stages redone, the manifest), sub-folders made from a file replaced, and the
+        manifest entries kept."""
+        redone = STAGES[STAGES.index(stage) + (1 if keep_own else 0) :]
         entries = self.manifest()
-        if any(name in entries for name in later):
-            self._write_manifest({k: v for k, v in entries.items() if k not in later})
-        return removed
+        kept = {name: entry for name, entry in entries.items() if name not in redone}
+        dropped = {MANIFEST}
+        for name in redone:
+            dropped.update(entries.get(name, {}).get("files", {}))
+        # The files later stages read that this stage rewrites (a take rewrites the dataset).
+        replaced = {
+            str(self.final.resolve() / f)
+            for name in STAGES[STAGES.index(stage) :] for f in READ_BY_LATER[name]
+        }  # fmt: skip
+        folders = []
+        for sub in sorted(p for p in self.path.iterdir() if p.is_dir() and not p.is_symlink()):
+            sub_entries = self.read_manifest(sub / MANIFEST, strict=False)
+            inputs = {i for entry in sub_entries.values() for i in entry.get("inputs", {})}
+            derived = sub.name == PLACEMENTS_FOLDER and "demonstrate" in redone
+            if sub_entries and (derived or inputs & replaced):
+                folders.append(sub.name)
+        return dropped, folders, kept
 
     @contextlib.contextmanager
-    def stage(self, stage):
-        """``begin(stage)``, then run the block; if it fails or is interrupted, remove what
-        the stage had written so far, so no partial output stays behind. Yields the names
-        removed by ``begin``. The block calls :meth:`finish` when its files are written."""
-        removed = self.begin(stage)
+    def transaction(self, stage, *, keep_own=False, progress=None):
+        """Build the folder's next version for ``stage`` beside it; swap it in when the block
+        ends without error.
+
+        Yields a :class:`RunFolder` on the new version: the kept files are there (hard
+        links), and the block writes the stage's outputs there and calls :meth:`finish` last.
+        Kept: everything but the outputs of ``stage`` (unless ``keep_own``: a take added to
+        the takes) and of the stages after it, and sub-folders made from a file it replaces.
+        If the block raises (or the process dies), the folder is left exactly as it was.
+        """
+        target = Path(os.path.realpath(self.path))
+        made = [p for p in (target, *target.parents) if not p.exists()]
+        target.mkdir(parents=True, exist_ok=True)
         try:
-            yield removed
+            with folder_lock(target) as lock:
+                recover(target)
+                folder = RunFolder(target)
+                folder.check_writable(stage)
+                if stage == "demonstrate" and not keep_own and folder.takes():
+                    raise ValueError(
+                        f"{target}: holds takes a person recorded (hemg-drake teleop), which "
+                        "this would replace: give another folder"
+                    )
+                dropped, folders, entries = folder._dropped(stage, keep_own)
+                staging = target.parent / f".{target.name}.{NEW}-{os.getpid()}"
+                if staging.exists():
+                    shutil.rmtree(staging)
+                fd = lock_new_folder(staging)
+                try:
+                    os.chmod(staging, os.stat(target).st_mode & 0o7777)
+                    removed = _copy_kept(target, staging, dropped, folders)
+                    new = RunFolder(staging, final=target)
+                    new.removed = removed
+                    if entries:
+                        new._write_manifest(entries)
+                    if removed and progress is not None:
+                        progress(f"replacing {len(removed)} file(s) of the older run in {target}/ "
+                                 "once this one is complete")  # fmt: skip
+                    yield new
+                    if new.manifest().get(stage) in (None, entries.get(stage)):
+                        raise RuntimeError(f"the {stage} stage did not record its files")
+                    exchange(staging, target)
+                except BaseException:
+                    os.close(fd)
+                    shutil.rmtree(staging, ignore_errors=True)
+                    raise
+                lock.moved_to(fd)
+                old = target.parent / f".{target.name}.{OLD}-{os.getpid()}"
+                os.rename(staging, old)
+                kept = discard_old(old, target)
+                if kept and progress is not None:
+                    progress(f"kept {old}/: it holds files changed while this command ran")
         except BaseException:
-            with contextlib.suppress(OSError, ValueError):
-                self.begin(stage)
+            for path in made:  # only folders this call made, and only if still empty
+                with contextlib.suppress(OSError):
+                    path.rmdir()
             raise
 
-    def finish(self, stage, written, *, inputs=()):
-        """Record ``stage`` as done: the hashes of the files it wrote and read (paths)."""
+    def finish(self, stage, written, *, inputs=(), command=None):
+        """Record ``stage`` as done: the hashes of the files it wrote and read (paths), and
+        the command that ran it (``teleop`` marks takes a person recorded)."""
         entries = self.manifest()
+        if self.final != self.path:
+            # A kept file is a hard link to the previous version's: one listed as written
+            # must be new, or listed before with the same bytes (the takes a take keeps).
+            before = entries.get(stage, {}).get("files", {})
+            shared = [
+                self._name(p) for p in written
+                if os.stat(p).st_nlink > 1 and before.get(self._name(p)) != file_hash(p)
+            ]  # fmt: skip
+            if shared:
+                raise RuntimeError(
+                    f"the {stage} stage wrote into a file it kept ({', '.join(shared)}) "
+                    "instead of a new one: use hemg_drake.fileio's atomic writers"
+                )
         entries[stage] = {
             "files": {self._name(p): file_hash(p) for p in written},
             "inputs": {self._name(p): file_hash(p) for p in inputs},
         }
+        if command is not None:
+            entries[stage]["command"] = command
         self._write_manifest(entries)
 
     def _name(self, path):
-        path = Path(path)
-        try:
-            return str(path.resolve().relative_to(self.path.resolve()))
-        except ValueError:
-            return str(path.resolve())
+        """A path as the manifest names it: relative to the folder (or to the folder this
+        version will become), otherwise absolute."""
+        path = Path(path).resolve()
+        for base in (self.path, self.final):
+            with contextlib.suppress(ValueError):
+                return str(path.relative_to(base.resolve()))
+        return str(path)
 
     def check(self, stage, path, *, run_hint):
         """Raise ValueError unless ``path`` is the file that ``stage`` recorded writing.
@@ -178,12 +429,14 @@ class RunFolder:
         if entry is None or name not in entry["files"]:
             raise ValueError(
                 f"{path}: no finished '{stage}' recorded it in {self.path / MANIFEST} "
-                f"(an older or interrupted run): run {run_hint}"
+                f"(an older or interrupted run): hemg-drake repair {self.path} records the "
+                f"files there, or run {run_hint}"
             )
         if file_hash(path) != entry["files"][name]:
             raise ValueError(
                 f"{path}: changed since '{stage}' wrote it (its hash differs from the "
-                f"manifest's): run {run_hint}"
+                f"manifest's): hemg-drake repair {self.path} records it as it is, or run "
+                f"{run_hint}"
             )
         return entry
 
@@ -196,3 +449,81 @@ class RunFolder:
                 f"{self.path / MODEL if stage == 'learn' else self.path}: was not made from "
                 f"this folder's {name}: run {run_hint}"
             )
+
+
+def _copy_kept(target, staging, dropped, folders):
+    """Hard-link (or copy, where links fail) every file of ``target`` into ``staging`` but
+    the ``dropped`` paths, the ``folders`` and temporaries; returns what is not kept."""
+    removed = []
+    for rel in _walk_files(target):
+        top = rel.split(os.sep, 1)[0]
+        if rel in dropped or top in folders or _is_temporary(os.path.basename(rel)):
+            if rel != MANIFEST:
+                removed.append(rel)
+            continue
+        source, there = target / rel, staging / rel
+        there.parent.mkdir(parents=True, exist_ok=True)
+        if os.path.islink(source):
+            os.symlink(os.readlink(source), there)
+            continue
+        try:
+            os.link(source, there)
+        except OSError:
+            shutil.copy2(source, there)
+    for base, dirs, _files in os.walk(target):  # empty folders a person made
+        for name in dirs:
+            rel = os.path.relpath(os.path.join(base, name), target)
+            if rel.split(os.sep, 1)[0] not in folders:
+                (staging / rel).mkdir(parents=True, exist_ok=True)
+    return removed
+
+
+def repair(path, *, check_dataset=None):
+    """Rebuild the manifest of the run folder ``path`` from the files there; returns the
+    names recorded by stage.
+
+    A stage whose recorded files are all there unchanged keeps its entry. Any other stage
+    whose outputs are present is recorded again as it is now (``"repaired": true``) with no
+    inputs, so a model or reproduction can no longer claim to come from the dataset (learn
+    and reproduce ask to be run again: they replace only the tool's own files). Takes
+    (``inputs_<c>.npz``) mark the dataset as a person's, which demonstrate will not replace.
+    Nothing is removed or changed but the manifest. ``check_dataset`` (path -> None, raises
+    ValueError) vets a dataset before it is recorded.
+    """
+    folder = RunFolder(path)
+    with folder_lock(folder.path):
+        try:
+            entries = folder.manifest()
+        except ValueError:
+            entries = {}  # unreadable: rebuilt whole
+        recorded = {}
+        for stage in STAGES:
+            names = sorted({
+                str(p.relative_to(folder.path))
+                for pattern in OUTPUTS[stage] for p in folder.path.glob(pattern) if p.is_file()
+            })  # fmt: skip
+            entry = entries.get(stage)
+            if entry is not None and all(
+                (folder / n).is_file() and file_hash(folder / n) == h
+                for n, h in entry.get("files", {}).items()
+            ):
+                recorded[stage] = entry
+                continue
+            if not names or (stage != "demonstrate" and "demonstrate" not in recorded):
+                continue
+            if stage == "demonstrate":
+                if DATASET not in names:
+                    continue
+                if check_dataset is not None:
+                    check_dataset(folder.dataset)
+            recorded[stage] = {
+                "files": {n: file_hash(folder / n) for n in names}, "inputs": {}, "repaired": True,
+            }  # fmt: skip
+            if stage == "demonstrate" and any(n.startswith("inputs_") for n in names):
+                recorded[stage]["command"] = "teleop"
+        if "demonstrate" not in recorded:
+            raise ValueError(f"{folder.path}: no {DATASET} to record; nothing to repair")
+        if "demo" in entries:
+            recorded["demo"] = entries["demo"]
+        folder._write_manifest(recorded)
+    return {stage: sorted(entry["files"]) for stage, entry in recorded.items()}

@@ -8,6 +8,7 @@ log); :func:`teleop` appends takes to a run folder's dataset (``hemg-drake teleo
 
 import dataclasses as dc
 import time
+from pathlib import Path
 
 import numpy as np
 from pydrake.math import RigidTransform
@@ -219,9 +220,9 @@ def existing_takes(scenario, out_dir):
     from hemg_drake.learning.demos import load_dataset
     from hemg_drake.run_folder import RunFolder
 
-    folder = RunFolder(out_dir, create=True)
-    if not folder.dataset.exists():
+    if not (Path(out_dir) / "dataset.npz").exists():
         return [], {}
+    folder = RunFolder(out_dir)
     folder.check("demonstrate", folder.dataset, run_hint=_takes_hint(folder))
     demos, metadata = load_dataset(folder.dataset)
     if "scenario" not in metadata or not same_takes(metadata["scenario"], scenario.to_yaml()):
@@ -241,8 +242,9 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     operator), with ``replay_<c>.html`` (when ``replays``) and its raw inputs
     ``inputs_<c>.npz`` beside it, c its number in the dataset, and the figures redrawn; the
     folder's manifest records the demonstrate stage again, so ``learn`` and ``reproduce``
-    take it; an older model and reproduction are removed (they no longer match). Takes
-    already there are kept.
+    take it; an older model and reproduction are replaced (they no longer match). Takes
+    already there are kept. The folder is locked for the take and changes only when it is
+    saved (:meth:`~hemg_drake.run_folder.RunFolder.transaction`).
 
     Live (``replay_inputs`` None): without a ``visualization``, one is started on ``port`` and
     the first line given to ``progress`` is ``Meshcat: http://localhost:P``. The take
@@ -256,6 +258,17 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     -------
     list of Path, the files written (dataset first).
     """
+    from hemg_drake.run_folder import RunFolder
+
+    with RunFolder.output(out_dir).transaction("demonstrate", keep_own=True) as folder:
+        written = _take(scenario, folder, out_dir, duration, replay_inputs, replays, progress,
+                        visualization, port, on_step, realtime)  # fmt: skip
+    return [folder.shown(path) for path in written]
+
+
+def _take(scenario, folder, out_dir, duration, replay_inputs, replays, progress, visualization,
+          port, on_step, realtime):  # fmt: skip
+    """One take into ``folder`` (the run's next version, being built; see :func:`teleop`)."""
     from hemg_drake.learning.demos import save_dataset
     from hemg_drake.diagrams.visualization import Visualization
     from hemg_drake.placements import (
@@ -268,7 +281,6 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     from hemg_drake.viz.figures import plot_demonstrations, plot_emg_envelopes, save_figure
 
     demos, metadata = existing_takes(scenario, out_dir)
-    folder = RunFolder(out_dir, create=True)
     c = len(demos) + 1
     if replay_inputs is not None:
         source = load_inputs(replay_inputs)
@@ -285,7 +297,7 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
             progress(f"Meshcat: http://localhost:{visualization.port()}")
         keys = ", ".join(f"{name}: {down}/{up}" for name, (down, up) in KEYS.items())
         progress(
-            f"take {c} into {folder.path}/: keys {keys}; gamepad sticks and right trigger; "
+            f"take {c} into {folder.final}/: keys {keys}; gamepad sticks and right trigger; "
             f"End take or {END_KEY} ends it"
             + (f" (or {duration:g} s)" if duration is not None else "")
         )
@@ -307,37 +319,31 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     )
     inputs_path = folder / f"inputs_{c}.npz"
     new_files = [p for p in (replay, inputs_path) if p is not None]
+    # The takes already recorded stay (the transaction kept them); the model and
+    # reproductions, made from the old dataset, do not.
     old_files = [
         folder / name
-        for name in folder.manifest().get("demonstrate", {}).get("files", {})
+        for name in RunFolder(out_dir).manifest().get("demonstrate", {}).get("files", {})
         if name.startswith(("replay_", "inputs_")) and (folder / name).is_file()
     ]
-    # The model and reproductions were made from the old dataset: remove them; the takes
-    # already recorded stay (unlike a demonstrate stage, which starts the folder over).
-    folder.begin("learn")
-    try:
-        save_inputs(inputs_path, take.inputs)
-        demo = take.demonstration
-        if not demos or demos[0].frame_A is not None:
-            # Each demonstration carries the task frames where it was shown (an older
-            # dataset without them keeps none).
-            frame_A, frame_b = task_frames(here)
-            demo = dc.replace(demo, frame_A=frame_A, frame_b=frame_b)
-        demos = [*demos, demo]
-        operators = metadata.get("operators", ["simulated"] * (len(demos) - 1))
-        record = dict(
-            # The dataset keeps the scenario it was begun with (takes differ only in length).
-            scenario=metadata.get("scenario", scenario.to_yaml()), task=scenario.task,
-            log_period=scenario.log_period, operators=[*operators, operator_name],
-        )  # fmt: skip
-        save_dataset(folder.dataset, demos, record)
-    except BaseException:
-        for path in new_files:
-            path.unlink(missing_ok=True)
-        raise
+    save_inputs(inputs_path, take.inputs)
+    demo = take.demonstration
+    if not demos or demos[0].frame_A is not None:
+        # Each demonstration carries the task frames where it was shown (an older
+        # dataset without them keeps none).
+        frame_A, frame_b = task_frames(here)
+        demo = dc.replace(demo, frame_A=frame_A, frame_b=frame_b)
+    demos = [*demos, demo]
+    operators = metadata.get("operators", ["simulated"] * (len(demos) - 1))
+    record = dict(
+        # The dataset keeps the scenario it was begun with (takes differ only in length).
+        scenario=metadata.get("scenario", scenario.to_yaml()), task=scenario.task,
+        log_period=scenario.log_period, operators=[*operators, operator_name],
+    )  # fmt: skip
+    save_dataset(folder.dataset, demos, record)
     figures = [folder / "demonstrations.png", folder / "fig6_emg.png"]
     save_figure(plot_demonstrations(demos, task=scenario.task), figures[0])
     save_figure(plot_emg_envelopes(demos[0].emg, per_channel=scenario.emg.per_channel), figures[1])
     written = [folder.dataset, *sorted(set(old_files) - set(new_files)), *new_files, *figures]
-    folder.finish("demonstrate", written)
+    folder.finish("demonstrate", written, command="teleop")
     return written

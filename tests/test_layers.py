@@ -4,7 +4,7 @@ and calls, and no module holds more than one job's worth of lines.
 Layers, lowest first; a module may import its own layer and those below, never above:
 
 0. configs and base helpers: the ``config.py`` of each package, ``config_fields``,
-   ``_validate``, ``fileio``, ``yaml_schema``;
+   ``_validate``, ``fileio``, ``folder_lock``, ``yaml_schema``;
 1. systems: ``emg``, ``control``, ``teleop``, ``learning``, ``robots``, ``tasks``;
 2. station and diagrams: ``diagrams``, the ``scenario`` that composes the configs for the
    builders, ``placements``;
@@ -29,6 +29,7 @@ PLACES = {
     "config_fields": "configs",
     "_validate": "configs",
     "fileio": "configs",
+    "folder_lock": "configs",
     "yaml_schema": "configs",
     "emg": "systems",
     "control": "systems",
