@@ -318,7 +318,10 @@ class RunFolder:
         folders = []
         for sub in sorted(p for p in self.path.iterdir() if p.is_dir() and not p.is_symlink()):
             sub_entries = self.read_manifest(sub / MANIFEST, strict=False)
-            inputs = {i for entry in sub_entries.values() for i in entry.get("inputs", {})}
+            inputs = {
+                str((self.final.resolve() / sub.name / i).resolve())
+                for entry in sub_entries.values() for i in entry.get("inputs", {})
+            }  # fmt: skip
             derived = sub.name == PLACEMENTS_FOLDER and "demonstrate" in redone
             if sub_entries and (derived or inputs & replaced):
                 folders.append(sub.name)
@@ -410,11 +413,17 @@ class RunFolder:
 
     def _name(self, path):
         """A path as the manifest names it: relative to the folder (or to the folder this
-        version will become), otherwise absolute."""
+        version will become); beside it (in its parent folder), relative too
+        (``../model.npz``), so a run moved with its reproductions keeps its provenance;
+        otherwise absolute."""
         path = Path(path).resolve()
         for base in (self.path, self.final):
             with contextlib.suppress(ValueError):
                 return str(path.relative_to(base.resolve()))
+        final = self.final.resolve()
+        with contextlib.suppress(ValueError):
+            path.relative_to(final.parent)
+            return os.path.relpath(path, final)
         return str(path)
 
     def check(self, stage, path, *, run_hint):

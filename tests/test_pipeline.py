@@ -160,7 +160,7 @@ def test_demonstrating_another_task_into_the_folder_refuses_the_old_model(pin_ru
     shutil.copy(run / "model.npz", pin_model)
     lines = []
     demonstrate(small("drawing"), run, replays=False, progress=lines.append)
-    assert any("of an older run" in line for line in lines)
+    assert any("of the older run" in line for line in lines)
     # Everything made from the pin's dataset is gone with it.
     for name in ("model.npz", "state_activations.png", "metrics.json", "reproduction.npz",
                  "fig8_reproduction.png", "start_offset/metrics.json"):  # fmt: skip
@@ -202,7 +202,11 @@ def test_a_model_fitted_on_an_older_dataset_is_refused(pin_run, tmp_path, capsys
 def test_reproduce_without_replay_leaves_no_old_replay(pin_run, tmp_path, capsys):
     run = copy_run(pin_run, tmp_path)
     # A replay of an earlier reproduction, beside the metrics.
+    folder = RunFolder(run)
+    earlier = [run / name for name in folder.manifest()["reproduce"]["files"]]
     (run / "reproduction.html").write_text("<html>an earlier reproduction</html>\n")
+    earlier.append(run / "reproduction.html")
+    folder.finish("reproduce", earlier, inputs=[folder.model, folder.dataset])
     old_metrics = (run / "metrics.json").read_bytes()
     assert main(["reproduce", str(run), "--no-replay", "--weighting", "forward"]) == 0
     assert not (run / "reproduction.html").exists()
@@ -224,7 +228,7 @@ def test_reproduce_into_another_folder_from_an_offset(pin_run, tmp_path):
         np.subtract(metrics["start"], results["cotter_pin"]["start"]), [0, 0, 0.02], atol=1e-12
     )
     manifest = json.loads((tmp_path / "manifest.json").read_text())
-    assert set(manifest["reproduce"]["inputs"]) == {
+    assert {str((tmp_path / name).resolve()) for name in manifest["reproduce"]["inputs"]} == {
         str((out / "cotter_pin" / name).resolve()) for name in ("model.npz", "dataset.npz")
     }
     # The run folder itself is untouched.
@@ -243,11 +247,17 @@ def test_interrupted_demonstrate_leaves_no_partial_output(tmp_path, monkeypatch)
         replay_path.write_text("<html>demonstration 1</html>\n")  # the first replay, done
 
     monkeypatch.setattr(pipeline, "demonstrate_seed", record)
-    (tmp_path / "notes.txt").write_text("mine\n")
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "manifest.json").write_text("{}\n")  # a run folder (with a person's notes)
+    (run / "notes.txt").write_text("mine\n")
     with pytest.raises(KeyboardInterrupt):
-        demonstrate(small("cotter_pin"), tmp_path, replays=True, progress=quiet)
+        demonstrate(small("cotter_pin"), run, replays=True, progress=quiet)
     assert calls == [1, 2]
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # nothing left beside it
+    assert {p.name: p.read_text() for p in run.iterdir()} == {
+        "manifest.json": "{}\n", "notes.txt": "mine\n"
+    }  # fmt: skip
 
 
 def test_learning_data_is_the_logged_reference_delayed_and_paired_with_the_gain(tmp_path):
