@@ -3,11 +3,32 @@
 import contextlib
 import io
 import os
+import signal
 import tempfile
 import zipfile
 from pathlib import Path
 
 import numpy as np
+
+
+# Fault injection for tests/faults (off unless set): HEMG_DRAKE_FAULT_AT=N kills the
+# process (SIGKILL) at the N-th fault point; HEMG_DRAKE_FAULT_LOG=FILE appends each point's
+# label there, so a harness can count them.
+_FAULTS = {"count": 0}
+
+
+def fault_point(label):
+    """A moment at which a crash must leave every folder consistent (file writes, renames,
+    the swap of a run folder's versions). No-op unless the test variables above are set."""
+    at, log = os.environ.get("HEMG_DRAKE_FAULT_AT"), os.environ.get("HEMG_DRAKE_FAULT_LOG")
+    if at is None and log is None:
+        return
+    _FAULTS["count"] += 1
+    if log is not None:
+        with open(log, "a", encoding="utf-8") as f:
+            f.write(f"{_FAULTS['count']} {label}\n")
+    if at is not None and _FAULTS["count"] == int(at):
+        os.kill(os.getpid(), signal.SIGKILL)
 
 
 @contextlib.contextmanager
@@ -26,8 +47,10 @@ def atomic_open(path, mode="w", **kwargs):
         os.chmod(tmp, 0o666 & ~_umask())
         with os.fdopen(fd, mode, **kwargs) as f:
             yield f
+            fault_point(f"write {path.name}")
             f.flush()
             os.fsync(f.fileno())
+        fault_point(f"rename {path.name}")
         os.replace(tmp, path)
     except BaseException as error:
         with contextlib.suppress(FileNotFoundError):

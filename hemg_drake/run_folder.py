@@ -36,7 +36,7 @@ import os
 import shutil
 from pathlib import Path
 
-from hemg_drake.fileio import write_text_atomic
+from hemg_drake.fileio import fault_point, write_text_atomic
 from hemg_drake.folder_lock import folder_lock, held_lock, lock_new_folder
 
 MANIFEST = "manifest.json"
@@ -104,6 +104,7 @@ def exchange(a, b):
             raise OSError(code, os.strerror(code), str(b))
     aside = Path(b).parent / f".{Path(b).name}.{OLD}-{os.getpid()}"
     os.rename(b, aside)
+    fault_point("fallback: folder aside")
     os.rename(a, b)
     os.rename(aside, a)
 
@@ -146,7 +147,9 @@ def discard_old(old, new):
     other file (one a person put there while the command ran) is moved into ``new``. Returns
     the relative paths kept in ``old`` because ``new`` has another file of that name."""
     listed, kept = _listed(old), []
-    for rel in _walk_files(old):
+    # The manifests go last: a crash midway leaves them naming what is still the tool's.
+    for rel in sorted(_walk_files(old), key=lambda rel: os.path.basename(rel) == MANIFEST):
+        fault_point(f"discard {rel}")
         path, there = Path(old) / rel, Path(new) / rel
         if rel in listed or _is_temporary(path.name) or _same_file(path, there):
             path.unlink()
@@ -358,7 +361,9 @@ class RunFolder:
                 fd = lock_new_folder(staging)
                 try:
                     os.chmod(staging, os.stat(target).st_mode & 0o7777)
+                    fault_point("staging made")
                     removed = _copy_kept(target, staging, dropped, folders)
+                    fault_point("kept files linked")
                     new = RunFolder(staging, final=target)
                     new.removed = removed
                     if entries:
@@ -369,7 +374,9 @@ class RunFolder:
                     yield new
                     if new.manifest().get(stage) in (None, entries.get(stage)):
                         raise RuntimeError(f"the {stage} stage did not record its files")
+                    fault_point("before the swap")
                     exchange(staging, target)
+                    fault_point("swapped")
                 except BaseException:
                     os.close(fd)
                     shutil.rmtree(staging, ignore_errors=True)
@@ -377,6 +384,7 @@ class RunFolder:
                 lock.moved_to(fd)
                 old = target.parent / f".{target.name}.{OLD}-{os.getpid()}"
                 os.rename(staging, old)
+                fault_point("old version aside")
                 kept = discard_old(old, target)
                 if kept and progress is not None:
                     progress(f"kept {old}/: it holds files changed while this command ran")
