@@ -220,7 +220,7 @@ LEROBOT_PYTHON = os.environ.get("HEMG_LEROBOT_PYTHON", "/tmp/lerobot_venv/bin/py
 def _lerobot_python():
     if not Path(LEROBOT_PYTHON).exists():
         return None
-    probe = subprocess.run([LEROBOT_PYTHON, "-c", "import lerobot.datasets.lerobot_dataset"],
+    probe = subprocess.run([LEROBOT_PYTHON, "-c", "import lerobot, pyarrow, torch"],
                            capture_output=True, timeout=300)  # fmt: skip
     return LEROBOT_PYTHON if probe.returncode == 0 else None
 
@@ -236,7 +236,17 @@ def test_lerobot_itself_loads_the_dataset(tmp_path, demos):
     states = [np.arange(n) % 4 for n in LENGTHS]
     export_lerobot(root, demos, METADATA, fps=100, hsmm_states=states)
     script = f"""
-import json, numpy as np
+import importlib.machinery, json, sys, types, numpy as np
+try:
+    import torchvision  # noqa: F401
+except (ImportError, RuntimeError):
+    # A torchvision built against another torch: LeRobot uses it only for images, and
+    # this dataset has none, so an empty stand-in lets its reader import.
+    stub = types.ModuleType("torchvision")
+    stub.transforms = types.ModuleType("torchvision.transforms")
+    for module in (stub, stub.transforms):
+        module.__spec__ = importlib.machinery.ModuleSpec(module.__name__, None)
+    sys.modules.update({{"torchvision": stub, "torchvision.transforms": stub.transforms}})
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 ds = LeRobotDataset("local/hemg_drake", root={str(root)!r})
 item = ds[45]
