@@ -32,15 +32,14 @@ in attr ``hemg_drake_metadata``.
 :func:`load_robomimic` reads the file back into :class:`Demonstration` objects.
 """
 
-import contextlib
 import errno
 import json
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from hemg_drake.fileio import write_bytes_atomic
 from hemg_drake.learning.demos import Demonstration
 
 _INSTALL_HINT = "install the optional extra: pip install 'hemg-drake[export]'"
@@ -105,35 +104,20 @@ def export_robomimic(path, demos, metadata=None):
     except TypeError as error:
         raise ValueError(f"metadata must be JSON-serialisable: {error}") from None
     path = Path(path)
-    with _temporary_path(path) as tmp:
-        try:
-            with h5py.File(tmp, "w") as f:
-                total = _write_demos(f, demos, metadata, metadata_text)
-            with open(tmp, "rb") as f:
-                os.fsync(f.fileno())
-        except OSError as error:
-            raise write_error(path, error) from None
-        os.replace(tmp, path)
-    return total
-
-
-@contextlib.contextmanager
-def _temporary_path(path):
-    """The name of a new temporary file beside ``path``, removed after the block (unless
-    the block renamed it). HDF5 writes it by name, through its own file driver: through a
-    Python file object a full disk made h5py crash (measured: a segfault after ~1,200 lines
-    of tracebacks)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    mask = os.umask(0)
-    os.umask(mask)
-    os.chmod(tmp, 0o666 & ~mask)  # mkstemp's 0600: give the mode open() would have
+    # HDF5 builds the file in memory (its core driver, no backing store) and the bytes go to
+    # a temporary file beside ``path``, renamed over it: a full disk is then an OSError of
+    # plain file I/O. Measured: HDF5 writing to a full disk itself, through a Python file
+    # object or by name, crashed (exit 139, hundreds of lines of h5py tracebacks) while
+    # closing its objects.
+    with h5py.File(path.name, "w", driver="core", backing_store=False) as f:
+        total = _write_demos(f, demos, metadata, metadata_text)
+        f.flush()
+        image = f.id.get_file_image()
     try:
-        yield tmp
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
+        write_bytes_atomic(path, image)
+    except OSError as error:
+        raise write_error(path, error) from None
+    return total
 
 
 def write_error(path, error):
