@@ -270,3 +270,53 @@ print(json.dumps({{"len": len(ds), "episodes": ds.num_episodes, "fps": ds.fps,
         np.float32(got["action"]), np.float32(np.r_[demo.p_WE_desired[5], demo.gain[5]]))
     assert (got["hsmm"], got["episode"]) == (5 % 4, 1)
     assert got["timestamp"] == float(np.float32(0.05))
+
+
+def _run_folder(tmp_path, demos):
+    from hemg_drake.learning.demos import save_dataset
+    from hemg_drake.run_folder import RunFolder
+    from hemg_drake.scenario import shipped_scenario
+
+    folder = RunFolder(tmp_path / "run", create=True)
+    text = shipped_scenario("cotter_pin").read_text(encoding="utf-8")
+    save_dataset(folder.dataset, demos, {"task": "cotter_pin", "scenario": text})
+    folder.finish("demonstrate", [folder.dataset])
+    return folder
+
+
+def test_cli_adds_hsmm_states_only_from_a_model_of_this_dataset(tmp_path, demos, capsys):
+    from hemg_drake.cli import main
+    from hemg_drake.learning.tphsmm import load_model
+    from hemg_drake.pipeline import fit_model, learning_data, load_demonstrations
+
+    folder = _run_folder(tmp_path, demos)
+    loaded, scenario = load_demonstrations(folder.dataset)
+    data = learning_data(loaded, scenario)
+    fit_model(data, scenario.replaced(["learning.num_states=2"]), n_iter=3).save(folder.model)
+    folder.finish("learn", [folder.model], inputs=[folder.dataset])
+    out = tmp_path / "lerobot"
+    assert main(["export", str(folder.path), "--format", "lerobot", str(out)]) == 0
+    assert capsys.readouterr().out == f"wrote {out} (3 demonstrations, 107 samples, HSMM states, lerobot)\n"
+    table = _data(out)
+    model = load_model(folder.model)
+    want = np.concatenate([model.decode(demo)[1] for demo in data])
+    np.testing.assert_array_equal(_column(table, "hsmm.state")[:, 0], want)
+    assert set(np.unique(want)) <= {0, 1}
+    info = json.loads((out / "meta/info.json").read_text())
+    assert info["features"]["hsmm.state"]["dtype"] == "int64" and info["fps"] == 100
+    # The dataset recorded again, the model not learnt again: no states (they would be
+    # another dataset's), and the folder export replaces its own previous one.
+    _run_folder(tmp_path, demos[:2])
+    assert main(["export", str(folder.path), "--format", "lerobot", str(out)]) == 0
+    assert "hsmm.state" not in _data(out).column_names
+    assert json.loads((out / "meta/info.json").read_text())["total_episodes"] == 2
+
+
+def test_cli_refuses_a_user_folder_in_one_line(tmp_path, demos, capsys):
+    from hemg_drake.cli import main
+
+    folder = _run_folder(tmp_path, demos)
+    assert main(["export", str(folder.path), "--format", "lerobot", str(folder.path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not a LeRobot export by hemg-drake" in err
+    assert sorted(p.name for p in folder.path.iterdir()) == ["dataset.npz", "manifest.json"]
