@@ -34,7 +34,9 @@ SET_HELP = (
 # Longest demonstration (s), as the scenario's check has it.
 MAX_DURATION = 600.0
 # The extra that installs each optional package a command may need (pyproject.toml).
-OPTIONAL_EXTRAS = {"h5py": "export", "ray": "ray", "pyOpenHaptics": "touchx", "pyomyo": "myo"}
+OPTIONAL_EXTRAS = {
+    "h5py": "export", "pyarrow": "lerobot", "ray": "ray", "pyOpenHaptics": "touchx", "pyomyo": "myo",
+}  # fmt: skip
 # emg-figure's synthetic recording: at most this long (s); a longer one takes minutes and
 # gigabytes to plot for no more insight.
 MAX_EMG_FIGURE_DURATION = 600.0
@@ -214,13 +216,20 @@ def build_parser():
     )  # fmt: skip
     emg.add_argument("-o", "--output", default="fig6.png", help="image file (.png, .svg, .pdf)")
     emg.set_defaults(func=emg_figure_command)
-    export = command("export", "write a run's demonstrations in another format (robomimic HDF5)")
+    export = command(
+        "export", "write a run's demonstrations in another format (robomimic HDF5, LeRobot v3.0)"
+    )
     export.add_argument("run", help="run folder holding dataset.npz (or a dataset file)")
     export.add_argument(
-        "--format", choices=["robomimic"], default="robomimic",
-        help="robomimic: its HDF5 layout (data/demo_i/obs, actions; needs h5py)",
+        "--format", choices=["robomimic", "lerobot"], default="robomimic",
+        help="robomimic: its HDF5 layout (data/demo_i/obs, actions; needs h5py), a file; "
+        "lerobot: a LeRobot v3.0 dataset folder (meta/, data/; needs pyarrow), with HSMM "
+        "states when the run folder holds a model learnt from its dataset",
     )  # fmt: skip
-    export.add_argument("output", help="file to write, e.g. runs/pin/demos.hdf5")
+    export.add_argument(
+        "output", help="file (robomimic, e.g. runs/pin/demos.hdf5) or folder (lerobot, e.g. "
+        "runs/pin_lerobot/: new, empty or an earlier lerobot export) to write",
+    )  # fmt: skip
     export.set_defaults(func=export_command)
     imports = command("import", "read demonstrations exported with export into a run folder")
     imports.add_argument("input", help="robomimic HDF5 file written by hemg-drake export")

@@ -205,17 +205,78 @@ def sweep_command(args):
 
 
 def export_command(args):
-    """``hemg-drake export``: write a run's demonstrations as robomimic HDF5."""
+    """``hemg-drake export``: write a run's demonstrations as robomimic HDF5 (a file) or a
+    LeRobot v3.0 dataset (a folder, with each frame's HSMM state when the run folder holds a
+    model learnt from its dataset)."""
     from hemg_drake.learning.demos import load_dataset
-    from hemg_drake.learning.export import export_robomimic
     from hemg_drake.run_folder import RunFolder
 
     run = Path(args.run)
-    dataset = run if run.is_file() else RunFolder(run).dataset
-    check_output_file(args.output)
-    demos, metadata = load_dataset(dataset)
-    total = export_robomimic(args.output, demos, metadata)
-    _print(f"wrote {args.output} ({len(demos)} demonstrations, {total} samples, {args.format})")
+    folder = None if run.is_file() else RunFolder(run)
+    dataset = run if folder is None else folder.dataset
+    if args.format == "lerobot":
+        from hemg_drake.learning.lerobot import check_output, export_lerobot
+
+        check_output_folder(args.output)
+        check_output(args.output)
+        demos, metadata = load_dataset(dataset)
+        states = _hsmm_states(folder, demos, metadata)
+        total = export_lerobot(
+            args.output, demos, metadata, fps=_fps(metadata), hsmm_states=states
+        )
+        extra = ", HSMM states" if states is not None else ""
+    else:
+        from hemg_drake.learning.export import export_robomimic
+
+        check_output_file(args.output)
+        demos, metadata = load_dataset(dataset)
+        total = export_robomimic(args.output, demos, metadata)
+        extra = ""
+    count = len(demos)
+    _print(
+        f"wrote {args.output} ({count} demonstration{'s' if count != 1 else ''}, {total} "
+        f"samples{extra}, {args.format})"
+    )
+
+
+def _fps(metadata):
+    """1 / the dataset scenario's log period, or None (found from the sample times)."""
+    from hemg_drake.scenario import parse_scenario
+
+    if "scenario" not in metadata:
+        return None
+    return 1.0 / parse_scenario(metadata["scenario"], source="dataset metadata").log_period
+
+
+def _hsmm_states(folder, demos, metadata):
+    """Each demonstration's HSMM states (segmental Viterbi), if the run folder holds a model
+    that its manifest records as learnt from this dataset; None otherwise."""
+    from hemg_drake.pipeline import demonstration_frames, learning_data, placed_model
+    from hemg_drake.scenario import parse_scenario
+
+    if folder is None or not folder.model.is_file() or "scenario" not in metadata:
+        return None
+    hint = f"hemg-drake learn {folder.path}"
+    try:
+        folder.check("learn", folder.model, run_hint=hint)
+        folder.check_made_from("learn", folder.dataset, run_hint=hint)
+    except ValueError:
+        return None  # a model of another dataset: its states would mean nothing here
+    from hemg_drake.learning.tphsmm import load_model
+    from hemg_drake.placements import last_frames
+
+    scenario = parse_scenario(metadata["scenario"], source=f"{folder.dataset} metadata")
+    model = load_model(folder.model)
+    data = learning_data(demos, scenario)
+    frames = demonstration_frames(demos, scenario)
+    states = []
+    for c, demo in enumerate(data):
+        at = model.at(*last_frames(frames[c], model.n_frames_)) if hasattr(model, "at") else model
+        try:
+            states.append(at.decode(demo)[1])
+        except ValueError as error:
+            raise ValueError(f"{folder.model}: demonstration {c + 1}: {error}") from None
+    return states
 
 
 def import_robomimic_command(args):

@@ -32,12 +32,14 @@ in attr ``hemg_drake_metadata``.
 :func:`load_robomimic` reads the file back into :class:`Demonstration` objects.
 """
 
+import errno
 import json
+import os
 from pathlib import Path
 
 import numpy as np
 
-from hemg_drake.fileio import atomic_open
+from hemg_drake.fileio import write_bytes_atomic
 from hemg_drake.learning.demos import Demonstration
 
 _INSTALL_HINT = "install the optional extra: pip install 'hemg-drake[export]'"
@@ -101,34 +103,65 @@ def export_robomimic(path, demos, metadata=None):
         metadata_text = json.dumps(metadata, sort_keys=True)
     except TypeError as error:
         raise ValueError(f"metadata must be JSON-serialisable: {error}") from None
+    path = Path(path)
+    # HDF5 builds the file in memory (its core driver, no backing store) and the bytes go to
+    # a temporary file beside ``path``, renamed over it: a full disk is then an OSError of
+    # plain file I/O. Measured: HDF5 writing to a full disk itself, through a Python file
+    # object or by name, crashed (exit 139, hundreds of lines of h5py tracebacks) while
+    # closing its objects.
+    with h5py.File(path.name, "w", driver="core", backing_store=False) as f:
+        total = _write_demos(f, demos, metadata, metadata_text)
+        f.flush()
+        image = f.id.get_file_image()
+    try:
+        write_bytes_atomic(path, image)
+    except OSError as error:
+        raise write_error(path, error) from None
+    return total
+
+
+def write_error(path, error):
+    """An OSError naming ``path`` (the output) for an error while writing it (a full disk,
+    an I/O error): one line, whatever the library's message."""
+    number = getattr(error, "errno", None)
+    text = str(error)
+    if number is None:
+        for code in (errno.ENOSPC, errno.EIO, errno.EDQUOT, errno.EFBIG):
+            if os.strerror(code) in text or f"errno = {code}," in text:
+                number = code
+                break
+    reason = os.strerror(number) if number else (text.splitlines() or ["I/O error"])[0]
+    return OSError(number, f"cannot write it: {reason}; nothing was written", str(path))
+
+
+def _write_demos(f, demos, metadata, metadata_text):
     total = 0
-    with atomic_open(path, "w+b") as raw, h5py.File(raw, "w") as f:
-        data = f.create_group("data")
-        for i, demo in enumerate(demos):
-            group = data.create_group(f"demo_{i}")
-            n = len(demo)
-            obs = {key: _column(getattr(demo, key)) for key in OBS_KEYS}
-            for key, array in obs.items():
-                _write(group, f"obs/{key}", array)
-                _write(group, f"next_obs/{key}", np.concatenate([array[1:], array[-1:]]))
-            actions = np.column_stack([getattr(demo, key) for key in ACTION_KEYS])
-            _write(group, "actions", actions)
-            _write(group, "rewards", np.zeros(n))
-            dones = np.zeros(n)
-            dones[-1] = 1.0
-            _write(group, "dones", dones)
-            _write(group, "time", demo.time)
-            for key, field in EMG_KEYS.items():
-                _write(group, f"emg/{key}", getattr(demo, field))
-            if demo.frame_A is not None:
-                _write(group, "task_frames/A", demo.frame_A)
-                _write(group, "task_frames/b", demo.frame_b)
-            group.attrs["num_samples"] = n
-            group.attrs["seed"] = demo.seed
-            total += n
-        data.attrs["total"] = total
-        data.attrs["env_args"] = json.dumps(_env_args(metadata))
-        data.attrs[METADATA_ATTR] = metadata_text
+    data = f.create_group("data")
+    for i, demo in enumerate(demos):
+        group = data.create_group(f"demo_{i}")
+        n = len(demo)
+        obs = {key: _column(getattr(demo, key)) for key in OBS_KEYS}
+        for key, array in obs.items():
+            _write(group, f"obs/{key}", array)
+            _write(group, f"next_obs/{key}", np.concatenate([array[1:], array[-1:]]))
+        actions = np.column_stack([getattr(demo, key) for key in ACTION_KEYS])
+        _write(group, "actions", actions)
+        _write(group, "rewards", np.zeros(n))
+        dones = np.zeros(n)
+        dones[-1] = 1.0
+        _write(group, "dones", dones)
+        _write(group, "time", demo.time)
+        for key, field in EMG_KEYS.items():
+            _write(group, f"emg/{key}", getattr(demo, field))
+        if demo.frame_A is not None:
+            _write(group, "task_frames/A", demo.frame_A)
+            _write(group, "task_frames/b", demo.frame_b)
+        group.attrs["num_samples"] = n
+        group.attrs["seed"] = demo.seed
+        total += n
+    data.attrs["total"] = total
+    data.attrs["env_args"] = json.dumps(_env_args(metadata))
+    data.attrs[METADATA_ATTR] = metadata_text
     return total
 
 
