@@ -1,6 +1,33 @@
-"""Demonstrations as the HSMM takes them: checked, and hmmlearn's (X, lengths) form."""
+"""Demonstrations as the HSMM takes them: checked, and hmmlearn's (X, lengths) form; the
+layout of an observation xi = [x, xdot, k] and the fitted-model check."""
 
 import numpy as np
+from sklearn.utils.validation import check_is_fitted
+
+
+def check_fitted(model):
+    """Raise ``NotFittedError`` (a ``ValueError``) naming the model if it is not fitted."""
+    check_is_fitted(
+        model, msg="this %(name)s is not fitted yet: call fit(demos) or %(name)s.load(path)"
+    )
+
+
+def position_count(n_dims, n_position=None):
+    """P of the layout xi = [x (P), xdot (P), k (rest)] of D = ``n_dims`` dimensions.
+
+    ``n_position`` if given, else D // 2; ValueError if x and xdot do not fit in D.
+    """
+    p = n_dims // 2 if n_position is None else n_position
+    if 2 * p > n_dims:
+        raise ValueError(
+            f"n_position = {p} needs D >= {2 * p} (x and xdot), the model has D = {n_dims}"
+        )
+    return p
+
+
+def fitted_sequences(model, X, lengths=None):
+    """``X`` (and ``lengths``) as checked sequences of a fitted ``model``'s dimension D."""
+    return check_demos(split_sequences(X, lengths), n_dims=model.n_dims_)
 
 
 def check_demos(demos, n_dims=None):

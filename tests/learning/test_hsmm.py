@@ -95,7 +95,7 @@ def test_em_recovers_a_known_hsmm(models):
     rng = np.random.default_rng(1)
     data = [models.sample(rng, **truth, n_segments=12) for _ in range(4)]
     demos = [observations for observations, _ in data]
-    model = HSMM(3, max_duration=50, n_iter=30, seed=3).fit(demos)
+    model = HSMM(3, max_duration=50, n_iter=30, random_state=3).fit(demos)
 
     # Match fitted states to true ones by their means.
     order = [np.argmin(np.linalg.norm(model.means_ - mu, axis=1)) for mu in truth["means"]]
@@ -113,7 +113,7 @@ def test_em_log_likelihood_never_decreases(models, init):
     truth = seeded_truth()
     rng = np.random.default_rng(2)
     demos = [models.sample(rng, **truth, n_segments=8)[0] for _ in range(3)]
-    model = HSMM(4, n_iter=15, tol=0.0, init=init, seed=0).fit(demos)
+    model = HSMM(4, n_iter=15, tol=0.0, init=init, random_state=0).fit(demos)
     history = np.asarray(model.log_likelihood_history_)
     assert len(history) == 15
     assert np.all(np.diff(history) >= -1e-9 * np.abs(history[1:]))
@@ -122,8 +122,8 @@ def test_em_log_likelihood_never_decreases(models, init):
 
 def test_fit_is_deterministic_for_a_seed(models):
     demos = models.smooth_demos(n_demos=2, n_steps=120, n_dims=3)
-    first = HSMM(4, n_iter=3, seed=7).fit(demos)
-    second = HSMM(4, n_iter=3, seed=7).fit(demos)
+    first = HSMM(4, n_iter=3, random_state=7).fit(demos)
+    second = HSMM(4, n_iter=3, random_state=7).fit(demos)
     np.testing.assert_array_equal(first.means_, second.means_)
     assert first.log_likelihood_history_ == second.log_likelihood_history_
 
@@ -159,7 +159,7 @@ def test_duration_support_is_ten_spreads_around_the_mean(models):
         transmat=[[0.0, 1.0], [1.0, 0.0]], duration_means=[50.0, 10.0],
         duration_stds=[2.0, 1.0], max_duration=100,
     )  # fmt: skip
-    finite = np.isfinite(model._log_durations())
+    finite = np.isfinite(model.log_durations())
     d = np.arange(1, 101)
     np.testing.assert_array_equal(finite[0], np.abs(d - 50) <= 20)
     np.testing.assert_array_equal(finite[1], np.abs(d - 10) <= 10)
@@ -241,11 +241,14 @@ def test_load_rejects_damaged_and_other_version_files(models, tmp_path):
         (dict(n_states=2, tol=-1.0), "tol"),
         (dict(n_states=2, n_init=0), "n_init"),
         (dict(n_states=2, n_position=0), "n_position"),
+        (dict(n_states=2, random_state=None), "random_state"),
+        (dict(n_states=2, random_state=-1), "random_state"),
     ],
 )
 def test_bad_parameters_are_rejected(kwargs, message):
+    model = HSMM(**kwargs)  # scikit-learn's convention: stored as given, checked by fit
     with pytest.raises(ValueError, match=message):
-        HSMM(**kwargs)
+        model.fit(np.random.default_rng(0).standard_normal((20, 4)))
 
 
 def test_bad_demos_are_rejected():
@@ -319,7 +322,7 @@ def test_polyline_init_gives_a_state_per_straight_run(models):
     for _ in range(2):
         x = zig_zag(rng)
         demos.append(np.column_stack([x, np.gradient(x, 0.01, axis=0)]))
-    model = HSMM(4, init="polyline", n_iter=5, seed=0).fit(demos)
+    model = HSMM(4, init="polyline", n_iter=5, random_state=0).fit(demos)
     # Left to right, and each state is one run: its mean velocity points along that run.
     assert np.allclose(np.triu(model.transmat_, 2), 0) and np.allclose(np.tril(model.transmat_), 0)
     runs = np.array([[1, 0, 0], [0, 1, 0], [-1, 0, 0.5], [0, 1, 0]], float)
