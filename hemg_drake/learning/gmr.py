@@ -2,6 +2,7 @@
 
 import numpy as np
 from sklearn.base import BaseEstimator
+from sklearn.exceptions import NotFittedError
 
 from hemg_drake.learning import _step_kernels
 
@@ -162,7 +163,7 @@ class Gmr(BaseEstimator):
 
     def _as_queries(self, x):
         if not hasattr(self, "gains_"):
-            raise ValueError("this Gmr is not fitted yet: call fit()")
+            raise NotFittedError("this Gmr is not fitted yet: call fit()")
         x = np.asarray(x, dtype=float)
         n_in = self.input_dims_.size
         if x.shape[-1:] != (n_in,) or x.ndim > 2:

@@ -124,6 +124,8 @@ class HSMM(InferenceMixin, CriteriaMixin, PersistenceMixin, BaseEstimator):
         Smallest and largest value of each dimension in the training data (reproduction
         keeps k* inside it).
     max_duration_ : int
+    n_features_in_ : int
+        D (scikit-learn's name; set by fit, not saved: ``n_dims_`` is always there).
     min_duration_std_ : float
         The floor used in the last fit (not saved).
     log_likelihood_history_ : list of float
@@ -208,9 +210,11 @@ class HSMM(InferenceMixin, CriteriaMixin, PersistenceMixin, BaseEstimator):
         for c, demo in enumerate(demos):
             if len(demo) < self.n_states:
                 raise ValueError(
-                    f"demonstration {c + 1} has {len(demo)} steps, fewer than the N = {self.n_states} states"
+                    f"demonstration {c + 1} has {len(demo)} samples (steps), fewer than the "
+                    f"N = {self.n_states} states"
                 )
         samples = np.concatenate(demos)
+        self.n_features_in_ = samples.shape[1]
         self.data_range_ = np.stack([samples.min(axis=0), samples.max(axis=0)])
         scale = samples.std(axis=0)
         # A constant dimension's std is 0 or rounding noise (a held coordinate, the gradient

@@ -262,7 +262,7 @@ def test_bad_demos_are_rejected():
         HSMM(2).fit([np.where(with_nan == with_nan, good, np.inf)])
     with pytest.raises(ValueError, match="demonstration 2 has D = 2"):
         HSMM(2).fit([good, good[:, :2]])
-    with pytest.raises(ValueError, match="demonstration 2 has 3 steps, fewer than the N = 4 states"):
+    with pytest.raises(ValueError, match=r"demonstration 2 has 3 samples \(steps\), fewer than the N = 4 states"):
         HSMM(4).fit([good, good[:3]])
     with pytest.raises(ValueError, match="shape"):
         HSMM(2).fit([good[:, 0]])
