@@ -90,7 +90,7 @@ def hsmm_runs(demos, dt):
     n_steps = int(round(np.mean([len(d) for d in demos])))
     for init in ("kmeans", "time"):
         begin = time.perf_counter()
-        model = HSMM(N_STATES, init=init, seed=0).fit(demos)
+        model = HSMM(N_STATES, init=init, random_state=0).fit(demos)
         fit_seconds = time.perf_counter() - begin
         for tracker in TRACKERS:
             weightings = reproduce_module.WEIGHTINGS if tracker == "gmr" else LQR_WEIGHTINGS
@@ -205,7 +205,7 @@ def held_out(demos, reg_covar, init, n_states):
     scores = []
     for c in range(len(demos)):
         train = demos[:c] + demos[c + 1:]
-        model = HSMM(n_states, reg_covar=reg_covar, init=init, seed=0).fit(train)
+        model = HSMM(n_states, reg_covar=reg_covar, init=init, random_state=0).fit(train)
         scores.append(model.log_likelihood(demos[c]) / len(demos[c]))
     return float(np.mean(scores))
 

@@ -30,6 +30,7 @@ import numpy as np  # noqa: E402
 from hemg_drake.learning import _kernels  # noqa: E402
 from hemg_drake.learning.gmr import gaussian_log_pdf  # noqa: E402
 from hemg_drake.learning.hsmm import HSMM  # noqa: E402
+from hemg_drake.learning.hsmm_em import log_parameters  # noqa: E402
 from hemg_drake.learning.reproduce import WEIGHTINGS, reproduce  # noqa: E402
 
 NOISE = 2e-4
@@ -204,7 +205,7 @@ def main():
             print(f"  reproduction {weighting!r}: {1e6 * seconds / N_STEPS:.0f} us per step "
                   f"(target < 100 us), position RMSE {100 * rmse / extent:.1f} % of the extent")
 
-    log_parameters = model._log_parameters()
+    log_parameters = log_parameters(model)
     log_emission = gaussian_log_pdf(demos[0], model.means_, model.covariances_)
     numba_s, fast = timed(lambda: _kernels.forward(log_emission, *log_parameters)[0], repeat=3)
     numpy_s, slow = timed(lambda: numpy_forward(log_emission, *log_parameters), repeat=1)

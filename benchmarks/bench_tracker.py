@@ -66,7 +66,7 @@ def main():
     data = demos(1000)
     start = data[0][0, :3]
     models = {
-        n: HSMM(n, init="time", reg_covar=0.1, n_iter=10, seed=0).fit(data) for n in (18, 4)
+        n: HSMM(n, init="time", reg_covar=0.1, n_iter=10, random_state=0).fit(data) for n in (18, 4)
     }
     print("re-plan of the LQR tracker, one 10 ms step (2 shared cores; us = microseconds)")
     print(f"{'N':>3} {'weighting':>9} {'H':>4} {'table (s)':>10} {'step median':>12} "

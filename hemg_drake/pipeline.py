@@ -100,7 +100,7 @@ def fit_model(data, scenario, *, n_iter=None, frames=None):
         init=settings.init,
         reg_covar=settings.reg_covar,
         n_iter=settings.n_iter if n_iter is None else n_iter,
-        seed=scenario.seed,
+        random_state=scenario.seed,
     )
     if frames is not None and (settings.task_parameterised or frames_vary(frames)):
         used = [last_frames(pair, FRAME_SETS[settings.task_frames]) for pair in frames]

@@ -7,6 +7,7 @@ reproduce`); it lives here so that the model does not import the reproduction.
 import numpy as np
 
 from hemg_drake.learning import _step_kernels
+from hemg_drake.learning.sequences import check_fitted
 
 
 class ResidualForward:
@@ -19,8 +20,8 @@ class ResidualForward:
     """
 
     def __init__(self, model):
-        model._check_fitted()
-        self.durations = np.exp(model._log_durations())  # p_i(d), shape (N, d_max)
+        check_fitted(model)
+        self.durations = np.exp(model.log_durations())  # p_i(d), shape (N, d_max)
         transmat = model.transmat_.copy()
         final = transmat.sum(axis=1) == 0
         transmat[final, final] = 1.0

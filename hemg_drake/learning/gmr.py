@@ -1,6 +1,8 @@
 """Gaussian mixture regression: condition a mixture on a subset of dimensions (eqs. 14-17)."""
 
 import numpy as np
+from sklearn.base import BaseEstimator
+from sklearn.exceptions import NotFittedError
 
 from hemg_drake.learning import _step_kernels
 
@@ -48,11 +50,16 @@ def softmax(log_weights):
     return shifted / shifted.sum(axis=-1, keepdims=True)
 
 
-class Gmr:
+class Gmr(BaseEstimator):
     """p(xi^O | xi^I) of a Gaussian mixture, for one query or a batch.
 
-    The index split is given once; the regression matrices
-    S_i^OI (S_i^II)^-1 and conditional covariances are precomputed.
+    A scikit-learn estimator whose constructor only stores the mixture and the index
+    split; :meth:`fit` checks them and precomputes the regression matrices
+    S_i^OI (S_i^II)^-1 and the conditional covariances. The mixture is given (e.g. an
+    HSMM's ``occupancy_``, ``means_``, ``covariances_``), not learnt from ``X``::
+
+        gmr = Gmr(priors=pi, means=mu, covariances=sigma, input_dims=[0, 1]).fit()
+        mean, covariance = gmr.predict(x)
 
     Parameters
     ----------
@@ -67,16 +74,46 @@ class Gmr:
 
     Attributes
     ----------
+    input_dims_, output_dims_ : arrays of int
+        The index split, checked.
+    log_priors_ : array, shape (N,)
+        log pi_i (-inf for a zero weight).
+    input_means_ : array, shape (N, I)
+    output_means_ : array, shape (N, O)
+    input_covariances_ : array, shape (N, I, I)
     gains_ : array, shape (N, O, I)
         S_i^OI (S_i^II)^-1 (eq. 16).
     conditional_covariances_ : array, shape (N, O, O)
         S_i^OO - S_i^OI (S_i^II)^-1 S_i^IO (eq. 17).
     """
 
-    def __init__(self, *, priors, means, covariances, input_dims, output_dims=None):
-        means = np.asarray(means, dtype=float)
-        covariances = np.asarray(covariances, dtype=float)
-        priors = np.asarray(priors, dtype=float)
+    def __init__(self, *, priors=None, means=None, covariances=None, input_dims=None,
+                 output_dims=None):  # fmt: skip
+        self.priors = priors
+        self.means = means
+        self.covariances = covariances
+        self.input_dims = input_dims
+        self.output_dims = output_dims
+
+    def fit(self, X=None, y=None):
+        """Check the mixture and the index split; precompute the regression (eqs. 16-17).
+
+        Parameters
+        ----------
+        X, y : ignored
+            The mixture is a parameter; kept for scikit-learn's ``fit`` signature.
+
+        Returns
+        -------
+        self
+        """
+        if self.means is None or self.covariances is None or self.priors is None:
+            raise ValueError("Gmr needs priors, means and covariances (the mixture)")
+        if self.input_dims is None:
+            raise ValueError("Gmr needs input_dims, the indices conditioned on")
+        means = np.asarray(self.means, dtype=float)
+        covariances = np.asarray(self.covariances, dtype=float)
+        priors = np.asarray(self.priors, dtype=float)
         n_states, n_dims = means.shape if means.ndim == 2 else (0, 0)
         if means.ndim != 2 or n_states < 1:
             raise ValueError(f"means must have shape (N, D), got {means.shape}")
@@ -87,7 +124,8 @@ class Gmr:
             )
         if priors.shape != (n_states,) or np.any(priors < 0):
             raise ValueError(f"priors must be {n_states} non-negative weights")
-        input_dims = np.asarray(input_dims, dtype=int).ravel()
+        input_dims = np.asarray(self.input_dims, dtype=int).ravel()
+        output_dims = self.output_dims
         if output_dims is None:
             output_dims = np.setdiff1d(np.arange(n_dims), input_dims)
         output_dims = np.asarray(output_dims, dtype=int).ravel()
@@ -103,9 +141,8 @@ class Gmr:
             if not np.all(np.isfinite(value)):
                 raise ValueError(f"{name} contain NaN or inf")
 
-        self.input_dims = input_dims
-        self.output_dims = output_dims
-        self.priors = priors
+        self.input_dims_ = input_dims
+        self.output_dims_ = output_dims
         self.input_means_ = means[:, input_dims]
         self.output_means_ = means[:, output_dims]
         self.input_covariances_ = covariances[np.ix_(range(n_states), input_dims, input_dims)]
@@ -117,12 +154,18 @@ class Gmr:
         )
         self.conditional_covariances_ = output_cov - self.gains_ @ np.swapaxes(cross, 1, 2)
         with np.errstate(divide="ignore"):
-            self._log_priors = np.log(priors)
+            self.log_priors_ = np.log(priors)
         self._input_whitening = _whitening(self.input_covariances_)
+        return self
+
+    def __sklearn_is_fitted__(self):
+        return hasattr(self, "gains_")
 
     def _as_queries(self, x):
+        if not hasattr(self, "gains_"):
+            raise NotFittedError("this Gmr is not fitted yet: call fit()")
         x = np.asarray(x, dtype=float)
-        n_in = self.input_dims.size
+        n_in = self.input_dims_.size
         if x.shape[-1:] != (n_in,) or x.ndim > 2:
             raise ValueError(f"query must have shape ({n_in},) or (T, {n_in}), got {x.shape}")
         if not np.all(np.isfinite(x)):
@@ -132,15 +175,12 @@ class Gmr:
     def log_input_likelihood(self, x):
         """log N(x | mu_i^I, S_i^II) per component; shape (T, N) (or (N,) for one query)."""
         queries, single = self._as_queries(x)
-        log_pdf = self._log_input_likelihood(queries)
+        log_pdf = _log_pdf_whitened(queries, self.input_means_, *self._input_whitening)
         return log_pdf[0] if single else log_pdf
-
-    def _log_input_likelihood(self, queries):
-        return _log_pdf_whitened(queries, self.input_means_, *self._input_whitening)
 
     def responsibilities(self, x):
         """h_i proportional to pi_i N(x | mu_i^I, S_i^II) (eq. 14); shape (T, N) or (N,)."""
-        return softmax(self._log_priors + self.log_input_likelihood(x))
+        return softmax(self.log_priors_ + self.log_input_likelihood(x))
 
     def component_means(self, x):
         """mu_i^O + S_i^OI (S_i^II)^-1 (x - mu_i^I) (eq. 16); shape (T, N, O) or (N, O)."""
@@ -170,7 +210,7 @@ class Gmr:
         queries, single = self._as_queries(x)
         if weights is None:
             weights = self.responsibilities(queries)
-        shape = (len(queries), len(self.priors))
+        shape = (len(queries), len(self.log_priors_))
         try:
             weights = np.broadcast_to(np.asarray(weights, dtype=float), shape)
         except ValueError:

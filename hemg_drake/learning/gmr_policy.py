@@ -117,7 +117,7 @@ def output_gmr(model):
         covariances=model.covariances_,
         input_dims=model.position_dims_,
         output_dims=np.concatenate([model.velocity_dims_, model.stiffness_dims_]),
-    )
+    ).fit()
     return gmr, model.data_range_[:, model.stiffness_dims_]
 
 
@@ -198,17 +198,16 @@ class HsmmGmrPolicy:
         x_star_next : array, shape (P,)
         predicted_next : array, shape (N, d_max)
         """
-        query = x[None, :]
         if self.weighting == "spatial":
-            h = softmax(self.gmr._log_priors + self.gmr._log_input_likelihood(query)[0])
+            h = softmax(self.gmr.log_priors_ + self.gmr.log_input_likelihood(x))
             predicted_next = predicted
         else:
             if self.weighting == "forward":
-                log_emission = self.gmr._log_input_likelihood(query)[0]
+                log_emission = self.gmr.log_input_likelihood(x)
             else:
                 log_emission = np.zeros(self.n_states)
             h, predicted_next = self.forward.step(predicted, log_emission)
-        output = h @ self.gmr._component_means(query)[0]
+        output = h @ self.gmr.component_means(x)
         xdot = output[: self.n_position]
         if self.restoring_gain > 0:
             towards = self.gmr.input_means_ - x  # (N, P)

@@ -7,34 +7,35 @@ EM steps (:mod:`.hsmm_em`), decoding, sampling and forward variables
 (:mod:`.hsmm_io`). Every public name of those modules is importable from here.
 """
 
-import inspect
-
 import numpy as np
+from sklearn.base import BaseEstimator
 
-from hemg_drake.learning.hsmm_em import EmMixin
+from hemg_drake.learning import hsmm_em
+from hemg_drake.learning.gmr import gaussian_log_pdf
 from hemg_drake.learning.hsmm_inference import InferenceMixin, segments  # noqa: F401
 from hemg_drake.learning.hsmm_init import (  # noqa: F401
     DURATION_STD_FLOOR,
-    InitialisationMixin,
+    initialise,
     polyline_segments,
 )
 from hemg_drake.learning.hsmm_io import (  # noqa: F401
-    _FITTED,
+    FITTED,
     FORMAT_VERSION,
     PersistenceMixin,
     save_fitted,
 )
+from hemg_drake.learning.hsmm_params import INITS, check_parameters  # noqa: F401
 from hemg_drake.learning.model_selection import CriteriaMixin, select_n_states  # noqa: F401
-from hemg_drake.learning.sequences import check_demos, split_sequences
+from hemg_drake.learning.sequences import (
+    check_demos,
+    check_fitted,
+    fitted_sequences,
+    position_count,
+    split_sequences,
+)
 
-INITS = ("kmeans", "time", "polyline")
-PARAMETERS = (
-    "n_states", "max_duration", "reg_covar", "min_duration_std", "n_iter", "tol", "init",
-    "n_init", "n_position", "seed",
-)  # fmt: skip
 
-
-class HSMM(InitialisationMixin, EmMixin, InferenceMixin, CriteriaMixin, PersistenceMixin):
+class HSMM(InferenceMixin, CriteriaMixin, PersistenceMixin, BaseEstimator):
     """Explicit-duration hidden semi-Markov model with full-covariance Gaussian states.
 
     lambda = {pi, A, {mu_i, Sigma_i}, {mu_i^D, sigma_i^D}} (eq. 4): no
@@ -51,9 +52,12 @@ class HSMM(InitialisationMixin, EmMixin, InferenceMixin, CriteriaMixin, Persiste
     steps and covariance eigenvalues (in data-standardised units) at ``reg_covar``, both
     exact constrained M-steps. A sequence must end with a complete segment.
 
-    The estimator API follows hmmlearn and scikit-learn: ``fit(X, lengths)``,
-    ``score``, ``decode`` (segmental Viterbi), ``sample``, ``bic`` / ``aic``,
-    ``get_params`` / ``set_params`` (``sklearn.base.clone`` works).
+    The estimator API follows hmmlearn and scikit-learn: a
+    :class:`sklearn.base.BaseEstimator` (``get_params`` / ``set_params``, ``clone``, its
+    repr), whose constructor only stores the parameters and whose :meth:`fit` checks them;
+    ``fit(X, lengths)``, ``score``, ``decode`` (segmental Viterbi), ``sample``, ``bic`` /
+    ``aic``. The scikit-learn estimator checks it passes, and those that do not apply to
+    a sequence model, are listed in docs/learning.md.
 
     Parameters
     ----------
@@ -100,8 +104,10 @@ class HSMM(InitialisationMixin, EmMixin, InferenceMixin, CriteriaMixin, Persiste
     n_position : int, optional
         Layout of xi = [x (P), xdot (P), k (rest)]; default P = D // 2, so
         D = 7 gives [x(3), xdot(3), k(1)], D = 6 no stiffness, D = 4 planar.
-    seed : int
-        Seed of every random draw.
+    random_state : int
+        Seed of every random draw (k-means++, empty states); an integer >= 0, never None,
+        so that the same data give the same model. (Model files written with the former
+        name ``seed`` still load.)
 
     Attributes
     ----------
@@ -118,6 +124,8 @@ class HSMM(InitialisationMixin, EmMixin, InferenceMixin, CriteriaMixin, Persiste
         Smallest and largest value of each dimension in the training data (reproduction
         keeps k* inside it).
     max_duration_ : int
+    n_features_in_ : int
+        D (scikit-learn's name; set by fit, not saved: ``n_dims_`` is always there).
     min_duration_std_ : float
         The floor used in the last fit (not saved).
     log_likelihood_history_ : list of float
@@ -138,7 +146,7 @@ class HSMM(InitialisationMixin, EmMixin, InferenceMixin, CriteriaMixin, Persiste
         init="kmeans",
         n_init=5,
         n_position=None,
-        seed=0,
+        random_state=0,
     ):
         self.n_states = n_states
         self.max_duration = max_duration
@@ -149,75 +157,16 @@ class HSMM(InitialisationMixin, EmMixin, InferenceMixin, CriteriaMixin, Persiste
         self.init = init
         self.n_init = n_init
         self.n_position = n_position
-        self.seed = seed
-        self._check_parameters()
+        self.random_state = random_state
 
-    def get_params(self, deep=True):
-        """The constructor's parameters by name (scikit-learn's estimator protocol).
-
-        Parameters
-        ----------
-        deep : bool
-            Ignored (no parameter is an estimator); kept for scikit-learn.
-
-        Returns
-        -------
-        dict
-        """
-        return {name: getattr(self, name) for name in PARAMETERS}
-
-    def set_params(self, **params):
-        """Set constructor parameters by name; checked as in the constructor. Returns self."""
-        unknown = sorted(set(params) - set(PARAMETERS))
-        if unknown:
-            raise ValueError(f"unknown HSMM parameter(s) {unknown}; valid: {list(PARAMETERS)}")
-        previous = self.get_params()
-        for name, value in params.items():
-            setattr(self, name, value)
-        try:
-            self._check_parameters()
-        except ValueError:
-            for name, value in previous.items():
-                setattr(self, name, value)
-            raise
-        return self
-
-    def __repr__(self):
-        changed = {
-            name: value for name, value in self.get_params().items()
-            if name == "n_states" or value != _DEFAULTS[name]
-        }  # fmt: skip
-        return "HSMM(" + ", ".join(f"{name}={value!r}" for name, value in changed.items()) + ")"
-
-    def _check_parameters(self):
-        def integer(value):
-            return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
-
-        if not integer(self.n_states) or self.n_states < 1:
-            raise ValueError(f"n_states must be an integer >= 1, got {self.n_states!r}")
-        if self.max_duration is not None and (
-            not integer(self.max_duration) or self.max_duration < 1
-        ):
-            raise ValueError(f"max_duration must be an integer >= 1, got {self.max_duration!r}")
-        if not self.reg_covar > 0:
-            raise ValueError(f"reg_covar must be > 0, got {self.reg_covar!r}")
-        if self.min_duration_std is not None and not self.min_duration_std > 0:
-            raise ValueError(f"min_duration_std must be > 0, got {self.min_duration_std!r}")
-        if not integer(self.n_iter) or self.n_iter < 1:
-            raise ValueError(f"n_iter must be an integer >= 1, got {self.n_iter!r}")
-        if not self.tol >= 0:
-            raise ValueError(f"tol must be >= 0, got {self.tol!r}")
-        if self.init not in INITS:
-            raise ValueError(f"init must be one of {INITS}, got {self.init!r}")
-        if not integer(self.n_init) or self.n_init < 1:
-            raise ValueError(f"n_init must be an integer >= 1, got {self.n_init!r}")
-        if self.n_position is not None and (not integer(self.n_position) or self.n_position < 1):
-            raise ValueError(f"n_position must be an integer >= 1, got {self.n_position!r}")
+    def __sklearn_is_fitted__(self):
+        return all(hasattr(self, name) for name in FITTED)
 
     # ------------------------------------------------------------------ layout
     @property
     def n_dims_(self):
-        self._check_fitted()
+        """D of the fitted model."""
+        check_fitted(self)
         return self.means_.shape[1]
 
     @property
@@ -236,14 +185,8 @@ class HSMM(InitialisationMixin, EmMixin, InferenceMixin, CriteriaMixin, Persiste
         """Indices of k (possibly empty)."""
         return np.arange(2 * self._n_position(), self.n_dims_)
 
-    def _n_position(self, n_dims=None):
-        n_dims = self.n_dims_ if n_dims is None else n_dims
-        p = n_dims // 2 if self.n_position is None else self.n_position
-        if 2 * p > n_dims:
-            raise ValueError(
-                f"n_position = {p} needs D >= {2 * p} (x and xdot), the model has D = {n_dims}"
-            )
-        return p
+    def _n_position(self):
+        return position_count(self.n_dims_, self.n_position)
 
     # -------------------------------------------------------------------- fit
     def fit(self, X, lengths=None):
@@ -262,27 +205,29 @@ class HSMM(InitialisationMixin, EmMixin, InferenceMixin, CriteriaMixin, Persiste
         -------
         self
         """
-        self._check_parameters()
+        check_parameters(self)
         demos = check_demos(split_sequences(X, lengths))
         for c, demo in enumerate(demos):
             if len(demo) < self.n_states:
                 raise ValueError(
-                    f"demonstration {c + 1} has {len(demo)} steps, fewer than the N = {self.n_states} states"
+                    f"demonstration {c + 1} has {len(demo)} samples (steps), fewer than the "
+                    f"N = {self.n_states} states"
                 )
         samples = np.concatenate(demos)
+        self.n_features_in_ = samples.shape[1]
         self.data_range_ = np.stack([samples.min(axis=0), samples.max(axis=0)])
         scale = samples.std(axis=0)
         # A constant dimension's std is 0 or rounding noise (a held coordinate, the gradient
         # of one): a floor relative to that is no floor, so a dimension whose spread is
         # below 1e-12 of the data's largest magnitude is floored in its own units.
         scale[scale <= 1e-12 * np.abs(samples).max()] = 1.0
-        self._initialise(demos, samples, scale)
+        initialise(self, demos, samples, scale)
         self.log_likelihood_history_ = []
         self.converged_ = False
         n_samples = len(samples)
         outer = (samples[:, :, None] * samples[:, None, :]).reshape(n_samples, -1)
         for self.n_iter_ in range(1, self.n_iter + 1):
-            stats = self._expectation(demos, outer)
+            stats = hsmm_em.expectation(self, demos, outer)
             if not np.isfinite(stats["log_likelihood"]):
                 raise ValueError(
                     "the demos cannot be segmented into at most "
@@ -291,24 +236,30 @@ class HSMM(InitialisationMixin, EmMixin, InferenceMixin, CriteriaMixin, Persiste
                 )
             history = self.log_likelihood_history_
             history.append(stats["log_likelihood"])
-            self._maximisation(stats, scale)
+            hsmm_em.maximisation(self, stats, scale)
             if len(history) > 1 and history[-1] - history[-2] < self.tol * n_samples:
                 self.converged_ = True
                 break
         return self
 
+    def floor_covariances(self, covariances, scale):
+        """The constrained covariance M-step: eigenvalues of ``covariances`` (N, D, D)
+        floored at ``reg_covar`` in units of ``scale`` (D,), the per-dimension spread of the
+        training data. A subclass that constrains the covariances further overrides it."""
+        return hsmm_em.floor_covariances(covariances, scale, self.reg_covar)
+
+    def log_durations(self):
+        """log p_i(d) for d = 1 .. max_duration_, shape (N, d_max); -inf beyond the
+        support |d - mu_i^D| <= 10 sigma_i^D (below e^-50 of the peak)."""
+        check_fitted(self)
+        return hsmm_em.log_durations(self.duration_means_, self.duration_stds_, self.max_duration_)
+
     # -------------------------------------------------------------- likelihood
-    def _check_fitted(self):
-        if not all(hasattr(self, name) for name in _FITTED):
-            raise ValueError("this HSMM is not fitted yet: call fit(demos) or HSMM.load(path)")
-
-    def _check_demo(self, demo):
-        self._check_fitted()
-        return check_demos([demo], n_dims=self.means_.shape[1])[0]
-
     def _demo_posteriors(self, demo):
-        """:meth:`_posteriors` of one demonstration (checked)."""
-        return self._posteriors(self._log_emission(demo, True), self._log_parameters())
+        """:func:`hsmm_em.posteriors` of one demonstration (checked)."""
+        demo = check_demos([demo], n_dims=self.n_dims_)[0]
+        log_emission = gaussian_log_pdf(demo, self.means_, self.covariances_)
+        return hsmm_em.posteriors(log_emission, hsmm_em.log_parameters(self))
 
     def log_likelihood(self, demo):
         """log p(demo | lambda) of one ``demo`` of shape (T, D), as a float.
@@ -347,15 +298,4 @@ class HSMM(InitialisationMixin, EmMixin, InferenceMixin, CriteriaMixin, Persiste
         float
             sum_c log p(sequence c | lambda) (-inf if one cannot be produced).
         """
-        return float(sum(self.log_likelihood(demo) for demo in self._sequences(X, lengths)))
-
-    def _sequences(self, X, lengths):
-        self._check_fitted()
-        return check_demos(split_sequences(X, lengths), n_dims=self.means_.shape[1])
-
-
-_DEFAULTS = {
-    name: parameter.default
-    for name, parameter in inspect.signature(HSMM.__init__).parameters.items()
-    if name in PARAMETERS
-}
+        return float(sum(self.log_likelihood(demo) for demo in fitted_sequences(self, X, lengths)))

@@ -2,7 +2,7 @@
 
 Segmental Viterbi decoding and its segments, sampling, the forward variable (eqs. 11-12)
 and the order in which the timing visits the states. :class:`InferenceMixin` holds these
-methods of :class:`~hemg_drake.learning.hsmm.HSMM`.
+methods of :class:`~hemg_drake.learning.hsmm.HSMM`; they use its public API only.
 """
 
 import warnings
@@ -12,6 +12,8 @@ import numpy as np
 from hemg_drake.learning import _kernels
 from hemg_drake.learning.forward import ResidualForward
 from hemg_drake.learning.gmr import gaussian_log_pdf
+from hemg_drake.learning.hsmm_em import log_parameters
+from hemg_drake.learning.sequences import check_demos, check_fitted, fitted_sequences
 
 
 class InferenceMixin:
@@ -43,18 +45,18 @@ class InferenceMixin:
         ValueError
             If a sequence cannot be produced by the model.
         """
-        log_parameters = self._log_parameters()
+        log_parameters_ = log_parameters(self)
         total, states = 0.0, []
-        for c, demo in enumerate(self._sequences(X, lengths)):
+        for c, demo in enumerate(fitted_sequences(self, X, lengths)):
             log_emission = gaussian_log_pdf(demo, self.means_, self.covariances_)
-            log_probability, path = _kernels.viterbi(log_emission, *log_parameters)
+            log_probability, path = _kernels.viterbi(log_emission, *log_parameters_)
             if not np.isfinite(log_probability):
                 raise ValueError(f"the model cannot produce sequence {c} (probability 0)")
             total += log_probability
             states.append(path)
         return float(total), np.concatenate(states)
 
-    def sample(self, n_samples, seed=0):
+    def sample(self, n_samples, random_state=0):
         """Draw one sequence from the model (hmmlearn's ``sample``).
 
         The first state from pi, each duration from p_i(d) normalised over its support,
@@ -65,18 +67,19 @@ class InferenceMixin:
         Parameters
         ----------
         n_samples : int >= 1
-        seed : int or numpy.random.Generator
+        random_state : int or numpy.random.Generator
+            Seed of the draws.
 
         Returns
         -------
         X : array, shape (n_samples, D)
         states : array of int, shape (n_samples,)
         """
-        self._check_fitted()
+        check_fitted(self)
         if not isinstance(n_samples, (int, np.integer)) or n_samples < 1:
             raise ValueError(f"n_samples must be an integer >= 1, got {n_samples!r}")
-        rng = np.random.default_rng(seed)
-        durations = np.exp(self._log_durations())
+        rng = np.random.default_rng(random_state)
+        durations = np.exp(self.log_durations())
         durations /= durations.sum(axis=1, keepdims=True)
         states = np.empty(n_samples, dtype=int)
         state, t = rng.choice(self.n_states, p=self.startprob_), 0
@@ -108,7 +111,7 @@ class InferenceMixin:
         -------
         list of int or None
         """
-        self._check_fitted()
+        check_fitted(self)
         state = int(np.argmax(self.startprob_))
         if self.startprob_[state] < threshold:
             return None
@@ -144,14 +147,14 @@ class InferenceMixin:
     def _log_emission(self, demo_or_n_steps, observe):
         """(T, N) emission log-likelihoods, zeros when not observing."""
         if observe:
-            demo = self._check_demo(demo_or_n_steps)
+            demo = check_demos([demo_or_n_steps], n_dims=self.n_dims_)[0]
             return gaussian_log_pdf(demo, self.means_, self.covariances_)
         n_steps = demo_or_n_steps
         if isinstance(n_steps, np.ndarray):
-            n_steps = len(self._check_demo(n_steps))
+            n_steps = len(check_demos([n_steps], n_dims=self.n_dims_)[0])
         if not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
             raise ValueError(f"n_steps must be an integer >= 1, got {n_steps!r}")
-        self._check_fitted()
+        check_fitted(self)
         return np.zeros((int(n_steps), self.n_states))
 
     def log_forward_variable(self, demo_or_n_steps, *, observe=True):
@@ -169,7 +172,7 @@ class InferenceMixin:
         array, shape (T, N)
         """
         log_emission = self._log_emission(demo_or_n_steps, observe)
-        return _kernels.forward(log_emission, *self._log_parameters())[0]
+        return _kernels.forward(log_emission, *log_parameters(self))[0]
 
     def forward_variable(self, demo_or_n_steps, *, observe=True):
         """State weights h_{i,t} = p(state i active at t | xi_0..t), normalised (eq. 12).

@@ -230,11 +230,11 @@ class HsmmLqrPolicy:
             u = self._feedforward_table[row] - self._gain_table[row] @ state
             predicted_next = predicted
         else:
-            log_emission = self.gmr._log_input_likelihood(observed[None, :])[0]
+            log_emission = self.gmr.log_input_likelihood(observed)
             h, predicted_next = self.forward.step(predicted, log_emission)
             ahead = np.concatenate([h[None], self.predict_weights(predicted_next, self.horizon)])
             u = lqr.first_control(self.A, self.B, *self.costs(ahead), self.R, state)
-        output = h @ self.gmr._component_means(observed[None, :])[0]
+        output = h @ self.gmr.component_means(observed)
         k = np.clip(output[self.n_position :], *self.stiffness_range)
         state_next = self.A @ state + self.B @ u
         return h, k, state_next[: self.n_position], state_next[self.n_position :], predicted_next

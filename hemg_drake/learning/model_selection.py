@@ -2,11 +2,12 @@
 
 import numpy as np
 
-from hemg_drake.learning.sequences import check_demos, split_sequences
+from hemg_drake.learning.sequences import check_demos, fitted_sequences, split_sequences
 
 
 class CriteriaMixin:
-    """Free parameters, BIC and AIC of a fitted :class:`~hemg_drake.learning.hsmm.HSMM`."""
+    """Free parameters, BIC and AIC of a fitted :class:`~hemg_drake.learning.hsmm.HSMM`
+    (from its public API)."""
 
     @property
     def n_parameters_(self):
@@ -23,13 +24,13 @@ class CriteriaMixin:
 
     def bic(self, X, lengths=None):
         """BIC = -2 log L + n_parameters_ log(n_samples); lower is better."""
-        demos = self._sequences(X, lengths)
+        demos = fitted_sequences(self, X, lengths)
         n_samples = sum(len(demo) for demo in demos)
         return -2.0 * self.score(demos) + self.n_parameters_ * np.log(n_samples)
 
     def aic(self, X, lengths=None):
         """AIC = -2 log L + 2 n_parameters_; lower is better."""
-        return -2.0 * self.score(self._sequences(X, lengths)) + 2.0 * self.n_parameters_
+        return -2.0 * self.score(fitted_sequences(self, X, lengths)) + 2.0 * self.n_parameters_
 
 
 def select_n_states(X, candidates, *, lengths=None, criterion="bic", **parameters):

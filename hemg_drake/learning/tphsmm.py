@@ -44,15 +44,16 @@ import json
 from pathlib import Path
 
 import numpy as np
+from sklearn.base import BaseEstimator
 
 from hemg_drake.fileio import load_npz
-from hemg_drake.learning import hsmm as _hsmm
 from hemg_drake.learning.hsmm import HSMM, check_demos
+from hemg_drake.learning.hsmm_io import FITTED, load_fitted, save_fitted, settings_of
+from hemg_drake.learning.hsmm_params import check_parameters
+from hemg_drake.learning.sequences import check_fitted
 
 FORMAT_VERSION = 3
 KIND = "task-parameterised HSMM"
-# The HSMM's constructor parameters a TP-HSMM passes on (n_position is the world layout's).
-_PASSED = tuple(name for name in _hsmm.PARAMETERS if name != "n_states")
 
 
 def check_frames(A, b, *, n_position=3, name="frames"):
@@ -80,25 +81,28 @@ def check_frames(A, b, *, n_position=3, name="frames"):
 class _StackedHSMM(HSMM):
     """An HSMM over stacked per-frame observations whose covariances stay block-diagonal."""
 
-    def _floor_covariances(self, covariances, scale):
+    def floor_covariances(self, covariances, scale):
         mask = self._block_mask
         if mask.all():  # one frame: the plain HSMM's floor, on the same array
-            return super()._floor_covariances(covariances, scale)
-        floored = super()._floor_covariances(np.where(mask, covariances, 0.0), scale)
+            return super().floor_covariances(covariances, scale)
+        floored = super().floor_covariances(np.where(mask, covariances, 0.0), scale)
         return np.where(mask, floored, 0.0)
 
 
-class TaskParameterisedHSMM:
+class TaskParameterisedHSMM(BaseEstimator):
     """HSMM whose states hold a Gaussian in each of F task frames (Calinon 2016).
+
+    A scikit-learn estimator (``get_params``, ``set_params``, ``clone``) whose parameters
+    are the :class:`~hemg_drake.learning.hsmm.HSMM`'s, with the same defaults and meaning:
+    ``reg_covar`` is relative to each frame's per-dimension variance; ``init="kmeans"`` and
+    ``"polyline"`` use the positions in all frames; ``n_position`` is P of the world
+    observations. The constructor only stores them; :meth:`fit` checks them.
 
     Parameters
     ----------
     n_states : int
-    **parameters
-        Any other :class:`~hemg_drake.learning.hsmm.HSMM` parameter (``init``,
-        ``reg_covar``, ``n_iter``, ``n_position``, ``seed``, ...); ``reg_covar`` is relative
-        to each frame's per-dimension variance. ``init="kmeans"`` and ``"polyline"`` use the
-        positions in all frames.
+    max_duration, reg_covar, min_duration_std, n_iter, tol, init, n_init, n_position, random_state
+        As for :class:`~hemg_drake.learning.hsmm.HSMM`.
 
     Attributes
     ----------
@@ -109,17 +113,37 @@ class TaskParameterisedHSMM:
         P and K of the world observations [x (P), xdot (P), k (K)].
     """
 
-    def __init__(self, n_states, **parameters):
-        unknown = sorted(set(parameters) - set(_PASSED))
-        if unknown:
-            raise ValueError(f"unknown HSMM parameter(s) {unknown}; valid: {list(_PASSED)}")
-        HSMM(n_states, **parameters)  # checks them
+    def __init__(
+        self,
+        n_states,
+        *,
+        max_duration=None,
+        reg_covar=1e-2,
+        min_duration_std=None,
+        n_iter=100,
+        tol=1e-3,
+        init="kmeans",
+        n_init=5,
+        n_position=None,
+        random_state=0,
+    ):
         self.n_states = n_states
-        self.parameters = dict(parameters)
+        self.max_duration = max_duration
+        self.reg_covar = reg_covar
+        self.min_duration_std = min_duration_std
+        self.n_iter = n_iter
+        self.tol = tol
+        self.init = init
+        self.n_init = n_init
+        self.n_position = n_position
+        self.random_state = random_state
 
-    def __repr__(self):
-        settings = "".join(f", {k}={v!r}" for k, v in self.parameters.items())
-        return f"TaskParameterisedHSMM(n_states={self.n_states}{settings})"
+    def __sklearn_is_fitted__(self):
+        return hasattr(self, "stacked_")
+
+    def _hsmm_parameters(self):
+        """The HSMM parameters but n_states, as given."""
+        return {k: v for k, v in self.get_params().items() if k != "n_states"}
 
     # -------------------------------------------------------------- layout
     def _indices(self, j):
@@ -168,6 +192,7 @@ class TaskParameterisedHSMM:
         -------
         self
         """
+        check_parameters(self)
         demos = check_demos(demos)
         frames = list(frames)
         if len(frames) != len(demos):
@@ -175,7 +200,7 @@ class TaskParameterisedHSMM:
                 f"frames must give (A, b) for each of the {len(demos)} demos, got {len(frames)}"
             )
         n_dims = demos[0].shape[1]
-        p = self.parameters.get("n_position") or n_dims // 2
+        p = self.n_position or n_dims // 2
         if 2 * p > n_dims:
             raise ValueError(f"n_position = {p} needs D >= {2 * p}, the demos have D = {n_dims}")
         self.n_position_, self.n_stiffness_ = p, n_dims - 2 * p
@@ -188,17 +213,14 @@ class TaskParameterisedHSMM:
             raise ValueError(f"every demo needs the same number of frames, got {sorted(counts)}")
         self.n_frames_ = counts.pop()
         stacked = [self.stack(d, A, b) for d, (A, b) in zip(demos, checked, strict=True)]
-        settings = dict(self.parameters, n_position=self.n_frames_ * p)
+        settings = dict(self._hsmm_parameters(), n_position=self.n_frames_ * p)
         model = _StackedHSMM(self.n_states, **settings)
         model._block_mask = self._block_mask()
         self.stacked_ = model.fit(stacked)
         return self
 
     def _check_fitted(self):
-        if not hasattr(self, "stacked_"):
-            raise ValueError(
-                "this TaskParameterisedHSMM is not fitted yet: call fit(demos, frames)"
-            )
+        check_fitted(self)
 
     @property
     def n_iter_(self):
@@ -248,8 +270,7 @@ class TaskParameterisedHSMM:
             covariances = np.linalg.inv(precision)
             covariances = 0.5 * (covariances + np.swapaxes(covariances, 1, 2))
             means = np.einsum("nde,ne->nd", covariances, information)
-        settings = dict(self.parameters)
-        model = HSMM(self.n_states, **settings)
+        model = HSMM(self.n_states, **self._hsmm_parameters())
         source = self.stacked_
         for name in ("startprob_", "transmat_", "duration_means_", "duration_stds_", "occupancy_"):
             setattr(model, name, getattr(source, name).copy())
@@ -280,10 +301,10 @@ class TaskParameterisedHSMM:
         self._check_fitted()
         source = self.stacked_
         settings = dict(
-            n_states=self.n_states, parameters=self.parameters, n_frames=self.n_frames_,
+            n_states=self.n_states, parameters=self._hsmm_parameters(), n_frames=self.n_frames_,
             n_position=self.n_position_, n_stiffness=self.n_stiffness_,
         )  # fmt: skip
-        _hsmm.save_fitted(path, source, FORMAT_VERSION, settings, kind=np.array(KIND))
+        save_fitted(path, source, FORMAT_VERSION, settings, kind=np.array(KIND))
 
     @classmethod
     def load(cls, path):
@@ -296,28 +317,23 @@ class TaskParameterisedHSMM:
                 f"{path}: TP-HSMM model format version {version}, this code reads "
                 f"{FORMAT_VERSION} (fit the model again, e.g. hemg-drake learn)"
             )
-        missing = [k for k in (*_hsmm._FITTED, "settings", "max_duration_") if k not in arrays]
+        missing = [k for k in (*FITTED, "settings", "max_duration_") if k not in arrays]
         if missing:
             raise ValueError(f"{path}: damaged TP-HSMM model file, missing {missing}")
         try:
             settings = json.loads(str(arrays["settings"]))
-            model = cls(settings["n_states"], **settings["parameters"])
+            model = cls(settings["n_states"], **settings_of(settings["parameters"]))
+            check_parameters(model)
             model.n_frames_ = int(settings["n_frames"])
             model.n_position_ = int(settings["n_position"])
             model.n_stiffness_ = int(settings["n_stiffness"])
-        except (TypeError, KeyError, json.JSONDecodeError) as error:
+        except (TypeError, KeyError, ValueError) as error:  # (JSONDecodeError: ValueError)
             raise ValueError(f"{path}: damaged TP-HSMM model settings ({error})") from None
         stacked = _StackedHSMM(
-            model.n_states, **dict(model.parameters, n_position=model.n_frames_ * model.n_position_)
+            model.n_states,
+            **dict(model._hsmm_parameters(), n_position=model.n_frames_ * model.n_position_),
         )
-        for name in _hsmm._FITTED:
-            setattr(stacked, name, arrays[name].astype(float))
-        stacked.max_duration_ = int(arrays["max_duration_"])
-        history = arrays.get("log_likelihood_history_", np.empty(0))
-        stacked.log_likelihood_history_ = history.tolist()
-        stacked.n_iter_ = len(stacked.log_likelihood_history_)
-        stacked.converged_ = None
-        stacked._check_loaded(path)
+        load_fitted(stacked, arrays, path, kind="TP-HSMM")
         stacked._block_mask = model._block_mask()
         if stacked.means_.shape[1] != len(stacked._block_mask):
             raise ValueError(f"{path}: damaged TP-HSMM model file, means_ do not fit the frames")

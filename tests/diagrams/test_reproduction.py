@@ -34,7 +34,7 @@ def model():
         v = np.gradient(x, DT, axis=0)
         k = 20.0 + 130.0 * s + rng.normal(0, 2.0, 101)
         demos.append(np.column_stack([x, v, k]))
-    return HSMM(3, init="time", reg_covar=0.1, n_iter=10, seed=0).fit(demos)
+    return HSMM(3, init="time", reg_covar=0.1, n_iter=10, random_state=0).fit(demos)
 
 
 @pytest.fixture(scope="module")

@@ -99,7 +99,7 @@ def path_task():
     demos = smooth_demos()
     n_steps = int(round(np.mean([len(d) for d in demos])))
     mean = np.mean([resample(d, n_steps) for d in demos], axis=0)
-    model = HSMM(8, n_iter=20, seed=0).fit(demos)
+    model = HSMM(8, n_iter=20, random_state=0).fit(demos)
     return SimpleNamespace(demos=demos, mean=mean, model=model)
 
 

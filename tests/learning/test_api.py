@@ -76,8 +76,8 @@ def test_decode_and_score_take_concatenated_sequences(models):
 
 def test_fit_with_lengths_equals_fit_with_a_list(models):
     demos = models.smooth_demos(n_demos=3, n_steps=80, n_dims=4)
-    listed = HSMM(3, n_iter=4, seed=1).fit(demos)
-    stacked = HSMM(3, n_iter=4, seed=1).fit(np.vstack(demos), lengths=[len(d) for d in demos])
+    listed = HSMM(3, n_iter=4, random_state=1).fit(demos)
+    stacked = HSMM(3, n_iter=4, random_state=1).fit(np.vstack(demos), lengths=[len(d) for d in demos])
     np.testing.assert_array_equal(listed.means_, stacked.means_)
     assert listed.log_likelihood_history_ == stacked.log_likelihood_history_
     with pytest.raises(ValueError, match="lengths must be integers >= 1 summing to len"):
@@ -85,19 +85,24 @@ def test_fit_with_lengths_equals_fit_with_a_list(models):
 
 
 def test_params_follow_the_scikit_learn_protocol():
-    base = pytest.importorskip("sklearn.base")
-    model = HSMM(4, reg_covar=1e-3, init="time", seed=5)
+    from sklearn.base import BaseEstimator, clone
+
+    model = HSMM(4, reg_covar=1e-3, init="time", random_state=5)
+    assert isinstance(model, BaseEstimator)
     params = model.get_params()
     assert params["n_states"] == 4 and params["reg_covar"] == 1e-3 and params["init"] == "time"
-    copy = base.clone(model)
+    assert params["random_state"] == 5 and "seed" not in params
+    copy = clone(model)
     assert copy is not model and copy.get_params() == params
     assert copy.set_params(n_states=6, tol=0.0) is copy and copy.n_states == 6
-    with pytest.raises(ValueError, match="unknown HSMM parameter"):
+    with pytest.raises(ValueError, match="Invalid parameter 'n_components'"):
         copy.set_params(n_components=3)
-    with pytest.raises(ValueError, match="reg_covar must be > 0"):
-        copy.set_params(reg_covar=-1.0)
-    assert copy.reg_covar == 1e-3  # a refused value leaves the model as it was
-    assert repr(model) == "HSMM(n_states=4, reg_covar=0.001, init='time', seed=5)"
+    # scikit-learn's convention: the constructor and set_params store, fit checks.
+    copy.set_params(reg_covar=-1.0)
+    with pytest.raises(ValueError, match="reg_covar must be > 0, got -1.0"):
+        copy.fit(np.zeros((10, 2)))
+    assert not hasattr(copy, "means_")
+    assert repr(model) == "HSMM(init='time', n_states=4, random_state=5, reg_covar=0.001)"
 
 
 def test_clone_of_a_fitted_model_is_unfitted(models):
@@ -119,8 +124,8 @@ def known_model(models):
 
 def test_sample_follows_the_model(models):
     model = known_model(models)
-    X, states = model.sample(20_000, seed=4)
-    again, _ = model.sample(20_000, seed=4)
+    X, states = model.sample(20_000, random_state=4)
+    again, _ = model.sample(20_000, random_state=4)
     np.testing.assert_array_equal(X, again)
     assert states[0] == 0 and X.shape == (20_000, 2)
     state, _, duration = segments(states)
@@ -138,7 +143,7 @@ def test_sample_follows_the_model(models):
 
 def test_information_criteria_count_the_free_parameters(models):
     model = known_model(models)
-    X, _ = model.sample(195, seed=1)
+    X, _ = model.sample(195, random_state=1)
     # N = 2, D = 2: pi 1, A 0 (each row has one free entry), means 4, covariances 6, durations 4.
     assert model.n_parameters_ == 15
     log_l = model.score(X)
@@ -151,7 +156,7 @@ def test_information_criteria_count_the_free_parameters(models):
 def test_select_n_states_by_bic(models):
     rng = np.random.default_rng(6)
     model = known_model(models)
-    demos = [model.sample(170, seed=rng)[0] for _ in range(3)]
+    demos = [model.sample(170, random_state=rng)[0] for _ in range(3)]
     best, scores = select_n_states(demos, [1, 2, 3], n_iter=10, init="kmeans")
     assert best.n_states == min(scores, key=scores.get) == 2
     assert set(scores) == {1, 2, 3}
@@ -166,9 +171,11 @@ def test_models_written_before_the_new_defaults_still_load(models, tmp_path):
         arrays = dict(data)
     old = json.loads(str(arrays["settings"]))
     old.update(min_duration_std=1.0, tol=1e-4)  # the defaults of format version 2 before
+    old["seed"] = old.pop("random_state")  # the name before scikit-learn's random_state
     np.savez(tmp_path / "old.npz", **{**arrays, "settings": np.array(json.dumps(old))})
     loaded = HSMM.load(tmp_path / "old.npz")
     assert loaded.min_duration_std == 1.0 and loaded.tol == 1e-4
+    assert loaded.random_state == model.random_state and "seed" not in loaded.get_params()
     np.testing.assert_array_equal(loaded.means_, model.means_)
     assert not any(isinstance(v, np.ndarray) and v.dtype == object for v in arrays.values())
 

@@ -17,7 +17,7 @@ def test_a_constant_dimension_keeps_a_floor_in_its_own_units(init):
         demos.append(np.hstack([line, np.gradient(line, t, axis=0), 50.0 + 0 * t[:, None]]))
     # The case: spreads of 0 or of rounding noise (np.gradient of a constant, numpy's std).
     assert np.all(np.concatenate(demos)[:, [0, 1, 3, 4, 6]].std(axis=0) < 1e-14)
-    model = HSMM(2, n_iter=3, init=init, reg_covar=1e-2, seed=0).fit(demos)
+    model = HSMM(2, n_iter=3, init=init, reg_covar=1e-2, random_state=0).fit(demos)
     variances = model.covariances_.diagonal(axis1=1, axis2=2)
     # Constant dimensions (x, y, their rates, the gain) are floored at reg_covar itself.
     for column in (0, 1, 3, 4, 6):

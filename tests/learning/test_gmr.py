@@ -20,7 +20,7 @@ def test_single_gaussian_equals_the_closed_form_conditional():
     rng = np.random.default_rng(0)
     mixture = random_mixture(rng, 1, 5)
     inputs, outputs = [3, 0], [1, 4]  # an arbitrary, unordered split
-    model = Gmr(**mixture, input_dims=inputs, output_dims=outputs)
+    model = Gmr(**mixture, input_dims=inputs, output_dims=outputs).fit()
     x = rng.standard_normal(2)
 
     mu, sigma = mixture["means"][0], mixture["covariances"][0]
@@ -38,7 +38,7 @@ def test_single_gaussian_equals_the_closed_form_conditional():
 def test_mixture_agrees_with_the_gmr_package(inputs):
     rng = np.random.default_rng(len(inputs))
     mixture = random_mixture(rng, 4, 5)
-    model = Gmr(**mixture, input_dims=inputs)
+    model = Gmr(**mixture, input_dims=inputs).fit()
     reference = gmr.GMM(n_components=4, random_state=0, **mixture)
     queries = rng.standard_normal((6, len(inputs)))
 
@@ -54,7 +54,7 @@ def test_mixture_agrees_with_the_gmr_package(inputs):
 
 def test_batch_equals_single_queries_and_weights_can_be_given():
     rng = np.random.default_rng(5)
-    model = Gmr(**random_mixture(rng, 3, 4), input_dims=[0, 1])
+    model = Gmr(**random_mixture(rng, 3, 4), input_dims=[0, 1]).fit()
     queries = rng.standard_normal((5, 2))
     weights = rng.dirichlet(np.ones(3), size=5)
     means, covs = model.predict(queries, weights=weights)
@@ -88,12 +88,12 @@ def test_bad_input_is_rejected():
     rng = np.random.default_rng(7)
     mixture = random_mixture(rng, 2, 3)
     with pytest.raises(ValueError, match="overlap"):
-        Gmr(**mixture, input_dims=[0, 1], output_dims=[1, 2])
+        Gmr(**mixture, input_dims=[0, 1], output_dims=[1, 2]).fit()
     with pytest.raises(ValueError, match="indices"):
-        Gmr(**mixture, input_dims=[3])
+        Gmr(**mixture, input_dims=[3]).fit()
     with pytest.raises(ValueError, match="covariances must have shape"):
-        Gmr(**{**mixture, "covariances": mixture["covariances"][:, :2]}, input_dims=[0])
-    model = Gmr(**mixture, input_dims=[0])
+        Gmr(**{**mixture, "covariances": mixture["covariances"][:, :2]}, input_dims=[0]).fit()
+    model = Gmr(**mixture, input_dims=[0]).fit()
     with pytest.raises(ValueError, match="query must have shape"):
         model.predict(np.zeros(2))
     with pytest.raises(ValueError, match="NaN"):
@@ -107,7 +107,7 @@ def test_predictive_covariance_of_a_long_batch_agrees_with_the_gmr_package():
     rng = np.random.default_rng(8)
     mixture = random_mixture(rng, 5, 4)
     inputs = np.array([0, 2])
-    model = Gmr(**mixture, input_dims=inputs)
+    model = Gmr(**mixture, input_dims=inputs).fit()
     reference = gmr.GMM(n_components=5, random_state=0, **mixture)
     queries = rng.standard_normal((100, 2))
     means, covs = model.predict(queries)

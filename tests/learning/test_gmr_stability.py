@@ -28,17 +28,17 @@ def exponential_demos(rate, n_demos=6, seed=0):
 
 @pytest.mark.parametrize("rate", [-5.0, 2.0, 20.0])
 def test_growth_rate_is_the_slope_of_velocity_on_position(rate):
-    model = HSMM(1, init="time", reg_covar=1e-6, n_iter=2, seed=0).fit(exponential_demos(rate))
+    model = HSMM(1, init="time", reg_covar=1e-6, n_iter=2, random_state=0).fit(exponential_demos(rate))
     # With xdot = rate (x - x0) exactly, the regression gain is rate I.
     assert regression_growth_rates(model) == pytest.approx([rate], abs=1e-3 * abs(rate))
 
 
 def test_a_fast_growing_state_warns_once_for_the_gmr_tracker_only():
-    unstable = HSMM(1, init="time", reg_covar=1e-6, n_iter=2, seed=0).fit(
+    unstable = HSMM(1, init="time", reg_covar=1e-6, n_iter=2, random_state=0).fit(
         exponential_demos(20.0))  # fmt: skip
     with pytest.warns(UserWarning, match=r"state 0's velocity regression .* \+20\.0 1/s"):
         HsmmGmrPolicy(unstable, weighting="temporal")
-    stable = HSMM(1, init="time", reg_covar=1e-6, n_iter=2, seed=0).fit(exponential_demos(2.0))
+    stable = HSMM(1, init="time", reg_covar=1e-6, n_iter=2, random_state=0).fit(exponential_demos(2.0))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         HsmmGmrPolicy(stable, weighting="temporal")
@@ -48,7 +48,7 @@ def test_a_fast_growing_state_warns_once_for_the_gmr_tracker_only():
 def test_the_lqr_tracker_does_not_warn():
     from hemg_drake.learning.reproduce import HsmmLqrPolicy
 
-    unstable = HSMM(1, init="time", reg_covar=1e-6, n_iter=2, seed=0).fit(
+    unstable = HSMM(1, init="time", reg_covar=1e-6, n_iter=2, random_state=0).fit(
         exponential_demos(20.0))  # fmt: skip
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -58,7 +58,7 @@ def test_the_lqr_tracker_does_not_warn():
 def test_the_fastest_axis_of_the_fastest_state_is_reported():
     # Two states set by hand: state 1's regression is diag(20, -5, 1) 1/s in a rotated
     # frame, so only its largest eigenvalue, not its mean or its diagonal, gives 20.
-    model = HSMM(2, init="time", reg_covar=1e-6, n_iter=2, seed=0).fit(exponential_demos(-1.0))
+    model = HSMM(2, init="time", reg_covar=1e-6, n_iter=2, random_state=0).fit(exponential_demos(-1.0))
     rotation = np.linalg.qr(np.random.default_rng(3).normal(size=(3, 3)))[0]
     gain = rotation @ np.diag([20.0, -5.0, 1.0]) @ rotation.T
     S_xx = np.diag([4e-4, 1e-4, 9e-4])

@@ -75,7 +75,7 @@ def line_model():
         v += rng.normal(0.0, 1e-3, v.shape)
         k = 50.0 + 100.0 * t + rng.normal(0.0, 1.0, len(t))
         demos.append(np.column_stack([x, v, k]))
-    return HSMM(4, init="time", reg_covar=0.1, n_iter=10, seed=0).fit(demos)
+    return HSMM(4, init="time", reg_covar=0.1, n_iter=10, random_state=0).fit(demos)
 
 
 def test_with_no_restoring_gain_the_rollout_is_eqs_15_to_18(line_model):
@@ -87,7 +87,7 @@ def test_with_no_restoring_gain_the_rollout_is_eqs_15_to_18(line_model):
     gmr = Gmr(
         priors=line_model.occupancy_, means=line_model.means_,
         covariances=line_model.covariances_, input_dims=[0, 1, 2], output_dims=[3, 4, 5, 6],
-    )  # fmt: skip
+    ).fit()  # fmt: skip
     h = line_model.forward_variable(n, observe=False)
     x = start
     for t in range(n):
@@ -120,7 +120,7 @@ def test_stiffness_is_clipped_to_the_training_range(line_model):
     gmr = Gmr(
         priors=line_model.occupancy_, means=line_model.means_,
         covariances=line_model.covariances_, input_dims=[0, 1, 2], output_dims=[3, 4, 5, 6],
-    )  # fmt: skip
+    ).fit()  # fmt: skip
     raw = gmr.predict(far, weights=result.h[0])[0][3]
     low, high = line_model.data_range_[:, 6]
     assert raw < low - 20.0
@@ -146,7 +146,7 @@ def test_a_state_that_holds_still_attracts_in_every_direction():
         v = np.column_stack([0.1 * (t > 0.5), np.zeros_like(t), np.zeros_like(t)])
         data = np.column_stack([x, v, np.full_like(t, 50.0)])
         demos.append(data + rng.normal(0.0, 1e-3, data.shape))
-    model = HSMM(3, init="time", reg_covar=0.1, n_iter=10, seed=0).fit(demos)
+    model = HSMM(3, init="time", reg_covar=0.1, n_iter=10, random_state=0).fit(demos)
     start = np.array([0.01, 0.0, 0.0])
     carried = reproduce(model, start, 40, weighting="temporal")
     restored = reproduce(model, start, 40, weighting="temporal", restoring_gain=4.0)
@@ -178,7 +178,7 @@ def pull_task():
          for d in demos],
         axis=0,
     )  # fmt: skip
-    model = HSMM(5, init="time", reg_covar=0.1, n_iter=20, seed=0).fit(demos)
+    model = HSMM(5, init="time", reg_covar=0.1, n_iter=20, random_state=0).fit(demos)
     return model, mean
 
 
@@ -230,7 +230,7 @@ def test_lqr_tracker_is_the_receding_horizon_plan_on_the_timing(pull_task, state
     gmr = Gmr(
         priors=model.occupancy_, means=model.means_, covariances=model.covariances_,
         input_dims=[0, 1, 2], output_dims=[6],
-    )  # fmt: skip
+    ).fit()  # fmt: skip
     low, high = model.data_range_[:, 6]
     s = np.concatenate([start, np.zeros(3)])
     for t in range(n):

@@ -1,5 +1,7 @@
 """Task-parameterised HSMM: equivariance, the one-frame case, a task known in one frame."""
 
+import json
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -156,6 +158,15 @@ def test_save_load_round_trip_and_older_models(fitted, tmp_path):
         TaskParameterisedHSMM.load(tmp_path / "plain.npz")
     with pytest.raises(FileNotFoundError):
         load_model(tmp_path / "missing.npz")
+    # A file written when the parameters were given as **parameters with ``seed``.
+    with np.load(tmp_path / "tp.npz") as data:
+        arrays = dict(data)
+    settings = json.loads(str(arrays["settings"]))
+    settings["parameters"] = {"init": "time", "n_iter": 15, "seed": 4}
+    np.savez(tmp_path / "old.npz", **{**arrays, "settings": np.array(json.dumps(settings))})
+    old = TaskParameterisedHSMM.load(tmp_path / "old.npz")
+    assert old.random_state == 4 and old.init == "time" and old.reg_covar == 1e-2
+    assert np.array_equal(old.at(A, b).means_, model.at(A, b).means_)
 
 
 def test_bad_frames_are_refused(fitted):
@@ -166,5 +177,22 @@ def test_bad_frames_are_refused(fitted):
         model.at(np.eye(3), np.zeros(3))
     with pytest.raises(ValueError, match="singular"):
         model.at(np.zeros((2, 3, 3)), np.zeros((2, 3)))
-    with pytest.raises(ValueError, match="unknown HSMM parameter"):
+    with pytest.raises(TypeError, match="unexpected keyword argument 'colour'"):
         TaskParameterisedHSMM(3, colour="red")
+    with pytest.raises(ValueError, match="init must be one of"):
+        TaskParameterisedHSMM(3, init="random").fit(demos, frames)  # checked by fit
+
+
+def test_the_tp_hsmm_takes_the_hsmm_parameters_with_their_defaults():
+    import inspect
+
+    from sklearn.base import BaseEstimator, clone
+
+    def defaults(cls):
+        return {name: p.default for name, p in inspect.signature(cls).parameters.items()}
+
+    assert defaults(TaskParameterisedHSMM) == defaults(HSMM)
+    model = TaskParameterisedHSMM(4, init="time", random_state=2)
+    assert isinstance(model, BaseEstimator)
+    assert clone(model).get_params() == model.get_params()
+    assert repr(model) == "TaskParameterisedHSMM(init='time', n_states=4, random_state=2)"
