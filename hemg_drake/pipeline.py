@@ -28,7 +28,8 @@ TASKS = ("cotter_pin", "drawing")
 
 
 def _demonstrate_hint(folder):
-    return f"hemg-drake demonstrate SCENARIO --out {folder.path}"
+    # Never advice that replaces what is there (a person's takes): a new run goes elsewhere.
+    return "hemg-drake demonstrate SCENARIO --out NEW_FOLDER for a new run"
 
 
 def demonstrate_seed(built, seed, *, replay_path=None, title=None):

@@ -134,7 +134,7 @@ def test_learn_refuses_a_dataset_no_demonstrate_recorded(pin_run, tmp_path, caps
         learn(tmp_path, progress=quiet)
     message = str(error.value)
     assert "\n" not in message and "no finished 'demonstrate' recorded it" in message
-    assert message.endswith(f"run hemg-drake demonstrate SCENARIO --out {tmp_path}")
+    assert message.endswith("run hemg-drake demonstrate SCENARIO --out NEW_FOLDER for a new run")
     assert not (tmp_path / "model.npz").exists()
     assert main(["learn", str(tmp_path)]) == 2
     err = capsys.readouterr().err

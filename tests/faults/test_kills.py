@@ -9,14 +9,9 @@ import time
 
 import pytest
 
-from tooling.faults import COMMANDS, Case, _env, kill_many, leftovers, make_base, snapshot
+from tooling.faults import COMMANDS, Case, _env, kill_many, leftovers, snapshot
 
 SEED = 2025  # the kills' moments; the benchmark draws others
-
-
-@pytest.fixture(scope="module")
-def base(tmp_path_factory):
-    return make_base(tmp_path_factory.mktemp("base"))
 
 
 @pytest.mark.slow
