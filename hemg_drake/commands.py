@@ -10,6 +10,18 @@ import sys
 from pathlib import Path
 
 
+# The scenario keys that learn and reproduce read from the dataset's scenario (pipeline.learn:
+# learning_data, fit_model; pipeline.reproduce: the placement, build_reproduction_diagram);
+# a --set of any other key would do nothing, and is refused.
+READS = {
+    "learn": ("learning", "seed"),
+    "reproduce": (
+        "reproduction", "scene.position", "scene.yaw_deg", "scene.cotter_pin", "scene.drawing",
+        "plant", "simulator", "visualization", "clik", "pd", "emg.k_min", "emg.k_max",
+    ),
+}  # fmt: skip
+
+
 def _print(line):
     """Print, and keep working if the reader went away (``| head``)."""
     try:
@@ -97,18 +109,22 @@ def demonstrate_command(args):
 def learn_command(args):
     """``hemg-drake learn``: fit the HSMM of a run folder's dataset."""
     from hemg_drake.pipeline import learn
+    from hemg_drake.scenario import check_overrides_read
 
+    check_overrides_read(args.set, READS["learn"], reader="learn")
     learn(args.run, overrides=args.set, n_iter=args.iterations, progress=_print)
 
 
 def reproduce_command(args):
     """``hemg-drake reproduce``: simulate the learnt task of a run folder."""
     from hemg_drake.pipeline import reproduce
+    from hemg_drake.scenario import check_overrides_read
 
     overrides = _with_flags(
         args, weighting="reproduction.weighting", restoring_gain="reproduction.restoring_gain",
         tracker="reproduction.tracker",
     )  # fmt: skip
+    check_overrides_read(overrides, READS["reproduce"], reader="reproduce")
     if args.out is not None:
         check_output_folder(args.out)
     reproduce(

@@ -46,7 +46,9 @@ from hemg_drake.tasks import plans
 from hemg_drake.tasks.config import PlanConfig, SceneConfig
 from hemg_drake.tasks.placement import master_orientation, task_scene_pose, to_world
 from hemg_drake.teleop.config import FeedbackConfig, MappingConfig, MasterConfig, OperatorConfig
-from hemg_drake.yaml_schema import check_types, first_line, override_data, parse_yaml
+from hemg_drake.yaml_schema import (
+    check_types, first_line, override_data, parse_yaml, schema_fields,
+)  # fmt: skip
 
 TASKS = ("cotter_pin", "drawing")
 # The largest seed: Drake's RandomGenerator takes a 32-bit seed (2**32 draws what 0 draws,
@@ -233,6 +235,65 @@ def drake_choices():
             items = re.match(r'(\s*-\s*"\w+")*', doc.partition("Valid strings are:")[2])
             choices[f"plant.{field.name}"] = tuple(re.findall(r'"(\w+)"', items.group()))
     return choices
+
+
+def check_overrides_read(overrides, reads, *, reader, source="--set"):
+    """Refuse an override of a key that ``reader`` does not read, in one line.
+
+    Parameters
+    ----------
+    overrides : sequence of str, ``key=value`` as for :func:`load_scenario`.
+    reads : sequence of str, the key paths ``reader`` reads: a section (``"learning"``: every
+        key under it) or a key (``"seed"``).
+    reader : str, who reads them, e.g. ``"learn"``.
+
+    Raises
+    ------
+    ValueError
+        ``--set emg.k_max=150: learn does not use emg.*: it reads learning.* and seed``; an
+        override of ``task``: the task of a run folder is fixed. A malformed override is
+        left for :func:`load_scenario` to name.
+    """
+    shown = [key if _leaf(key) else f"{key}.*" for key in reads]
+    said = ", ".join(shown[:-1]) + f" and {shown[-1]}" if len(shown) > 1 else shown[0]
+    for override in overrides:
+        try:
+            keys = _key_paths(override_data(override, Scenario))
+        except ValueError:
+            continue
+        for key in keys:
+            if key == "task":
+                raise ValueError(
+                    f"{source} {override}: the task of a run folder is fixed (its dataset's); "
+                    "demonstrate the other task into a folder of its own"
+                )
+            if not any(key == read or key.startswith(f"{read}.") for read in reads):
+                section = key.split(".")[0]
+                partly = _leaf(section) or any(r.split(".")[0] == section for r in reads)
+                unused = key if partly else f"{section}.*"
+                raise ValueError(f"{source} {override}: {reader} does not use {unused}: it "
+                                 f"reads {said}")  # fmt: skip
+
+
+def _key_paths(data, path=""):
+    """The dotted key paths of the values in nested mappings ``data``."""
+    if not isinstance(data, dict) or not data:
+        return [path]
+    return [key for name, value in data.items()
+            for key in _key_paths(value, f"{path}.{name}" if path else str(name))]  # fmt: skip
+
+
+def _leaf(key):
+    """True if ``key`` (a dotted path in Scenario) holds a value, not a section."""
+    schema = Scenario
+    for name in key.split("."):
+        fields = schema_fields(schema)
+        if name not in fields:
+            return True
+        schema = fields[name]
+        if typing.get_origin(schema) is typing.Union:
+            schema = next(a for a in typing.get_args(schema) if a is not type(None))
+    return not (dc.is_dataclass(schema) or hasattr(schema, "__fields__"))
 
 
 def load_scenario(path, *, overrides=()):
