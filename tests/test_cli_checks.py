@@ -177,3 +177,22 @@ def test_a_missing_optional_package_is_one_clean_sentence(
     assert f"pip install 'hemg-drake[{extra}]'" in message
     assert "needs the optional package the" not in message and "package robomimic" not in message
     assert not (tmp_path / "x.hdf5").exists()
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["stability", "cotter_pin", "--delays", "0", "100000", "-o", "{tmp}/s.png"],
+         "--delays 100000: at most 500 ms"),
+        (["emg-figure", "--seed", "4294967296", "-o", "{tmp}/f.png"],
+         "--seed must be at most 4294967295"),
+        (["demonstrate", "cotter_pin", "--out", "{tmp}/o", "--seed", "4294967296"],
+         "--seed must be at most 4294967295"),
+        (["teleop", "cotter_pin", "--out", "{tmp}/o", "--port", "70000"],
+         "--port must be at most 65535"),
+    ],
+)  # fmt: skip
+def test_command_line_sizes_are_bounded(tmp_path, run_cli, no_jobs, argv, words):
+    code, stdout, err = run_cli([a.format(tmp=tmp_path) for a in argv])
+    assert words in one_line(code, stdout, err, argv[0])
+    assert list(tmp_path.iterdir()) == []
