@@ -167,3 +167,42 @@ def moved_demonstration(demo, frame_from, frame_to):
         v_WE=demo.v_WE @ R.T,
         f_WE=demo.f_WE @ R.T,
     )
+
+
+def scene_placements(frames):
+    """The distinct scene placements of the demonstrations' task frames (list of (A, b)), as
+    a model stores them (``learnt_at_``): JSON-ready ``{"position": [x, y, z], "rotation":
+    R (3 x 3)}`` of the scene frame, in the demonstrations' order."""
+    placements = []
+    for A, b in frames:
+        R, p = scene_frame(A, b)
+        entry = {"position": np.asarray(p, float).tolist(),
+                 "rotation": np.asarray(R, float).tolist()}  # fmt: skip
+        if entry not in placements:
+            placements.append(entry)
+    return placements
+
+
+def unlearnt_placement(model, scenario, learnt_at):
+    """Why reproducing ``model`` at the scenario's placement is not the task it learnt, or None.
+
+    A world-frame model (a plain HSMM) reproduces its demonstrations where they were: at a
+    scene placement that is none of ``learnt_at`` (:func:`scene_placements`) it pulls the
+    pin or draws the strokes where the scene was. A TP-HSMM (with ``at``) is placed by its
+    frames, and an unknown ``learnt_at`` (None) says nothing.
+    """
+    if hasattr(model, "at") or not learnt_at:
+        return None
+    R, p = scene_frame(*task_frames(scenario))
+    here = [(np.linalg.norm(p - e["position"]), np.abs(R - e["rotation"]).max()) for e in learnt_at]
+    if any(distance <= 1e-6 and turn <= 1e-9 for distance, turn in here):
+        return None
+    nearest = learnt_at[int(np.argmin([distance for distance, _ in here]))]
+    R0 = np.asarray(nearest["rotation"])
+    yaw = np.degrees(np.arctan2(R0[1, 0], R0[0, 0]))
+    return (
+        f"a world-frame HSMM learnt with the scene at {np.round(nearest['position'], 3).tolist()} "
+        f"m, yaw {yaw:.1f} deg, reproduced with the {describe_placement(scenario)}: it "
+        f"reproduces the task where it was learnt, and is checked where the scene is now "
+        f"(demonstrate at several placements for a TP-HSMM)"
+    )
