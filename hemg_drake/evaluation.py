@@ -259,8 +259,9 @@ def task_metrics(task, demos, result):
             "not pushed into the fixture": record["dip_m"] <= PIN_DIP_M,
         })  # fmt: skip
         limits.update(
-            overshoot_m=PIN_OVERSHOOT_M, dip_m=PIN_DIP_M, pull_direction_error_deg=PIN_PULL_ANGLE_DEG
-        )
+            overshoot_m=PIN_OVERSHOOT_M, dip_m=PIN_DIP_M,
+            pull_direction_error_deg=PIN_PULL_ANGLE_DEG,
+        )  # fmt: skip
     else:
         record.update(_drawing_metrics(demos, log))
         shapes = record["stroke_shape_error_m"]
