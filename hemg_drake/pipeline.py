@@ -273,22 +273,17 @@ def placed_model(model, scenario):
 
 def _checked_model(folder, scenario, frames):
     """The run folder's model at the scenario's placement, refused unless it was fitted on
-    the folder's dataset; a UserWarning if a world-frame model is moved (placements learnt:
-    the model's own, or for files without them the dataset's ``frames``)."""
-    import warnings
-
+    the folder's dataset; a warning if a world-frame model is moved from where it learnt."""
     from hemg_drake.diagrams.reproduction import check_model
     from hemg_drake.learning.tphsmm import load_model
-    from hemg_drake.placements import scene_placements, unlearnt_placement
+    from hemg_drake.placements import check_learnt_placement
 
     hint = f"hemg-drake learn {folder.path}"
     folder.check("demonstrate", folder.dataset, run_hint=_demonstrate_hint(folder))
     folder.check("learn", folder.model, run_hint=hint)
     folder.check_made_from("learn", folder.dataset, run_hint=hint)
     learnt = load_model(folder.model)
-    learnt_at = learnt.learnt_at_ or scene_placements(frames)
-    if (moved := unlearnt_placement(learnt, scenario, learnt_at)) is not None:
-        warnings.warn(f"{folder.model}: {moved}", stacklevel=3)
+    check_learnt_placement(learnt, scenario, frames, source=folder.model)
     model = placed_model(learnt, scenario)
     try:
         check_model(model)

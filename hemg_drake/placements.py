@@ -183,14 +183,19 @@ def scene_placements(frames):
     return placements
 
 
-def unlearnt_placement(model, scenario, learnt_at):
-    """Why reproducing ``model`` at the scenario's placement is not the task it learnt, or None.
+def check_learnt_placement(model, scenario, frames=None, source="model"):
+    """Warn (``UserWarning``, naming ``source``) when ``model`` is reproduced where it cannot
+    do the task it learnt; returns the warning's text, or None.
 
     A world-frame model (a plain HSMM) reproduces its demonstrations where they were: at a
-    scene placement that is none of ``learnt_at`` (:func:`scene_placements`) it pulls the
-    pin or draws the strokes where the scene was. A TP-HSMM (with ``at``) is placed by its
-    frames, and an unknown ``learnt_at`` (None) says nothing.
+    scene placement that is none of those it was learnt at (its ``learnt_at_``, see
+    :func:`scene_placements`; for a model file written without them, the placements of
+    the demonstrations' ``frames``) it pulls the pin or draws the strokes where the scene
+    was. A TP-HSMM (with ``at``) is placed by its frames; unknown placements say nothing.
     """
+    import warnings
+
+    learnt_at = getattr(model, "learnt_at_", None) or (frames and scene_placements(frames))
     if hasattr(model, "at") or not learnt_at:
         return None
     R, p = scene_frame(*task_frames(scenario))
@@ -200,9 +205,11 @@ def unlearnt_placement(model, scenario, learnt_at):
     nearest = learnt_at[int(np.argmin([distance for distance, _ in here]))]
     R0 = np.asarray(nearest["rotation"])
     yaw = np.degrees(np.arctan2(R0[1, 0], R0[0, 0]))
-    return (
-        f"a world-frame HSMM learnt with the scene at {np.round(nearest['position'], 3).tolist()} "
-        f"m, yaw {yaw:.1f} deg, reproduced with the {describe_placement(scenario)}: it "
-        f"reproduces the task where it was learnt, and is checked where the scene is now "
-        f"(demonstrate at several placements for a TP-HSMM)"
+    message = (
+        f"{source}: a world-frame HSMM learnt with the scene at "
+        f"{np.round(nearest['position'], 3).tolist()} m, yaw {yaw:.1f} deg, reproduced with "
+        f"the {describe_placement(scenario)}: it reproduces the task where it was learnt, and "
+        f"is checked where the scene is now (demonstrate at several placements for a TP-HSMM)"
     )
+    warnings.warn(message, stacklevel=3)
+    return message

@@ -3,6 +3,7 @@ files without them still load, and a world-frame model reproduced at another pla
 warns (the CLI: one line on stderr)."""
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -10,7 +11,7 @@ import pytest
 from hemg_drake.cli import main
 from hemg_drake.learning.hsmm import HSMM
 from hemg_drake.learning.tphsmm import TaskParameterisedHSMM, load_model
-from hemg_drake.placements import scene_placements, unlearnt_placement
+from hemg_drake.placements import check_learnt_placement, scene_placements
 from hemg_drake.scenario import load_scenario, shipped_scenario
 
 SHIPPED_RING = [0.642, -0.837, 0.12]  # the shipped pin scene's position (cotter_pin.yaml)
@@ -64,13 +65,24 @@ def test_a_world_frame_model_away_from_where_it_was_learnt_is_named():
     np.testing.assert_allclose(position, SHIPPED_RING, atol=1e-12)
     learnt_at = scene_placements([_frames(position, 0.0)])
     model = HSMM(3)
-    assert unlearnt_placement(model, scenario, learnt_at) is None  # where it was learnt
-    assert unlearnt_placement(model, scenario, None) is None  # unknown: nothing to say
+    assert check_learnt_placement(model, scenario) is None  # unknown: nothing to say
+    model.learnt_at_ = learnt_at
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert check_learnt_placement(model, scenario) is None  # where it was learnt
     for moved in (["scene.position=[0.652,-0.837,0.12]"], ["scene.yaw_deg=13.0"]):
-        message = unlearnt_placement(model, scenario.replaced(moved), learnt_at)
-        assert "world-frame HSMM learnt with the scene at [0.642, -0.837, 0.12] m" in message
+        with pytest.warns(UserWarning, match="world-frame HSMM learnt with the scene at "
+                                             r"\[0.642, -0.837, 0.12\] m, yaw 0.0 deg"):
+            check_learnt_placement(model, scenario.replaced(moved), source="model.npz")
+        # A file without placements: those of the demonstrations it was learnt from.
+        with pytest.warns(UserWarning, match="world-frame HSMM"):
+            check_learnt_placement(HSMM(3), scenario.replaced(moved), [_frames(position, 0.0)])
     # A TP-HSMM is placed by its frames.
-    assert unlearnt_placement(TaskParameterisedHSMM(3), scenario.replaced(moved), learnt_at) is None
+    tp = TaskParameterisedHSMM(3)
+    tp.learnt_at_ = learnt_at
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert check_learnt_placement(tp, scenario.replaced(moved)) is None
 
 
 def test_reproducing_a_world_frame_model_at_a_moved_scene_warns_in_one_line(tmp_path, run_cli):
