@@ -10,6 +10,7 @@ import argparse
 import math
 import signal
 import sys
+import warnings
 
 from hemg_drake.commands import (
     check_output_file,
@@ -368,8 +369,14 @@ def main(argv=None):
         return 2
     args = parser.parse_args(argv)
     previous = signal.signal(signal.SIGTERM, _terminate)
+
+    def one_line_warning(message, category, *_):  # a warning, like an error, in one line
+        print(f"hemg-drake {args.command}: warning: {_one_line(message)}", file=sys.stderr)
+
     try:
-        args.func(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = one_line_warning
+            args.func(args)
     except KeyboardInterrupt:
         print(f"hemg-drake {args.command}: interrupted; no partial output kept", file=sys.stderr)
         return 130

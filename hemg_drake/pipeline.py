@@ -227,7 +227,7 @@ def learn(run_dir, *, overrides=(), n_iter=None, diagrams=False, progress=print)
 
 
 def _learn(folder, overrides, n_iter, diagrams, progress):
-    from hemg_drake.placements import last_frames
+    from hemg_drake.placements import last_frames, scene_placements
     from hemg_drake.viz.run_figures import write_state_activations_figure
 
     folder.check("demonstrate", folder.dataset, run_hint=_demonstrate_hint(folder))
@@ -237,6 +237,7 @@ def _learn(folder, overrides, n_iter, diagrams, progress):
     frames = demonstration_frames(demos, scenario)
     start = time.perf_counter()
     model = fit_model(data, scenario, n_iter=n_iter, frames=frames)
+    model.learnt_at_ = scene_placements(frames)  # stored in model.npz
     iterations = f"{model.n_iter_} EM iteration{'s' if model.n_iter_ != 1 else ''}"
     frame_names = scenario.learning.task_frames.replace("_", " ")
     kind = "HSMM" if not hasattr(model, "at") else f"TP-HSMM (task frames: {frame_names})"
@@ -270,17 +271,20 @@ def placed_model(model, scenario):
     return model.at(*last_frames(task_frames(scenario), model.n_frames_))
 
 
-def _checked_model(folder, scenario):
+def _checked_model(folder, scenario, frames):
     """The run folder's model at the scenario's placement, refused unless it was fitted on
-    the folder's dataset."""
+    the folder's dataset; a warning if a world-frame model is moved from where it learnt."""
     from hemg_drake.diagrams.reproduction import check_model
     from hemg_drake.learning.tphsmm import load_model
+    from hemg_drake.placements import check_learnt_placement
 
     hint = f"hemg-drake learn {folder.path}"
     folder.check("demonstrate", folder.dataset, run_hint=_demonstrate_hint(folder))
     folder.check("learn", folder.model, run_hint=hint)
     folder.check_made_from("learn", folder.dataset, run_hint=hint)
-    model = placed_model(load_model(folder.model), scenario)
+    learnt = load_model(folder.model)
+    check_learnt_placement(learnt, scenario, frames, source=folder.model)
+    model = placed_model(learnt, scenario)
     try:
         check_model(model)
     except ValueError as error:
@@ -327,7 +331,7 @@ def _checked_reproduce(folder, out, overrides, start_offset, replay, progress):
 
     demos, recorded = load_demonstrations(folder.dataset)
     scenario = recorded.replaced(overrides)
-    model = _checked_model(folder, scenario)
+    model = _checked_model(folder, scenario, demonstration_frames(demos, recorded))
     offset = np.asarray(start_offset, dtype=float)
     if offset.shape != (3,) or not np.all(np.isfinite(offset)):
         raise ValueError(f"start offset must be 3 finite numbers (m), got {start_offset!r}")
