@@ -13,8 +13,6 @@ import sys
 import warnings
 
 from hemg_drake.commands import (
-    check_output_file,
-    check_output_folder,
     demo_command,
     demonstrate_command,
     emg_figure_command,

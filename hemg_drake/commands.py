@@ -76,7 +76,7 @@ def _scenario_path(name):
 
 def demo_command(args):
     """``hemg-drake demo``: demonstrate, learn and reproduce each task into ``args.out``."""
-    from hemg_drake.pipeline import run_demo
+    from hemg_drake.demo import run_demo
 
     check_output_folder(args.out)
     run_demo(
@@ -273,7 +273,7 @@ def _fps(metadata):
 def _hsmm_states(folder, demos, metadata):
     """Each demonstration's HSMM states (segmental Viterbi), if the run folder holds a model
     that its manifest records as learnt from this dataset; None otherwise."""
-    from hemg_drake.pipeline import demonstration_frames, learning_data, placed_model
+    from hemg_drake.pipeline import demonstration_frames, learning_data
     from hemg_drake.scenario import parse_scenario
 
     if folder is None or not folder.model.is_file() or "scenario" not in metadata:

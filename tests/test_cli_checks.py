@@ -43,11 +43,14 @@ def snapshot(folder):
 @pytest.fixture
 def no_jobs(monkeypatch):
     """Every pipeline job fails the test if it is reached: the checks must come first."""
-    for name in ("demonstrate", "learn", "reproduce", "run_demo"):
-        def reached(*args, _name=name, **kwargs):
-            pytest.fail(f"pipeline.{_name} was reached")
+    import hemg_drake.demo as demo
 
-        monkeypatch.setattr(pipeline, name, reached)
+    for module, name in ((pipeline, "demonstrate"), (pipeline, "learn"), (pipeline, "reproduce"),
+                         (demo, "run_demo")):  # fmt: skip
+        def reached(*args, _name=name, **kwargs):
+            pytest.fail(f"{_name} was reached")
+
+        monkeypatch.setattr(module, name, reached)
 
 
 def one_line(code, out, err, command):

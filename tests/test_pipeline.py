@@ -11,7 +11,8 @@ import pytest
 from hemg_drake.cli import main
 from hemg_drake.learning.demos import load_dataset, save_dataset
 from hemg_drake.learning.hsmm import HSMM
-from hemg_drake.pipeline import demonstrate, learn, learning_data, reproduce, run_demo
+from hemg_drake.demo import run_demo
+from hemg_drake.pipeline import demonstrate, learn, learning_data, reproduce
 from hemg_drake.run_folder import RunFolder, file_hash
 from hemg_drake.scenario import load_scenario, shipped_scenario
 

@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from hemg_drake import run_folder
+from hemg_drake import folder_versions, run_folder
 from hemg_drake.fileio import write_text_atomic
 from hemg_drake.folder_lock import FolderBusy, folder_lock
 from hemg_drake.run_folder import MANIFEST, RunFolder, repair
@@ -308,7 +308,7 @@ def test_what_a_killed_stage_left_beside_is_tidied_by_the_next(full):
 
 
 def test_the_two_rename_fallback_and_its_recovery(full, monkeypatch):
-    monkeypatch.setattr(run_folder, "_renameat2", lambda: None)
+    monkeypatch.setattr(folder_versions, "_renameat2", lambda: None)
     run_stage(full, "reproduce", ["metrics.json"])
     assert (full / "metrics.json").read_text() == "reproduce again: metrics.json\n"
     # A crash between its two renames: the folder is missing and its last version is
