@@ -65,6 +65,7 @@ def make_base(root):
     """Earlier runs under ``root``: ``run/`` (demonstrated, learnt, reproduced), ``takes/``
     (one take re-driven from a logged one) and an exported ``demos.hdf5``."""
     root = Path(root)
+    root.mkdir(parents=True, exist_ok=True)
     run(["demonstrate", "cotter_pin", "--out", "run", "--seed", "3", *SMALL], cwd=root)
     run(["learn", "run", "--set", "learning.num_states=4"], cwd=root)
     run(["reproduce", "run", "--no-replay"], cwd=root)
