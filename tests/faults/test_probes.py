@@ -109,3 +109,15 @@ def test_a_sigkilled_run_leaves_the_folder_usable(base, tmp_path):
     assert snapshot(root / "run") == before and leftovers(root / "run")
     run(["reproduce", "run", "--no-replay"], cwd=root)  # tidies what was left beside
     assert not leftovers(root / "run")
+
+
+def test_a_missing_device_package_leaves_a_finished_run_as_it_was(base, tmp_path):
+    # Issue 25: a missing LibEMG streamer / MYO package on a re-run wiped the old run.
+    root = copy(base, tmp_path)
+    before = snapshot(root / "run")
+    for out in ("run", "fresh"):
+        argv = ["demonstrate", "cotter_pin", "--out", out, "--set", "emg.source=myo", *SMALL]
+        err = one_line(run(argv, cwd=root, check=False))
+        assert "needs the pyomyo package" in err
+    assert snapshot(root / "run") == before and not leftovers(root / "run")
+    assert not (root / "fresh").exists()  # no empty --out folder left behind
