@@ -198,6 +198,13 @@ class RunFolder:
         If the block raises (or the process dies), the folder is left exactly as it was.
         """
         target = Path(os.path.realpath(self.path))
+        here = Path(os.getcwd())
+        if here == target or target in here.parents:
+            # The swap would leave the shell in the replaced (deleted) version.
+            raise ValueError(
+                f"{self.path}: is the folder this command runs in (or holds it); a stage "
+                f"replaces the folder whole: run it from outside (cd {target.parent})"
+            )
         made = [p for p in (target, *target.parents) if not p.exists()]
         target.mkdir(parents=True, exist_ok=True)
         try:

@@ -386,3 +386,13 @@ def test_check_made_from_refuses_a_model_of_another_dataset(full):
     message = str(error.value)
     assert message.startswith(f"{full.model}: was not made from this folder's dataset.npz")
     assert message.endswith("run hemg-drake learn runs/x")
+
+
+def test_a_stage_is_refused_from_inside_the_folder(full, monkeypatch):
+    # The swap would leave the shell in a deleted folder.
+    before = snapshot(full.path)
+    for where in (full.path, full.path / "mine"):
+        monkeypatch.chdir(where)
+        with pytest.raises(ValueError, match="is the folder this command runs in"):
+            run_stage(RunFolder.output("."), "reproduce", ["metrics.json"])
+    assert snapshot(full.path) == before
