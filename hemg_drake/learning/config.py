@@ -10,6 +10,8 @@ HSMM_INITS = ("kmeans", "time", "polyline")
 WEIGHTINGS = ("temporal", "spatial", "forward")
 TRACKERS = ("gmr", "lqr")
 STATE_COSTS = ("active", "mixture")
+# The stiffness the reproduction applies (docs/reproduction.md, "A full stiffness matrix").
+STIFFNESS_MODES = ("scalar", "spd")
 
 
 @dc.dataclass
@@ -66,6 +68,12 @@ class ReproductionConfig:
     state_cost: str = checked("active", choices=STATE_COSTS)
     # K_ptr (N/m) and K_dtr (N s/m) of the tracking force (eq. 23; Table I: 50 and 50).
     tracking_gains: list[float] = checked([50.0, 50.0], size=2)
+    # The stiffness the station applies: "scalar" (eq. 20: k* scales the joints' stiffness)
+    # or "spd" (a Cartesian stiffness at the tool: k* times the shape learnt from the
+    # states' position precision, interpolated on the SPD manifold; control/impedance.py).
+    stiffness: str = checked("scalar", choices=STIFFNESS_MODES)
+    # "spd": the largest ratio of the shape's largest to smallest eigenvalue (>= 1).
+    stiffness_ratio: float = checked(10.0, positive=True)
     # Simulated time to let the arm come to rest in the scene, holding x*_0, before the
     # reproduction starts (s).
     settle_time: float = checked(1.0)
@@ -81,6 +89,11 @@ class ReproductionConfig:
                 f"key '{key_path(key, 'weighting')}' = 'spatial' does not go with "
                 f"'{key_path(key, 'tracker')}' = 'lqr' (it tracks a state sequence: 'temporal' "
                 "or 'forward')"
+            )
+        if self.stiffness_ratio < 1:
+            raise ValueError(
+                f"key '{key_path(key, 'stiffness_ratio')}' must be >= 1 (largest / smallest "
+                f"eigenvalue), got {self.stiffness_ratio}"
             )
         if any(len(offset) != 3 for offset in self.start_offsets):
             raise ValueError(
