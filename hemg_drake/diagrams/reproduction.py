@@ -156,6 +156,7 @@ def make_reproducer(scenario, model, start):
     common = dict(
         model=model, start=start, dt=scenario.log_period, weighting=settings.weighting,
         stiffness_ratio=settings.stiffness_ratio,
+        stiffness_normalisation=settings.stiffness_normalisation,
     )  # fmt: skip
     if settings.tracker == "gmr":
         return HsmmGmrReproducer(**common, restoring_gain=settings.restoring_gain)

@@ -35,6 +35,10 @@ import numpy as np
 
 # Largest ratio of the shape's largest to smallest eigenvalue (rho above).
 DEFAULT_MAX_RATIO = 10.0
+# How the interpolated shape is scaled: unit determinant (eigenvalues' geometric mean 1), or
+# its smallest eigenvalue 1 (the learnt shape only stiffens, from the softest direction up).
+NORMALISATIONS = ("determinant", "softest")
+DEFAULT_NORMALISATION = "determinant"
 
 
 def check_max_ratio(max_ratio):
@@ -72,13 +76,16 @@ def state_log_shapes(covariances, max_ratio=DEFAULT_MAX_RATIO):
     return np.einsum("nij,nj,nkj->nik", vectors, logs, vectors)
 
 
-def log_euclidean_mean(weights, log_shapes):
+def log_euclidean_mean(weights, log_shapes, normalisation=None):
     """expm(sum_i w_i L_i): the weighted log-Euclidean mean of the shapes exp(L_i).
 
     Parameters
     ----------
     weights : array, shape (N,)
     log_shapes : array, shape (N, P, P), symmetric.
+    normalisation : None, "determinant" or "softest"
+        None: the mean itself; "determinant": divided by its determinant's P-th root;
+        "softest": divided by its smallest eigenvalue.
 
     Returns
     -------
@@ -86,6 +93,12 @@ def log_euclidean_mean(weights, log_shapes):
     """
     mixed = np.tensordot(np.asarray(weights, dtype=float), log_shapes, axes=1)
     values, vectors = np.linalg.eigh(0.5 * (mixed + mixed.T))
+    if normalisation == "determinant":
+        values = values - values.mean()
+    elif normalisation == "softest":
+        values = values - values[0]
+    elif normalisation is not None:
+        raise ValueError(f"normalisation must be one of {NORMALISATIONS}, got {normalisation!r}")
     return (vectors * np.exp(values)) @ vectors.T
 
 
@@ -98,13 +111,20 @@ class SpdStiffness:
         Fitted; its position block of each state's covariance gives the shapes.
     max_ratio : float
         rho, the bound on each shape's largest / smallest eigenvalue (>= 1).
+    normalisation : {"determinant", "softest"}
+        The interpolated shape at unit determinant, or with its smallest eigenvalue 1.
 
     Attributes
     ----------
     log_shapes : array, shape (N, P, P), L_i (read-only).
     """
 
-    def __init__(self, model, max_ratio=DEFAULT_MAX_RATIO):
+    def __init__(self, model, max_ratio=DEFAULT_MAX_RATIO, normalisation=DEFAULT_NORMALISATION):
+        if normalisation not in NORMALISATIONS:
+            raise ValueError(
+                f"normalisation must be one of {NORMALISATIONS}, got {normalisation!r}"
+            )
+        self.normalisation = normalisation
         position = np.asarray(model.position_dims_)
         block = model.covariances_[:, position][:, :, position]
         self.max_ratio = check_max_ratio(max_ratio)
@@ -112,5 +132,5 @@ class SpdStiffness:
         self.log_shapes.flags.writeable = False
 
     def shape(self, h):
-        """S_hat(h), shape (P, P): unit determinant, SPD, for state weights h (N,)."""
-        return log_euclidean_mean(h, self.log_shapes)
+        """S_hat(h), shape (P, P), SPD, normalised, for state weights h (N,)."""
+        return log_euclidean_mean(h, self.log_shapes, self.normalisation)

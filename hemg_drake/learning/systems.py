@@ -17,7 +17,11 @@ from hemg_drake.learning.reproduce import (
     HsmmGmrPolicy,
     HsmmLqrPolicy,
 )
-from hemg_drake.learning.stiffness import DEFAULT_MAX_RATIO, SpdStiffness
+from hemg_drake.learning.stiffness import (
+    DEFAULT_MAX_RATIO,
+    DEFAULT_NORMALISATION,
+    SpdStiffness,
+)
 
 
 def _declare_reproducer(system, T, start, xdot, k, h, predicted, dt):
@@ -129,9 +133,11 @@ def HsmmGmrReproducer_(T):
             across the demonstrated path decays with the time constant 1 / kappa.
         stiffness_ratio : float
             rho >= 1, the bound on the stiffness shape's eigenvalue ratio.
+        stiffness_normalisation : {"determinant", "softest"}
+            The shape at unit determinant, or with its smallest eigenvalue 1.
 
         ``stiffness_shape`` (P*P, dimensionless, row-major) is S_hat(h_k) =
-        expm(sum_i h_k,i L_i), the log-Euclidean mean of the states' unit-determinant
+        expm(sum_i h_k,i L_i), the log-Euclidean mean of the states' normalised
         position precisions (:mod:`hemg_drake.learning.stiffness`): the shape of the
         Cartesian stiffness the station applies with ``reproduction.stiffness: spd``.
         """
@@ -139,14 +145,16 @@ def HsmmGmrReproducer_(T):
         def _construct(
             self, *, model, start, dt=DEFAULT_DT, weighting=DEFAULT_WEIGHTING,
             restoring_gain=DEFAULT_RESTORING_GAIN, stiffness_ratio=DEFAULT_MAX_RATIO,
+            stiffness_normalisation=DEFAULT_NORMALISATION,
             converter=None,
         ):  # fmt: skip
             LeafSystem_[T].__init__(self, converter)
             self._arguments = dict(
                 model=model, start=start, dt=dt, weighting=weighting,
                 restoring_gain=restoring_gain, stiffness_ratio=stiffness_ratio,
+                stiffness_normalisation=stiffness_normalisation,
             )  # fmt: skip
-            self._stiffness = SpdStiffness(model, stiffness_ratio)
+            self._stiffness = SpdStiffness(model, stiffness_ratio, stiffness_normalisation)
             self._policy = HsmmGmrPolicy(
                 model, weighting=weighting, dt=dt, restoring_gain=restoring_gain
             )
@@ -231,7 +239,7 @@ def HsmmLqrReproducer_(T):
             How far the plan may lead the measured ``p_WE``, m (>= 0; default 0.02).
         state_cost : {"active", "mixture"}
             The cost per step: the most probable state's, or all states' weighted by h.
-        stiffness_ratio : float
+        stiffness_ratio, stiffness_normalisation
             As for :class:`HsmmGmrReproducer` (so is ``stiffness_shape``).
         """
 
@@ -239,15 +247,17 @@ def HsmmLqrReproducer_(T):
             self, *, model, start, dt=DEFAULT_DT, weighting=DEFAULT_WEIGHTING,
             horizon=DEFAULT_HORIZON, control_cost=DEFAULT_CONTROL_COST,
             max_lead=DEFAULT_MAX_LEAD, state_cost=DEFAULT_STATE_COST,
-            stiffness_ratio=DEFAULT_MAX_RATIO, converter=None,
+            stiffness_ratio=DEFAULT_MAX_RATIO,
+            stiffness_normalisation=DEFAULT_NORMALISATION, converter=None,
         ):  # fmt: skip
             LeafSystem_[T].__init__(self, converter)
             self._arguments = dict(
                 model=model, start=start, dt=dt, weighting=weighting, horizon=horizon,
                 control_cost=control_cost, max_lead=max_lead, state_cost=state_cost,
                 stiffness_ratio=stiffness_ratio,
+                stiffness_normalisation=stiffness_normalisation,
             )  # fmt: skip
-            self._stiffness = SpdStiffness(model, stiffness_ratio)
+            self._stiffness = SpdStiffness(model, stiffness_ratio, stiffness_normalisation)
             self._policy = HsmmLqrPolicy(
                 model, weighting=weighting, dt=dt, horizon=horizon,
                 control_cost=control_cost, state_cost=state_cost,
