@@ -99,7 +99,8 @@ def log_euclidean_mean(weights, log_shapes, normalisation=None):
         values = values - values[0]
     elif normalisation is not None:
         raise ValueError(f"normalisation must be one of {NORMALISATIONS}, got {normalisation!r}")
-    return (vectors * np.exp(values)) @ vectors.T
+    mean = (vectors * np.exp(values)) @ vectors.T
+    return 0.5 * (mean + mean.T)  # symmetric to the last bit
 
 
 class SpdStiffness:
