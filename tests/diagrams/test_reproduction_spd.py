@@ -73,6 +73,9 @@ def test_the_spd_diagram_clones_and_runs_bit_identical(model):
     states = []
     for diagram in (built.diagram, built.diagram.Clone()):
         simulator = Simulator(diagram)
+        # A converted plant drops its default positions (SlaveStation.set_start).
+        built.station.set_start(simulator.get_mutable_context(), diagram.GetSubsystemByName(
+            built.station.diagram.get_name()))  # fmt: skip
         simulator.AdvanceTo(0.05)
         groups = simulator.get_context().get_discrete_state()
         states.append(np.concatenate(
