@@ -74,9 +74,9 @@ class ReproductionConfig:
     stiffness: str = checked("scalar", choices=STIFFNESS_MODES)
     # "spd": the largest ratio of the shape's largest to smallest eigenvalue (>= 1).
     stiffness_ratio: float = checked(10.0, positive=True)
-    # "spd": the shape at unit determinant ("determinant": its geometric mean is eq. 20's
-    # mean stiffness at the tool) or with its smallest eigenvalue 1 ("softest": the
-    # learnt shape only stiffens, from eq. 20's mean stiffness up).
+    # "spd": the shape at unit determinant (its geometric mean is eq. 20's harmonic-mean
+    # stiffness at the tool) or with its smallest eigenvalue 1 ("softest": the learnt
+    # shape only stiffens).
     stiffness_normalisation: str = checked("determinant", choices=("determinant", "softest"))
     # Simulated time to let the arm come to rest in the scene, holding x*_0, before the
     # reproduction starts (s).
