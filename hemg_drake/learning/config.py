@@ -23,6 +23,8 @@ MAX_ITERATIONS = 1000
 MAX_HORIZON = 1000
 # Longest settling before a reproduction (s, simulated): the arm comes to rest in about 1 s.
 MAX_SETTLE_TIME = 60.0
+# The stiffness the reproduction applies (docs/reproduction.md, "A full stiffness matrix").
+STIFFNESS_MODES = ("scalar", "spd")
 
 
 @dc.dataclass
@@ -80,6 +82,16 @@ class ReproductionConfig:
     state_cost: str = checked("active", choices=STATE_COSTS)
     # K_ptr (N/m) and K_dtr (N s/m) of the tracking force (eq. 23; Table I: 50 and 50).
     tracking_gains: list[float] = checked([50.0, 50.0], size=2)
+    # The stiffness the station applies: "scalar" (eq. 20: k* scales the joints' stiffness)
+    # or "spd" (a Cartesian stiffness at the tool: k* times the shape learnt from the
+    # states' position precision, interpolated on the SPD manifold; control/impedance.py).
+    stiffness: str = checked("scalar", choices=STIFFNESS_MODES)
+    # "spd": the largest ratio of the shape's largest to smallest eigenvalue (>= 1).
+    stiffness_ratio: float = checked(10.0, positive=True)
+    # "spd": the shape at unit determinant (its geometric mean is eq. 20's harmonic-mean
+    # stiffness at the tool) or with its smallest eigenvalue 1 ("softest": the learnt
+    # shape only stiffens).
+    stiffness_normalisation: str = checked("softest", choices=("determinant", "softest"))
     # Simulated time to let the arm come to rest in the scene, holding x*_0, before the
     # reproduction starts (s).
     settle_time: float = checked(1.0, maximum=MAX_SETTLE_TIME)
@@ -95,6 +107,11 @@ class ReproductionConfig:
                 f"key '{key_path(key, 'weighting')}' = 'spatial' does not go with "
                 f"'{key_path(key, 'tracker')}' = 'lqr' (it tracks a state sequence: 'temporal' "
                 "or 'forward')"
+            )
+        if self.stiffness_ratio < 1:
+            raise ValueError(
+                f"key '{key_path(key, 'stiffness_ratio')}' must be >= 1 (largest / smallest "
+                f"eigenvalue), got {self.stiffness_ratio}"
             )
         if any(len(offset) != 3 for offset in self.start_offsets):
             raise ValueError(
