@@ -58,7 +58,12 @@ def placement_demo(scenario, run_dir, *, replays=True, progress=print):
     with np.load(folder / "reproduction.npz") as arrays:
         log = ReproductionLog(**{name: arrays[name] for name in arrays.files})
     X_WT = recorded.replaced(new).X_WT()
-    write_placements_figure(demos, log, scenario.task, X_WT, folder / "placements.png")
+    # The figure joins the reproduce stage's record (a new version of the folder, as always).
+    with RunFolder.output(folder).transaction("reproduce", keep_own=True) as run:
+        figure = run / "placements.png"
+        write_placements_figure(demos, log, scenario.task, X_WT, figure)
+        written = [run / name for name in run.manifest()["reproduce"]["files"]]
+        run.finish("reproduce", [*written, figure], inputs=[run.model, run.dataset])
     progress(f"wrote {folder / 'placements.png'}")
     return {f"{scenario.task} (new placement)": metrics}
 

@@ -60,7 +60,7 @@ OUTPUTS = {
               "demonstration_diagram.dot", "reproduction_diagram.svg", "reproduction_diagram.dot"),
     "reproduce": (
         "reproduction.html", "reproduction.npz", "metrics.json", "fig8_reproduction.png",
-        "fig10_reproduction.png", "fig11_strokes.png",
+        "fig10_reproduction.png", "fig11_strokes.png", "placements.png",
     ),
 }  # fmt: skip
 # The files of a stage that later stages read: replacing them invalidates what was made
