@@ -6,15 +6,10 @@ import subprocess
 import sys
 from importlib.metadata import version
 
-import numpy as np
 import pytest
 
 import hemg_drake.demo as demo
 import hemg_drake.pipeline as pipeline
-from hemg_drake.cli import main
-from hemg_drake.learning.demos import Demonstration, save_dataset
-from hemg_drake.run_folder import RunFolder
-from hemg_drake.scenario import load_scenario, shipped_scenario
 
 
 @pytest.fixture
@@ -35,29 +30,6 @@ def no_simulation(monkeypatch):
     for name in ("build_reproduction_diagram", "run_reproduction"):
         forbid(reproduction, name)
     forbid(pipeline, "fit_model")
-
-
-@pytest.fixture
-def synthetic_run(tmp_path):
-    """A run folder with a finished demonstrate stage of two synthetic demonstrations (no
-    simulation: straight lines, constant gain)."""
-    run = tmp_path / "run"
-    scenario = load_scenario(shipped_scenario("cotter_pin"))
-    demos = []
-    for c in range(2):
-        t = np.arange(0.0, 1.0 + 1e-9, 0.01)
-        line = np.column_stack([0.6 + 0 * t, -0.8 + 0 * t, 0.1 + 0.05 * t + 0.001 * c])
-        zeros, e = np.zeros(len(t)), np.arange(200) / 200.0
-        demos.append(Demonstration(
-            seed=c + 1, time=t, p_WE=line, v_WE=np.gradient(line, t, axis=0), p_MS=line,
-            p_WE_desired=line, envelope=zeros, activation=zeros, gain=zeros + 50.0,
-            f_WE=np.zeros((len(t), 3)), emg_time=e, emg=np.zeros((200, 8)),
-            muscle_activation=np.zeros(200),
-        ))  # fmt: skip
-    folder = RunFolder(run, create=True)
-    save_dataset(folder.dataset, demos, {"scenario": scenario.to_yaml(), "task": "cotter_pin"})
-    folder.finish("demonstrate", [folder.dataset])
-    return run
 
 
 def assert_one_line_error(code, err, command):
