@@ -333,6 +333,8 @@ def _take(scenario, folder, out_dir, duration, replay_inputs, replays, progress,
         # dataset without them keeps none).
         frame_A, frame_b = task_frames(here)
         demo = dc.replace(demo, frame_A=frame_A, frame_b=frame_b)
+    if demos and demos[0].q is None:  # an older dataset, without joints: the take keeps none
+        demo = dc.replace(demo, q=None, R_WE=None)
     demos = [*demos, demo]
     operators = metadata.get("operators", ["simulated"] * (len(demos) - 1))
     record = dict(

@@ -5,7 +5,8 @@ Signal flow (each box a LeafSystem of this package, named as in the diagram)::
     operator --hand_force--> master --p_MS, v_MS--> workspace_map --p_WE_desired--> station
     operator --activation--> emg_source --emg--> envelope --> variable_gain --gain--> station
     station's interaction force f_WE --> force_feedback --motor_force--> master, operator
-    logger (every log_period): p_WE, v_WE, p_MS, p_WE_desired, envelope, activation, gain, f_WE
+    logger (every log_period): p_WE, v_WE, p_MS, p_WE_desired, envelope, activation, gain, f_WE,
+        the arm's joint positions q and the tool's rotation R_WE
     emg_logger (200 Hz): the raw sEMG and the operator's muscle activation
 
 The station (:func:`~hemg_drake.diagrams.station.make_slave_station`) holds the plant, the
@@ -31,6 +32,7 @@ import dataclasses as dc
 import numpy as np
 from pydrake.common import RandomGenerator
 from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import Demultiplexer
 
 from hemg_drake._validate import as_seed
 from hemg_drake.diagrams.built import StationDiagram, make_simulator
@@ -39,14 +41,17 @@ from hemg_drake.diagrams.station import make_slave_station
 from hemg_drake.emg.calibration import EmgCalibration
 from hemg_drake.emg.chain import add_emg_gain_chain
 from hemg_drake.emg.sources import MYO_PERIOD, MYO_RATE, make_synthetic_emg_source, synthesize_emg
-from hemg_drake.learning.demos import FIELD_WIDTHS, Demonstration
+from hemg_drake.learning.demos import ARM_FIELD_SHAPES, FIELD_WIDTHS, Demonstration
 from hemg_drake.teleop.feedback import ForceFeedback
 from hemg_drake.teleop.mapping import WorkspaceMap
 from hemg_drake.teleop.master import HapticMaster
 from hemg_drake.teleop.operator import SimulatedOperator, set_operator_seed
 
-# Logged signals after time, in the order of the logger's input vector.
-LOGGED_FIELDS = tuple(name for name in FIELD_WIDTHS if name != "time")
+# Logged signals after time, in the order of the logger's input vector, and their widths.
+LOGGED_FIELDS = (*(name for name in FIELD_WIDTHS if name != "time"), *ARM_FIELD_SHAPES)
+LOGGED_WIDTHS = {
+    **FIELD_WIDTHS, **{name: int(np.prod(shape)) for name, shape in ARM_FIELD_SHAPES.items()}
+}
 
 
 @dc.dataclass(frozen=True, eq=False)
@@ -58,7 +63,8 @@ class DemonstrationDiagram(StationDiagram):
     diagram : Diagram
         Subsystems by name: ``station`` (the slave), ``operator``, ``master``,
         ``workspace_map``, ``emg_source``, ``envelope``, ``variable_gain``,
-        ``force_feedback``, ``logger`` and ``emg_logger`` (and their muxes).
+        ``force_feedback``, ``arm_positions`` (q out of the station's arm_state),
+        ``logger`` and ``emg_logger`` (and their muxes).
     station : SlaveStation
     scenario : Scenario
     mapping : WorkspaceMapping
@@ -211,6 +217,9 @@ def build_demonstration_diagram(
     connect(motor_force, master.GetInputPort("motor_force"))
     connect(motor_force, operator.GetInputPort("feedback_force"))
 
+    # The arm's [q; v] split by Drake's Demultiplexer: q is logged, v left unconnected.
+    arm_positions = add("arm_positions", Demultiplexer([7, 7]))
+    connect(slave.GetOutputPort("arm_state"), arm_positions.get_input_port())
     sources = {
         "p_WE": slave.GetOutputPort("p_WE"),
         "v_WE": slave.GetOutputPort("v_WE"),
@@ -220,6 +229,8 @@ def build_demonstration_diagram(
         "activation": variable_gain.get_activation_output_port(),
         "gain": variable_gain.get_gain_output_port(),
         "f_WE": f_WE,
+        "q": arm_positions.get_output_port(0),
+        "R_WE": slave.GetOutputPort("R_WE"),
     }
     logger = add_logger(builder, {name: sources[name] for name in LOGGED_FIELDS}, scenario.log_period)
     emg_sources = {
@@ -247,8 +258,9 @@ def demonstration_from_logs(log, emg_log, seed):
     that the source read for it. The last activation row, whose sample is not logged, is
     dropped.
     """
-    blocks = split_log(log, {name: FIELD_WIDTHS[name] for name in LOGGED_FIELDS})
+    blocks = split_log(log, {name: LOGGED_WIDTHS[name] for name in LOGGED_FIELDS})
     fields = {name: block[:, 0] if block.shape[1] == 1 else block for name, block in blocks.items()}
+    fields["R_WE"] = fields["R_WE"].reshape(-1, 3, 3)  # the station's rows, one after another
     emg_blocks = split_log(emg_log, {"emg": 8, "muscle_activation": 1})
     emg = emg_blocks["emg"][1:]
     return Demonstration(

@@ -51,8 +51,8 @@ STIFFNESSES = ("scalar", "spd")
 @TemplateSystem.define("ToolPointKinematics_", T_list=[float, AutoDiffXd])
 def ToolPointKinematics_(T):
     class Impl(LeafSystem_[T]):
-        """Position and velocity of the tool point E in the world, from the plant's body
-        kinematics.
+        """Position, velocity and orientation of the tool frame E in the world, from the
+        plant's body kinematics.
 
         .. pydrake_system::
 
@@ -63,12 +63,15 @@ def ToolPointKinematics_(T):
             output_ports:
             - p_WE
             - v_WE
+            - R_WE
 
         ``body_poses`` and ``body_spatial_velocities`` are the plant's output ports of the
         same names (the poses X_WB and spatial velocities V_WB of every body, which the
         plant computes for its own step). ``p_WE`` (3, m) and ``v_WE`` (3, m/s) are the
-        origin E of ``frame_E`` (the tool frame, fixed on body B at p_BE) measured and
-        expressed in W: p_WE = X_WB p_BE, v_WE = v_WB + w_WB x (R_WB p_BE).
+        origin E of ``frame_E`` (the tool frame, fixed on body B at X_BE) measured and
+        expressed in W: p_WE = X_WB p_BE, v_WE = v_WB + w_WB x (R_WB p_BE). ``R_WE`` (9)
+        is the frame's orientation R_WE = R_WB R_BE, its rows one after another
+        (``R_WE.reshape(3, 3)`` gives the matrix back).
 
         Timing: stateless, direct feedthrough; computed only when a consumer (a logger, the
         force feedback in ``position_error`` mode, a reproducer observing the tool)
@@ -83,8 +86,10 @@ def ToolPointKinematics_(T):
             LeafSystem_[T].__init__(self, converter)
             self._frame_E = frame_E
             self._body = int(frame_E.body().index())
-            p_BE = frame_E.GetFixedPoseInBodyFrame().translation()
+            X_BE = frame_E.GetFixedPoseInBodyFrame()
+            p_BE = X_BE.translation()
             self._p_BE = p_BE if T is float else np.array([T(x) for x in p_BE])
+            self._R_BE = X_BE.rotation().cast[T]()
             self.body_poses_input = self.DeclareAbstractInputPort(
                 "body_poses", AbstractValue.Make([RigidTransform_[T]()])
             )
@@ -107,12 +112,23 @@ def ToolPointKinematics_(T):
                 },
             )
 
+            self.R_WE_output = self.DeclareVectorOutputPort(
+                "R_WE",
+                9,
+                self._calc_R_WE,
+                prerequisites_of_calc={self.body_poses_input.ticket()},
+            )
+
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, frame_E=other._frame_E, converter=converter)
 
         def _calc_p_WE(self, context, output):
             X_WB = self.body_poses_input.Eval(context)[self._body]
             output.SetFromVector(X_WB.multiply(self._p_BE))
+
+        def _calc_R_WE(self, context, output):
+            R_WB = self.body_poses_input.Eval(context)[self._body].rotation()
+            output.SetFromVector(R_WB.multiply(self._R_BE).matrix().reshape(9))
 
         def _calc_v_WE(self, context, output):
             R_WB = self.body_poses_input.Eval(context)[self._body].rotation()
@@ -139,7 +155,8 @@ class SlaveStation:
         CartesianImpedancePd`; the identity when unconnected). Output ports: ``p_WE``, ``v_WE`` (3, m and m/s, W), ``f_WE``
         (3, N: the scene's force on the tool point, zero in free space), ``arm_state``
         (14: [q; v]), ``q_desired`` (7, the CLIK's joint reference; absent with joint
-        references), ``contact_results``, ``query_object``. Subsystems: ``plant``,
+        references), ``R_WE`` (9: the tool frame's rotation in W, row after row),
+        ``contact_results``, ``query_object``. Subsystems: ``plant``,
         ``scene_graph``, ``clik``, ``pd``, ``pd_gravity`` (gravity compensation), ``tool_point``
         and the scene's own. The controllers use a plant of the arm alone.
     plant : MultibodyPlant
@@ -300,6 +317,7 @@ def make_slave_station(
         f_WE = f_WE.get_output_port()
     builder.ExportOutput(tool_point.p_WE_output, "p_WE")
     builder.ExportOutput(tool_point.v_WE_output, "v_WE")
+    builder.ExportOutput(tool_point.R_WE_output, "R_WE")
     builder.ExportOutput(f_WE, "f_WE")
     builder.ExportOutput(arm_state, "arm_state")
     if reference == "tool_point":

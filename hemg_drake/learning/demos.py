@@ -19,6 +19,13 @@ version) adds each demonstration's task frames, ``demo<c>.frame_A`` (F, 3, 3) an
 (``hemg_drake.placements.task_frames``), for demonstrations at many placements. Format 2
 datasets load without frames (``frame_A`` None: one placement, the scenario's); format 1
 datasets are refused with a message to record them again.
+
+Format 3 datasets recorded since the arm's joints are logged also hold, at the log period,
+``demo<c>.q`` (T, 7), the arm's joint positions, and ``demo<c>.R_WE`` (T, 3, 3), the tool
+frame's rotation in W; older ones load with both None (the format number stays 3: an older
+hemg_drake reads the new files, ignoring the two arrays). The orientation is kept as the
+rotation matrix Drake computes, unique and continuous; a quaternion (:func:`tool_quaternions`)
+has two signs per rotation, a convention each consumer fixes its own way.
 """
 
 import dataclasses as dc
@@ -49,6 +56,9 @@ FIELD_WIDTHS = {
 # Fields logged at the MYO's rate (200 Hz), on their own time base ``emg_time``.
 EMG_FIELD_WIDTHS = {"emg_time": 1, "emg": 8, "muscle_activation": 1}
 ALL_FIELDS = (*FIELD_WIDTHS, *EMG_FIELD_WIDTHS)
+# The arm's joint positions and the tool's orientation at the log period, name -> the shape
+# of one sample; both or neither (None: a dataset recorded before they were logged).
+ARM_FIELD_SHAPES = {"q": (7,), "R_WE": (3, 3)}
 
 
 @dc.dataclass(frozen=True, eq=False)
@@ -85,6 +95,11 @@ class Demonstration:
     frame_A, frame_b : arrays, shape (F, 3, 3) and (F, 3), or None
         The task frames where it was shown (rotations and origins in W: the robot's base,
         the scene frame T); None for a record without them (one placement).
+    q : array, shape (T, 7), or None
+        The arm's joint positions (rad), in ``JOINT_NAMES`` order (right_s0 ... right_w2).
+    R_WE : array, shape (T, 3, 3), or None
+        The tool frame E's rotation in the world (the frame whose origin is p_WE); with
+        ``q``, None for a record made before they were logged.
     """
 
     seed: int
@@ -102,10 +117,13 @@ class Demonstration:
     muscle_activation: np.ndarray
     frame_A: np.ndarray = None
     frame_b: np.ndarray = None
+    q: np.ndarray = None
+    R_WE: np.ndarray = None
 
     def __post_init__(self):
         object.__setattr__(self, "seed", int(self.seed))
         self._check_frames()
+        self._check_arm()
         for widths in (FIELD_WIDTHS, EMG_FIELD_WIDTHS):
             length = None
             for name, width in widths.items():
@@ -139,6 +157,29 @@ class Demonstration:
             raise ValueError("Demonstration fields 'frame_A', 'frame_b' contain NaN or inf")
         object.__setattr__(self, "frame_A", A)
         object.__setattr__(self, "frame_b", b)
+
+    def _check_arm(self):
+        if self.q is None and self.R_WE is None:
+            return
+        if self.q is None or self.R_WE is None:
+            raise ValueError("Demonstration fields 'q' and 'R_WE' go together")
+        for name, shape in ARM_FIELD_SHAPES.items():
+            array = np.asarray(getattr(self, name), dtype=float)
+            if array.shape != (len(self.time), *shape):
+                raise ValueError(
+                    f"Demonstration field '{name}' must have shape {(len(self.time), *shape)}, "
+                    f"got {array.shape}"
+                )
+            if not np.all(np.isfinite(array)):
+                raise ValueError(f"Demonstration field '{name}' contains NaN or inf")
+            object.__setattr__(self, name, array)
+        R = self.R_WE
+        error = np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max(initial=0.0)
+        if error > 1e-6 or np.any(np.linalg.det(R) < 0):
+            raise ValueError(
+                f"Demonstration field 'R_WE' must hold rotation matrices (R R^T = I within 1e-6, "
+                f"det +1), off by {error:.3g}"
+            )
 
     @property
     def frames(self):
@@ -183,13 +224,16 @@ def save_dataset(path, demos, metadata=None):
         raise ValueError(f"dataset metadata must be JSON-serialisable: {error}") from None
     if len({demo.frame_A is None for demo in demos}) > 1:
         raise ValueError("save_dataset: give task frames for every demonstration or for none")
+    if len({demo.q is None for demo in demos}) > 1:
+        raise ValueError("save_dataset: give q and R_WE for every demonstration or for none")
     arrays = {"metadata": np.array(text)}
     for c, demo in enumerate(demos):
         for name in ALL_FIELDS:
             arrays[f"demo{c}.{name}"] = getattr(demo, name)
-        if demo.frame_A is not None:
-            arrays[f"demo{c}.frame_A"] = demo.frame_A
-            arrays[f"demo{c}.frame_b"] = demo.frame_b
+        optional = [*(("frame_A", "frame_b") if demo.frame_A is not None else ()),
+                    *(ARM_FIELD_SHAPES if demo.q is not None else ())]  # fmt: skip
+        for name in optional:
+            arrays[f"demo{c}.{name}"] = getattr(demo, name)
     save_npz_atomic(path, **arrays)
 
 
@@ -243,7 +287,7 @@ def load_dataset(path):
             if key not in arrays:
                 raise ValueError(f"{path}: missing array '{key}'")
             fields[name] = arrays[key]
-        for name in ("frame_A", "frame_b"):
+        for name in ("frame_A", "frame_b", *ARM_FIELD_SHAPES):
             if f"demo{c}.{name}" in arrays:
                 fields[name] = arrays[f"demo{c}.{name}"]
         try:
@@ -276,3 +320,38 @@ def observations(demos, fields=("p_WE", "v_WE", "gain")):
     return [
         np.column_stack([getattr(demo, name) for name in fields]) for demo in demos
     ]
+
+
+def tool_quaternions(demos):
+    """The tool's orientation in each demonstration as unit quaternions [w, x, y, z].
+
+    Drake's ``RotationMatrix.ToQuaternion`` of ``R_WE``, with the signs made continuous:
+    q and -q are one rotation, and Drake's canonical w >= 0 flips the sign wherever the
+    rotation angle passes 180 deg, which is where the shipped tasks hold the tool (pointing
+    down: w is 0.05 at the pin's start). Each sample takes the sign nearer the sample
+    before; each demonstration's first, the sign nearer the first demonstration's first
+    (which keeps w >= 0), so the whole dataset lies on one side.
+
+    Returns
+    -------
+    list of array, shape (T_c, 4), one per demonstration; None if any has no ``R_WE``.
+    """
+    from pydrake.math import RotationMatrix
+
+    demos = list(demos)
+    if not demos or any(demo.R_WE is None for demo in demos):
+        return None
+    result, reference = [], None
+    for demo in demos:
+        quats = np.array(
+            [RotationMatrix(R).ToQuaternion().wxyz() for R in demo.R_WE]
+        ).reshape(-1, 4)
+        if not len(quats):
+            result.append(quats)
+            continue
+        reference = quats[0] if reference is None else reference
+        steps = np.einsum("ij,ij->i", quats[1:], quats[:-1])
+        first = 1.0 if quats[0] @ reference >= 0 else -1.0
+        signs = first * np.cumprod(np.r_[1.0, np.where(steps < 0, -1.0, 1.0)])
+        result.append(quats * signs[:, None])
+    return result

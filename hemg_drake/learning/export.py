@@ -14,8 +14,15 @@ robomimic (ARISE-Initiative/robomimic, "Datasets > Overview > Dataset Structure"
 A hemg_drake demonstration maps onto it at its log period (N = T samples):
 
 - ``obs``: ``p_WE``, ``v_WE``, ``p_MS``, ``f_WE`` (N, 3) and ``gain``, ``envelope``,
-  ``activation`` (N, 1), SI units (m, m/s, N; K as logged); ``next_obs`` repeats the last
-  sample at the end, as robomimic's converters do;
+  ``activation`` (N, 1), SI units (m, m/s, N; K as logged); for a dataset that logged the
+  arm's joints, also robosuite's proprioception keys, which robomimic's configs name:
+  ``robot0_joint_pos`` (N, 7, rad, right_s0 ... right_w2), ``robot0_eef_pos`` (N, 3, the
+  tool point p_WE again) and ``robot0_eef_quat`` (N, 4), the tool frame's orientation in W
+  as a unit quaternion in robosuite's order **[x, y, z, w]** (``convert_quat(..., to="xyzw")``
+  in its robots' ``eef_quat`` sensor; Drake's order is [w, x, y, z]), signs continuous over
+  the dataset (:func:`~hemg_drake.learning.demos.tool_quaternions`). A dataset recorded
+  before they were logged is exported without them, with a warning. ``next_obs`` repeats
+  the last sample at the end, as robomimic's converters do;
 - ``actions`` (N, 4): what the operator commanded the slave, ``[p_WE_desired (m, W), K]``
   (the CLIK's reference and the stiffness of eq. 22), in SI units, not normalised;
 - ``rewards``: 0 (no task reward is defined here); ``dones``: 1 on the last sample;
@@ -25,7 +32,8 @@ A hemg_drake demonstration maps onto it at its log period (N = T samples):
 
 Beside robomimic's keys, which its loaders ignore, each demo keeps what a round trip
 needs: attr ``seed``, ``time`` (N,), ``emg/{time, emg, muscle_activation}`` at the
-MYO's 200 Hz and, for a demonstration recorded at a placement, its task frames
+MYO's 200 Hz, ``R_WE`` (N, 3, 3) (the tool's rotation matrices, exact, when logged) and,
+for a demonstration recorded at a placement, its task frames
 ``task_frames/A`` (F, 3, 3) and ``task_frames/b`` (F, 3) (the robot's base and the scene
 frame T in W, what the TP-HSMM learns with); ``data`` keeps the dataset's metadata as JSON
 in attr ``hemg_drake_metadata``.
@@ -35,16 +43,23 @@ in attr ``hemg_drake_metadata``.
 import errno
 import json
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from hemg_drake.fileio import write_bytes_atomic
-from hemg_drake.learning.demos import Demonstration
+from hemg_drake.learning.demos import Demonstration, tool_quaternions
 
 _INSTALL_HINT = "install the optional extra: pip install 'hemg-drake[export]'"
 # Observation keys, with the Demonstration field each comes from.
 OBS_KEYS = ("p_WE", "v_WE", "p_MS", "f_WE", "gain", "envelope", "activation")
+# robosuite's proprioception keys, written when the dataset logged the arm's joints.
+ARM_OBS_KEYS = ("robot0_joint_pos", "robot0_eef_pos", "robot0_eef_quat")
+NO_ARM_NOTE = (
+    "the demonstrations do not hold the arm's joint positions and the tool's orientation "
+    "(recorded before they were logged): exported without {keys}"
+)
 ACTION_KEYS = ("p_WE_desired", "gain")
 EMG_KEYS = {"time": "emg_time", "emg": "emg", "muscle_activation": "muscle_activation"}
 # robomimic's EnvType.GYM_TYPE: the generic type, for an environment it cannot create.
@@ -71,11 +86,11 @@ def _write(group, name, array):
     group.create_dataset(name, data=array, compression="gzip", shuffle=True)
 
 
-def _env_args(metadata):
+def _env_args(metadata, arm):
     task = metadata.get("task", "unknown")
     kwargs = {key: metadata[key] for key in ("task", "log_period") if key in metadata}
     kwargs["action_keys"] = list(ACTION_KEYS)
-    kwargs["obs_keys"] = list(OBS_KEYS)
+    kwargs["obs_keys"] = [*OBS_KEYS, *(ARM_OBS_KEYS if arm else ())]
     return {"env_name": f"hemg_drake/{task}", "type": GYM_TYPE, "env_kwargs": kwargs}
 
 
@@ -137,10 +152,17 @@ def write_error(path, error):
 def _write_demos(f, demos, metadata, metadata_text):
     total = 0
     data = f.create_group("data")
+    quats = tool_quaternions(demos)  # None unless every demonstration has q and R_WE
+    if quats is None:
+        warnings.warn(NO_ARM_NOTE.format(keys=", ".join(ARM_OBS_KEYS)), stacklevel=3)
     for i, demo in enumerate(demos):
         group = data.create_group(f"demo_{i}")
         n = len(demo)
         obs = {key: _column(getattr(demo, key)) for key in OBS_KEYS}
+        if quats is not None:
+            obs["robot0_joint_pos"], obs["robot0_eef_pos"] = demo.q, demo.p_WE
+            obs["robot0_eef_quat"] = quats[i][:, [1, 2, 3, 0]]  # [w, x, y, z] -> [x, y, z, w]
+            _write(group, "R_WE", demo.R_WE)
         for key, array in obs.items():
             _write(group, f"obs/{key}", array)
             _write(group, f"next_obs/{key}", np.concatenate([array[1:], array[-1:]]))
@@ -160,7 +182,7 @@ def _write_demos(f, demos, metadata, metadata_text):
         group.attrs["seed"] = demo.seed
         total += n
     data.attrs["total"] = total
-    data.attrs["env_args"] = json.dumps(_env_args(metadata))
+    data.attrs["env_args"] = json.dumps(_env_args(metadata, quats is not None))
     data.attrs[METADATA_ATTR] = metadata_text
     return total
 
@@ -230,6 +252,9 @@ def load_robomimic(path):
             if "task_frames" in group:
                 fields["frame_A"] = _read(path, group, "task_frames/A")
                 fields["frame_b"] = _read(path, group, "task_frames/b")
+            if "R_WE" in group:
+                fields["R_WE"] = _read(path, group, "R_WE")
+                fields["q"] = _read(path, group, "obs/robot0_joint_pos")
             if len(fields["time"]) != n:
                 raise ValueError(
                     f"{path}: {group.name} has {len(fields['time'])} samples, "

@@ -18,8 +18,12 @@ There are no ``videos/``: the simulated cell has no cameras, so no feature has d
 log period (fps = 1 / log_period, 100 at Table I's 0.01 s), in float32 as LeRobot's
 policies expect (SI units, world frame W):
 
-- ``observation.state`` (6): the tool point E, ``[p_WE, v_WE]`` (m, m/s). The arm's joint
-  positions and the tool's orientation are not in a hemg_drake dataset, so not here;
+- ``observation.state`` (17): the arm's joint positions ``q`` (7, rad, right_s0 ...
+  right_w2), the tool's pose: the point E ``p_WE`` (3, m) and the frame's orientation as a
+  unit quaternion ``quat_WE`` in Drake's order [w, x, y, z] (4, signs continuous over the
+  dataset, :func:`~hemg_drake.learning.demos.tool_quaternions`), and the point's velocity
+  ``v_WE`` (3, m/s); each entry named in the feature's ``names``. A dataset recorded before
+  the joints were logged gives ``[p_WE, v_WE]`` (6), with a warning;
 - ``observation.force`` (3): force of the environment on the tool point, f_WE (N);
 - ``action`` (4): what the operator commanded, ``[p_WE_desired, K]``: the CLIK's reference
   (m) and the stiffness of eq. 22 (as logged), as in the robomimic export;
@@ -45,13 +49,15 @@ import json
 import os
 import shutil
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 import hemg_drake
-from hemg_drake.learning.demos import Demonstration
-from hemg_drake.learning.export import write_error
+from hemg_drake.learning.demos import Demonstration, tool_quaternions
+from hemg_drake.learning.export import NO_ARM_NOTE, write_error
+from hemg_drake.robots.baxter import JOINT_NAMES
 
 CODEBASE_VERSION = "v3.0"
 # The LeRobot release whose reader the optional test loads the dataset with.
@@ -99,6 +105,14 @@ _FLOAT_FEATURES = {
         ("p_MS",),
     ),
 }
+# observation.state of a dataset that logged the arm's joints (quat_WE: tool_quaternions).
+_ARM_STATE = (
+    [*JOINT_NAMES, "p_WE_x", "p_WE_y", "p_WE_z", "quat_WE_w", "quat_WE_x", "quat_WE_y",
+     "quat_WE_z", "v_WE_x", "v_WE_y", "v_WE_z"], "rad, m, 1, m/s",
+    "the arm's joint positions q, the tool's pose in the world (point E, the frame's "
+    "orientation as a unit quaternion w, x, y, z) and the point's velocity",
+    ("q", "p_WE", "quat_WE", "v_WE"),
+)  # fmt: skip
 HSMM_STATE = "hsmm.state"
 _INDEX_FEATURES = ("frame_index", "episode_index", "index", "task_index")
 
@@ -114,10 +128,15 @@ def _pyarrow():
     return pyarrow, pyarrow.parquet
 
 
-def features(hsmm_state=False):
-    """The dataset's features, as ``meta/info.json`` lists them (no video: no cameras)."""
+def _float_features(arm):
+    return {**_FLOAT_FEATURES, "observation.state": _ARM_STATE} if arm else _FLOAT_FEATURES
+
+
+def features(hsmm_state=False, arm=True):
+    """The dataset's features, as ``meta/info.json`` lists them (no video: no cameras);
+    ``arm`` False: a dataset without the arm's joints (observation.state [p_WE, v_WE])."""
     result = {}
-    for name, (names, unit, description, _) in _FLOAT_FEATURES.items():
+    for name, (names, unit, description, _) in _float_features(arm).items():
         result[name] = {
             "dtype": "float32", "shape": [len(names)], "names": names,
             "info": {"unit": unit, "description": description},
@@ -166,11 +185,12 @@ def feature_stats(values):
     return stats
 
 
-def _episode_columns(demo, c, first_index, fps, states):
+def _episode_columns(demo, c, first_index, fps, states, quats):
     n = len(demo)
     columns = {}
-    for name, (_, _, _, fields) in _FLOAT_FEATURES.items():
-        parts = [np.reshape(getattr(demo, field), (n, -1)) for field in fields]
+    for name, (_, _, _, fields) in _float_features(quats is not None).items():
+        parts = [np.reshape(quats if field == "quat_WE" else getattr(demo, field), (n, -1))
+                 for field in fields]  # fmt: skip
         columns[name] = np.hstack(parts).astype(np.float32)
     if states is not None:
         columns[HSMM_STATE] = np.asarray(states, dtype=np.int64).reshape(n, 1)
@@ -255,9 +275,13 @@ def export_lerobot(path, demos, metadata=None, *, fps=None, hsmm_states=None, ta
         raise ValueError(f"metadata must be JSON-serialisable: {error}") from None
     path = Path(path)
     check_output(path)
-    spec = features(hsmm_states is not None)
+    quats = tool_quaternions(demos)  # None unless every demonstration has q and R_WE
+    if quats is None:
+        warnings.warn(NO_ARM_NOTE.format(keys="them: observation.state is [p_WE, v_WE]"),
+                      stacklevel=2)  # fmt: skip
+    spec = features(hsmm_states is not None, quats is not None)
     with _staged_folder(path) as stage:
-        written = _write(stage, pa, pq, demos, spec, fps, task, hsmm_states,
+        written = _write(stage, pa, pq, demos, spec, fps, task, hsmm_states, quats,
                          data_files_size_in_mb, chunks_size)  # fmt: skip
         marker = {
             "writer": WRITER, "hemg_drake": hemg_drake.__version__,
@@ -270,13 +294,14 @@ def export_lerobot(path, demos, metadata=None, *, fps=None, hsmm_states=None, ta
     return sum(len(demo) for demo in demos)
 
 
-def _write(stage, pa, pq, demos, spec, fps, task, hsmm_states, size_in_mb, chunks_size):
+def _write(stage, pa, pq, demos, spec, fps, task, hsmm_states, quats, size_in_mb, chunks_size):
     written, episodes, all_columns = [], [], []
     chunk, file_, file_bytes, writer, first_index = 0, 0, 0, None, 0
     try:
         for c, demo in enumerate(demos):
             states = None if hsmm_states is None else hsmm_states[c]
-            columns = _episode_columns(demo, c, first_index, fps, states)
+            columns = _episode_columns(demo, c, first_index, fps, states,
+                                       None if quats is None else quats[c])  # fmt: skip
             table = _table(pa, columns, spec)
             if writer is not None and file_bytes + table.nbytes > size_in_mb * 1024**2:
                 writer.close()

@@ -2,7 +2,9 @@
 
 import numpy as np
 import pytest
+from pydrake.common.eigen_geometry import Quaternion
 from pydrake.geometry import MeshcatVisualizer
+from pydrake.math import RotationMatrix
 from pydrake.systems.analysis import Simulator
 
 from hemg_drake.diagrams.demonstration import (
@@ -13,9 +15,12 @@ from hemg_drake.diagrams.demonstration import (
     run_demonstration,
     seed_context,
 )
+from hemg_drake.diagrams.station import make_slave_station
 from hemg_drake.diagrams.visualization import Visualization
 from hemg_drake.emg.gain import VariableGain
 from hemg_drake.emg.sources import MYO_PERIOD
+from hemg_drake.learning.demos import tool_quaternions
+from hemg_drake.robots.baxter import JOINT_NAMES
 from hemg_drake.scenario import load_scenario, parse_scenario, shipped_scenario
 
 # Free space: the scene frame on the tool's home point; 10 cm up-forward-left from it, then
@@ -80,6 +85,35 @@ def test_free_space_slave_follows_the_mapped_master(free_space):
     assert np.abs(demo.v_WE).max() > 0.1
     # Free space: nothing pushes on the tool.
     assert not np.any(demo.f_WE)
+
+
+def check_logged_arm(station, demo):
+    """The logged q and R_WE against the plant's forward kinematics: q set joint by joint
+    (by name, in JOINT_NAMES order) in a fresh plant context puts the tool frame at the
+    logged p_WE, turned by the logged R_WE; the quaternions are unit and the same rotation."""
+    plant, frame = station.plant, station.arm.tool_frame
+    context = plant.CreateDefaultContext()
+    joints = [plant.GetJointByName(name) for name in JOINT_NAMES]
+    world = plant.world_frame()
+    quats = tool_quaternions([demo])[0]
+    assert demo.q.shape == (len(demo), 7) and demo.R_WE.shape == (len(demo), 3, 3)
+    for k in range(len(demo)):
+        for joint, angle in zip(joints, demo.q[k], strict=True):
+            joint.set_angle(context, angle)
+        p_WE = plant.CalcPointsPositions(context, frame, np.zeros(3), world)[:, 0]
+        R_WE = plant.CalcRelativeRotationMatrix(context, world, frame).matrix()
+        np.testing.assert_allclose(demo.p_WE[k], p_WE, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(demo.R_WE[k], R_WE, rtol=0, atol=1e-12)
+        from_quaternion = RotationMatrix(Quaternion(quats[k])).matrix()
+        np.testing.assert_allclose(from_quaternion, R_WE, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(quats, axis=1), 1.0, atol=1e-14)
+    assert np.abs(np.diff(quats, axis=0)).max() < 0.05  # one side: no sign flips
+    assert np.ptp(demo.q, axis=0).max() > 0.05  # the arm really moved
+
+
+def test_logged_joints_and_tool_rotation_are_the_plants_kinematics(free_space):
+    scenario, demo = free_space
+    check_logged_arm(make_slave_station(scenario, scene=False), demo)
 
 
 def test_logged_reference_is_the_mapped_master_without_delay(free_space):
@@ -195,7 +229,7 @@ def test_same_seed_same_demonstration_bitwise():
     other = record_demonstration(scenario, 12, scene=False)
     for name in (
         "time", "p_WE", "v_WE", "p_MS", "p_WE_desired", "envelope", "activation", "gain",
-        "f_WE", "emg_time", "emg", "muscle_activation",
+        "f_WE", "emg_time", "emg", "muscle_activation", "q", "R_WE",
     ):  # fmt: skip
         assert getattr(first, name).tobytes() == getattr(again, name).tobytes(), name
     assert not np.array_equal(first.envelope, other.envelope)
@@ -252,6 +286,7 @@ def pin_scenario():
 def test_cotter_pin_comes_out_with_the_emg_gain(pin_scenario):
     built, demo, plant_context = simulate(pin_scenario, 1)
     assert built.scene.pin_out(plant_context)
+    check_logged_arm(built.station, demo)  # with the pin's joint in the plant
     # The operator tensed up to pull: the gain peaks high, and the pin resisted (felt force).
     assert demo.gain.max() > 100
     assert demo.f_WE[:, 2].min() < -20

@@ -5,6 +5,7 @@ import copy
 import numpy as np
 import pytest
 from pydrake.geometry import Box
+from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, PortDataType
 from pydrake.systems.primitives import ConstantVectorSource
@@ -82,7 +83,7 @@ def test_ports_names_and_sizes(pin_scenario):
         "p_WE_desired": 3, "gain": 1, "applied_generalized_force": 8,
     }  # fmt: skip
     assert ports(diagram, diagram.num_output_ports(), diagram.get_output_port) == {
-        "p_WE": 3, "v_WE": 3, "f_WE": 3, "arm_state": 14, "q_desired": 7,
+        "p_WE": 3, "v_WE": 3, "R_WE": 9, "f_WE": 3, "arm_state": 14, "q_desired": 7,
         "contact_results": "abstract", "query_object": "abstract",
     }  # fmt: skip
     for name in ("plant", "scene_graph", "clik", "pd", "tool_point", "cotter_pin_detent"):
@@ -120,10 +121,31 @@ def test_tool_point_outputs_against_finite_differences(pin_scenario):
         plant.SetPositions(plant_context, arm.model_instance, qs)
         return diagram.GetOutputPort("p_WE").Eval(context).copy()
 
+    def R_at(qs):
+        plant.SetPositions(plant_context, arm.model_instance, qs)
+        return diagram.GetOutputPort("R_WE").Eval(context).reshape(3, 3).copy()
+
     numeric = (p_at(q + h * v) - p_at(q - h * v)) / (2 * h)
+    R_dot = (R_at(q + h * v) - R_at(q - h * v)) / (2 * h)
     plant.SetPositions(plant_context, arm.model_instance, q)
     np.testing.assert_allclose(diagram.GetOutputPort("v_WE").Eval(context), numeric, atol=1e-7)
     assert np.linalg.norm(numeric) > 0.05
+    # R_WE, row after row, is the tool frame's rotation (Drake's frame API), a rotation whose
+    # derivative along v is [w_WE]x R_WE, w_WE the frame's angular velocity (its Jacobian).
+    R_WE = diagram.GetOutputPort("R_WE").Eval(context).reshape(3, 3)
+    world = plant.world_frame()
+    expected = plant.CalcRelativeRotationMatrix(plant_context, world, arm.tool_frame).matrix()
+    np.testing.assert_allclose(R_WE, expected, atol=1e-15)
+    np.testing.assert_allclose(R_WE @ R_WE.T, np.eye(3), atol=1e-14)
+    assert np.linalg.det(R_WE) == pytest.approx(1.0, abs=1e-14)
+    J = plant.CalcJacobianSpatialVelocity(
+        plant_context, JacobianWrtVariable.kV, arm.tool_frame, np.zeros(3), world, world
+    )
+    w_WE = J[:3] @ plant.GetVelocities(plant_context)
+    skew = R_dot @ R_WE.T
+    np.testing.assert_allclose(skew, -skew.T, atol=1e-8)
+    np.testing.assert_allclose([skew[2, 1], skew[0, 2], skew[1, 0]], w_WE, atol=1e-7)
+    assert np.linalg.norm(w_WE) > 0.15  # 0.19 rad/s: the check is not vacuous
 
 
 def test_free_space_holds_still_with_no_force(pin_scenario, drawing_scenario):

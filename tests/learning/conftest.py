@@ -103,11 +103,29 @@ def path_task():
     return SimpleNamespace(demos=demos, mean=mean, model=model)
 
 
-def random_demonstration(seed, length):
-    """A Demonstration of seeded random but well-shaped data (sEMG at twice the rate)."""
+def rotation_of_quaternion(wxyz):
+    """Rotation matrices (n, 3, 3) of unit quaternions (n, 4) [w, x, y, z], written out."""
+    w, x, y, z = np.moveaxis(np.asarray(wxyz, dtype=float), -1, 0)
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)  # fmt: skip
+
+
+def random_demonstration(seed, length, arm=True):
+    """A Demonstration of seeded random but well-shaped data (sEMG at twice the rate); with
+    ``arm``, random joint positions and tool rotations (q, R_WE), else None (an older
+    dataset)."""
     from hemg_drake.learning.demos import Demonstration
 
     rng = np.random.default_rng(seed)
+    fields = {}
+    if arm:  # drawn from their own stream: the other fields are the same either way
+        arm_rng = np.random.default_rng([seed, 1])
+        quats = arm_rng.normal(size=(length, 4))
+        quats /= np.linalg.norm(quats, axis=1, keepdims=True)
+        fields = {"q": arm_rng.uniform(-3, 3, (length, 7)), "R_WE": rotation_of_quaternion(quats)}
     return Demonstration(
         seed=seed,
         time=np.arange(length) * 0.01,
@@ -122,7 +140,14 @@ def random_demonstration(seed, length):
         emg_time=np.arange(2 * length) * 0.005,
         emg=rng.integers(-128, 128, size=(2 * length, 8)).astype(float),
         muscle_activation=rng.uniform(0, 1, 2 * length),
+        **fields,
     )
+
+
+@pytest.fixture
+def quaternion_rotation():
+    """rotation_of_quaternion: closed-form matrices of [w, x, y, z] quaternions."""
+    return rotation_of_quaternion
 
 
 @pytest.fixture

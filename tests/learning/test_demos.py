@@ -7,11 +7,13 @@ import pytest
 
 from hemg_drake.learning.demos import (
     ALL_FIELDS,
+    ARM_FIELD_SHAPES,
     FORMAT_VERSION,
     Demonstration,
     load_dataset,
     observations,
     save_dataset,
+    tool_quaternions,
 )
 
 
@@ -27,8 +29,9 @@ def test_round_trip_is_exact(tmp_path, demos):
     assert len(loaded) == 2
     for before, after in zip(demos, loaded):
         assert after.seed == before.seed and len(after) == len(before)
-        for name in ALL_FIELDS:
+        for name in (*ALL_FIELDS, *ARM_FIELD_SHAPES):
             assert getattr(after, name).tobytes() == getattr(before, name).tobytes()
+            assert getattr(after, name).shape == getattr(before, name).shape
     assert metadata["scenario"] == "task: drawing\n"
     assert metadata["seeds"] == [3, 4] and metadata["format_version"] == FORMAT_VERSION
     assert set(metadata["versions"]) == {"hemg_drake", "drake", "numpy"}
@@ -124,3 +127,69 @@ def test_damaged_files_give_clear_errors(tmp_path, demos):
     seeds = {**arrays, "metadata": _metadata(seeds=[1, 2])}
     with pytest.raises(ValueError, match="one seed each"):
         load_dataset(_write_npz(tmp_path / "f.npz", **seeds))
+
+
+def test_datasets_without_joints_load_with_none(tmp_path, make_demo):
+    """A dataset recorded before q and R_WE were logged (format 3 or 2, no such arrays)."""
+    old = [make_demo(3, 40, arm=False), make_demo(4, 55, arm=False)]
+    assert old[0].q is None and old[0].R_WE is None
+    path = tmp_path / "old.npz"
+    save_dataset(path, old)
+    arrays = dict(np.load(path))
+    assert not [key for key in arrays if key.endswith((".q", ".R_WE"))]
+    loaded, _ = load_dataset(path)
+    assert [d.q for d in loaded] == [None, None] and [d.R_WE for d in loaded] == [None, None]
+    assert tool_quaternions(loaded) is None
+    record = json.loads(str(arrays["metadata"]))
+    two = tmp_path / "format2.npz"
+    np.savez(two, **{**arrays, "metadata": np.array(json.dumps({**record, "format_version": 2}))})
+    assert load_dataset(two)[0][1].q is None
+    with pytest.raises(ValueError, match="q and R_WE for every demonstration or for none"):
+        save_dataset(tmp_path / "mixed.npz", [make_demo(3, 40), old[1]])
+
+
+def test_demonstration_rejects_bad_joint_fields(make_demo):
+    demo = make_demo(1, 10)
+    fields = {name: getattr(demo, name) for name in demo.__dataclass_fields__}
+    with pytest.raises(ValueError, match="'q' and 'R_WE' go together"):
+        Demonstration(**{**fields, "R_WE": None})
+    with pytest.raises(ValueError, match="'q'.*shape \\(10, 7\\)"):
+        Demonstration(**{**fields, "q": np.zeros((10, 6))})
+    with pytest.raises(ValueError, match="'R_WE'.*shape \\(10, 3, 3\\)"):
+        Demonstration(**{**fields, "R_WE": np.zeros((10, 9))})
+    with pytest.raises(ValueError, match="'q'.*NaN"):
+        Demonstration(**{**fields, "q": np.full((10, 7), np.inf)})
+    with pytest.raises(ValueError, match="'R_WE' must hold rotation matrices"):
+        Demonstration(**{**fields, "R_WE": 1.01 * demo.R_WE})
+    with pytest.raises(ValueError, match="'R_WE' must hold rotation matrices"):
+        Demonstration(**{**fields, "R_WE": -demo.R_WE})  # det -1: a reflection
+
+
+def _turn_about_x(angles):
+    """Rotations about x by ``angles`` (rad), written out."""
+    c, s = np.cos(angles), np.sin(angles)
+    zero, one = np.zeros_like(c), np.ones_like(c)
+    rows = [[one, zero, zero], [zero, c, -s], [zero, s, c]]
+    return np.moveaxis(np.array(rows), (0, 1), (1, 2))
+
+
+def test_tool_quaternions_are_the_rotations_with_continuous_signs(make_demo, quaternion_rotation):
+    # Random rotations: unit, and the closed-form matrix of each quaternion is R_WE.
+    demos = [make_demo(3, 40), make_demo(4, 55)]
+    for demo, quats in zip(demos, tool_quaternions(demos), strict=True):
+        np.testing.assert_allclose(np.linalg.norm(quats, axis=1), 1.0, atol=1e-14)
+        np.testing.assert_allclose(quaternion_rotation(quats), demo.R_WE, atol=1e-14)
+    # A tool turning through 180 deg about x (where a tool pointing down sits): Drake's
+    # canonical w >= 0 would flip the sign at 180 deg; these stay on one path,
+    # [cos(a/2), sin(a/2), 0, 0] up to one sign for the whole dataset.
+    first = make_demo(5, 41)
+    angles = np.linspace(np.radians(170), np.radians(190), 41)
+    turning = Demonstration(**{**{n: getattr(first, n) for n in first.__dataclass_fields__},
+                               "R_WE": _turn_about_x(angles)})  # fmt: skip
+    back = Demonstration(**{**{n: getattr(first, n) for n in first.__dataclass_fields__},
+                            "R_WE": _turn_about_x(angles[::-1])})  # fmt: skip
+    quats = tool_quaternions([turning, back])
+    path = np.column_stack([np.cos(angles / 2), np.sin(angles / 2), 0 * angles, 0 * angles])
+    np.testing.assert_allclose(quats[0], path, atol=1e-12)  # w of the first sample >= 0
+    np.testing.assert_allclose(quats[1], path[::-1], atol=1e-12)  # the same side
+    assert np.abs(np.diff(quats[1], axis=0)).max() < 0.01

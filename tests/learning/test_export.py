@@ -30,8 +30,24 @@ def test_round_trip_gives_the_same_arrays(tmp_path, demos):
     for original, back in zip(demos, loaded):
         assert back.seed == original.seed
         for field in ("time", "p_WE", "v_WE", "p_MS", "p_WE_desired", "envelope", "activation",
-                      "gain", "f_WE", "emg_time", "emg", "muscle_activation"):  # fmt: skip
+                      "gain", "f_WE", "emg_time", "emg", "muscle_activation", "q",
+                      "R_WE"):  # fmt: skip
             np.testing.assert_array_equal(getattr(back, field), getattr(original, field))
+
+
+def test_a_dataset_without_joints_exports_as_before_with_a_warning(tmp_path, make_demo):
+    old = [make_demo(3, 40, arm=False), make_demo(4, 55, arm=False)]
+    path = tmp_path / "old.hdf5"
+    with pytest.warns(UserWarning, match="exported without robot0_joint_pos, robot0_eef_pos"):
+        export_robomimic(path, old, METADATA)
+    with h5py.File(path, "r") as f:
+        assert set(f["data/demo_0/obs"]) == {"p_WE", "v_WE", "p_MS", "f_WE", "gain", "envelope",
+                                             "activation"}  # fmt: skip
+        assert "R_WE" not in f["data/demo_0"]
+        assert "robot0_eef_quat" not in json.loads(f["data"].attrs["env_args"])["env_kwargs"]["obs_keys"]
+    loaded, _ = load_robomimic(path)
+    assert loaded[1].q is None and loaded[1].R_WE is None
+    np.testing.assert_array_equal(loaded[1].p_WE, old[1].p_WE)
 
 
 def test_task_frames_of_placed_demonstrations_make_the_round_trip(tmp_path, demos):
@@ -63,7 +79,7 @@ def test_task_frames_of_placed_demonstrations_make_the_round_trip(tmp_path, demo
         load_robomimic(path)
 
 
-def test_file_has_robomimics_layout_read_with_plain_h5py(tmp_path, demos):
+def test_file_has_robomimics_layout_read_with_plain_h5py(tmp_path, demos, quaternion_rotation):
     path = tmp_path / "demos.hdf5"
     export_robomimic(path, demos, METADATA)
     # Read as robomimic's SequenceDataset and file utilities do: demos sorted by the
@@ -81,7 +97,9 @@ def test_file_has_robomimics_layout_read_with_plain_h5py(tmp_path, demos):
             n = int(group.attrs["num_samples"])
             assert n == len(demo)
             widths = {"p_WE": 3, "v_WE": 3, "p_MS": 3, "f_WE": 3, "gain": 1, "envelope": 1,
-                      "activation": 1}  # fmt: skip
+                      "activation": 1, "robot0_joint_pos": 7, "robot0_eef_pos": 3,
+                      "robot0_eef_quat": 4}  # fmt: skip
+            assert set(env_meta["env_kwargs"]["obs_keys"]) == set(widths)
             assert set(group["obs"].keys()) == set(widths)
             assert set(group["next_obs"].keys()) == set(widths)
             for key, width in widths.items():
@@ -91,6 +109,13 @@ def test_file_has_robomimics_layout_read_with_plain_h5py(tmp_path, demos):
             np.testing.assert_array_equal(group["obs/gain"][()][:, 0], demo.gain)
             np.testing.assert_array_equal(group["next_obs/v_WE"][()][:-1], demo.v_WE[1:])
             np.testing.assert_array_equal(group["next_obs/v_WE"][()][-1], demo.v_WE[-1])
+            np.testing.assert_array_equal(group["obs/robot0_joint_pos"][()], demo.q)
+            np.testing.assert_array_equal(group["obs/robot0_eef_pos"][()], demo.p_WE)
+            # robosuite's quaternion order, [x, y, z, w]: unit, and the tool's rotation.
+            x, y, z, w = group["obs/robot0_eef_quat"][()].T
+            np.testing.assert_allclose(x**2 + y**2 + z**2 + w**2, 1.0, atol=1e-14)
+            rotation = quaternion_rotation(np.column_stack([w, x, y, z]))
+            np.testing.assert_allclose(rotation, demo.R_WE, atol=1e-14)
             actions = group["actions"][()]
             assert actions.shape == (n, 4)
             np.testing.assert_array_equal(actions[:, :3], demo.p_WE_desired)

@@ -7,6 +7,7 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -30,6 +31,13 @@ EPISODE_COLUMNS = {
     "meta/episodes/file_index",
 }  # fmt: skip
 STATS = {"min", "max", "mean", "std", "count", "q01", "q10", "q50", "q90", "q99"}
+# observation.state's entries, written out: the arm's joints, the tool's pose, its velocity.
+STATE_NAMES = [
+    "right_s0", "right_s1", "right_e0", "right_e1", "right_w0", "right_w1", "right_w2",
+    "p_WE_x", "p_WE_y", "p_WE_z", "quat_WE_w", "quat_WE_x", "quat_WE_y", "quat_WE_z",
+    "v_WE_x", "v_WE_y", "v_WE_z",
+]  # fmt: skip
+QUAT = slice(10, 14)
 
 
 @pytest.fixture
@@ -55,8 +63,10 @@ def _expected(demos, states=None):
     cat = lambda *fields: np.concatenate([np.column_stack([getattr(d, f) for f in fields])
                                           for d in demos])  # noqa: E731  # fmt: skip
     frame = np.concatenate([np.arange(len(d)) for d in demos])
+    # observation.state but its quaternion (checked by split_state).
+    state = cat("q", "p_WE", "v_WE") if demos[0].q is not None else cat("p_WE", "v_WE")
     expected = {
-        "observation.state": cat("p_WE", "v_WE"), "observation.force": cat("f_WE"),
+        "observation.state": state, "observation.force": cat("f_WE"),
         "action": cat("p_WE_desired", "gain"), "operator.emg_envelope": cat("envelope"),
         "operator.activation": cat("activation"), "operator.p_MS": cat("p_MS"),
         "frame_index": frame[:, None],
@@ -68,7 +78,17 @@ def _expected(demos, states=None):
     return expected
 
 
-def test_round_trip_every_column_dtype_and_shape(tmp_path, demos):
+def split_state(state, demos, rotation):
+    """observation.state without its quaternion [w, x, y, z], the quaternion checked against
+    the demonstrations' R_WE by the closed-form matrix of each (float32: to 1e-6)."""
+    quats = np.asarray(state[:, QUAT], dtype=np.float64)
+    np.testing.assert_allclose(np.linalg.norm(quats, axis=1), 1.0, atol=1e-6)
+    R_WE = np.concatenate([demo.R_WE for demo in demos])
+    np.testing.assert_allclose(rotation(quats), R_WE, atol=2e-6)
+    return np.delete(state, np.arange(state.shape[1])[QUAT], axis=1)
+
+
+def test_round_trip_every_column_dtype_and_shape(tmp_path, demos, quaternion_rotation):
     states = [np.arange(n) % 4 for n in LENGTHS]
     root = tmp_path / "lerobot"
     assert export_lerobot(root, demos, METADATA, fps=100, hsmm_states=states) == sum(LENGTHS)
@@ -80,6 +100,9 @@ def test_round_trip_every_column_dtype_and_shape(tmp_path, demos):
         got = _column(table, name)
         assert got.shape == (sum(LENGTHS), *feature["shape"]), name
         assert got.dtype == np.dtype(feature["dtype"]), name
+        if name == "observation.state":
+            assert feature["shape"] == [17] and feature["names"] == STATE_NAMES
+            got = split_state(got, demos, quaternion_rotation)
         want = values.astype(feature["dtype"])  # float32: LeRobot's policies' dtype
         np.testing.assert_array_equal(got, want, err_msg=name)
     # timestamp = frame_index / fps exactly: the float32 of the double quotient.
@@ -87,6 +110,20 @@ def test_round_trip_every_column_dtype_and_shape(tmp_path, demos):
     timestamp = _column(table, "timestamp")[:, 0]
     assert timestamp.dtype == np.float32
     assert np.array_equal(timestamp, np.array([np.float32(int(i) / 100) for i in frame]))
+
+
+def test_a_dataset_without_joints_exports_as_before_with_a_warning(tmp_path, make_demo):
+    old = [make_demo(3 + c, n, arm=False) for c, n in enumerate(LENGTHS)]
+    root = tmp_path / "lerobot"
+    with pytest.warns(UserWarning, match="exported without them: observation.state is"):
+        export_lerobot(root, old, METADATA, fps=100)
+    info = json.loads((root / "meta/info.json").read_text())
+    state = info["features"]["observation.state"]
+    assert state["shape"] == [6] and state["names"] == [*STATE_NAMES[7:10], *STATE_NAMES[14:]]
+    np.testing.assert_array_equal(_column(_data(root), "observation.state"),
+                                  _expected(old)["observation.state"].astype(np.float32))  # fmt: skip
+    stats = json.loads((root / "meta/stats.json").read_text())
+    assert len(stats["observation.state"]["mean"]) == 6
 
 
 def test_files_follow_the_v3_schema(tmp_path, demos):
@@ -226,7 +263,7 @@ def _lerobot_python():
 
 
 @pytest.mark.slow
-def test_lerobot_itself_loads_the_dataset(tmp_path, demos):
+def test_lerobot_itself_loads_the_dataset(tmp_path, demos, quaternion_rotation):
     """Where the ``lerobot`` package runs (a Python named by HEMG_LEROBOT_PYTHON; it needs
     torch): LeRobotDataset reads the export, frame for frame."""
     python = _lerobot_python()
@@ -264,8 +301,9 @@ print(json.dumps({{"len": len(ds), "episodes": ds.num_episodes, "fps": ds.fps,
     assert (got["len"], got["episodes"], got["fps"]) == (sum(LENGTHS), 3, 100)
     assert got["task"] == "pull the cotter pin out of its hole"
     demo = demos[1]  # frame 45 of the dataset: frame 5 of episode 1
-    np.testing.assert_array_equal(
-        np.float32(got["state"]), np.float32(np.r_[demo.p_WE[5], demo.v_WE[5]]))
+    frame5 = SimpleNamespace(R_WE=demo.R_WE[5:6])
+    state = split_state(np.float32([got["state"]]), [frame5], quaternion_rotation)
+    np.testing.assert_array_equal(state[0], np.float32(np.r_[demo.q[5], demo.p_WE[5], demo.v_WE[5]]))
     np.testing.assert_array_equal(
         np.float32(got["action"]), np.float32(np.r_[demo.p_WE_desired[5], demo.gain[5]]))
     assert (got["hsmm"], got["episode"]) == (5 % 4, 1)
