@@ -275,7 +275,7 @@ def test_building_does_not_simulate():
 def test_calibration_shorter_than_the_window_is_refused():
     # 0.05 s of the MYO's 200 Hz is 10 samples, fewer than L_win = 20: no envelope to calibrate.
     with pytest.raises(ValueError, match="emg.calibration_duration' gives 10 samples.*window.*20"):
-        parse_scenario(FREE_SPACE + "emg: {calibration_duration: 0.05}\n")
+        parse_scenario(FREE_SPACE.replace("emg: {k_max: 200.0}", "emg: {k_max: 200.0, calibration_duration: 0.05}"))
 
 
 @pytest.fixture(scope="module")
