@@ -184,19 +184,22 @@ def _add_station(builder, scenario, start, *, scene, q0=None, visualization=None
     return station, limits
 
 
-def settled_arm_positions(built):
-    """Where the arm comes to rest in the task's scene while the PD holds its tool at x*_0.
+def settled_plant_state(built):
+    """The plant's state [q; v] (arm and scene) at rest while the PD holds its tool at x*_0.
 
     Simulates ``built.diagram`` itself, in a context of its own, for
     ``reproduction.settle_time`` with the reproducer holding (its ``holding`` parameter:
     x*_0 and the first k* stay put) from the configuration that puts the tool point on
     x*_0. Free of contact this is that configuration; when the scene pulls on the tool there
     (the cotter pin's grasp, stretched by a start beside the ring) it is the static balance
-    of the PD and the scene's force.
+    of the PD and the scene's force. The scene's bodies settle too, and the run starts from
+    all of it: a start above the ring draws the pin out to it (the detent gives at 50 N);
+    restarting that pin at rest in the fixture under the settled arm would stretch the grasp
+    to 150 N at t = 0 (issue 23).
 
     Returns
     -------
-    q : array, shape (7,), rad.
+    array, shape (nq + nv,): the plant's positions and velocities (m, rad, m/s, rad/s).
     """
     diagram, station = built.diagram, built.station
     context = diagram.CreateDefaultContext()
@@ -204,7 +207,7 @@ def settled_arm_positions(built):
     set_holding(reproducer, reproducer.GetMyMutableContextFromRoot(context), True)
     simulator = Simulator(diagram, context)
     simulator.AdvanceTo(built.scenario.reproduction.settle_time)
-    return station.plant.GetPositions(station.plant_context(context), station.arm.model_instance)
+    return station.plant.GetPositionsAndVelocities(station.plant_context(context))
 
 
 def build_reproduction_diagram(
@@ -327,7 +330,7 @@ def run_reproduction(built, *, duration=None, settle=True):
 
     Before the reproduction starts, the arm is brought to rest where it settles in the
     task's scene while the PD holds the tool at x*_0 with the first k*
-    (:func:`settled_arm_positions`, a run of this same diagram with the reproducer holding;
+    (:func:`settled_plant_state`, a run of this same diagram with the reproducer holding;
     ``settle=False`` starts it on x*_0 by inverse
     kinematics). Beside the cotter pin's grasped ring, where the PD balances the stretched
     grasp, that is about 1 mm from the ring (the arm is much softer than the grasp);
@@ -347,12 +350,17 @@ def run_reproduction(built, *, duration=None, settle=True):
     """
     scenario = built.scenario
     station = built.station
-    # Settled first, in a context of its own: the arm starts this run at rest there.
-    q0 = settled_arm_positions(built) if settle and built.scene is not None else station.q0
+    # Settled first, in a context of its own: the arm and the scene start this run at rest
+    # there.
+    settled = settled_plant_state(built) if settle and built.scene is not None else None
     simulator, duration = make_simulator(built, duration)
     context = simulator.get_mutable_context()
     plant_context = station.plant_context(context)
-    station.plant.SetPositions(plant_context, station.arm.model_instance, q0)
+    if settled is None:
+        station.plant.SetPositions(plant_context, station.arm.model_instance, station.q0)
+    else:
+        station.plant.SetPositionsAndVelocities(plant_context, settled)
+    q0 = station.plant.GetPositions(plant_context, station.arm.model_instance)
     simulator.Initialize()
     # The logger samples at multiples of log_period; reach the last one.
     simulator.AdvanceTo(duration + 1e-9)

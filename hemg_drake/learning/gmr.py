@@ -71,6 +71,13 @@ class Gmr(BaseEstimator):
         Indices of xi^I, the dimensions conditioned on.
     output_dims : sequence of int, optional
         Indices of xi^O; default all the others, in order.
+    support_radius : float, optional
+        r > 0: each state conditions on the input clipped onto its own r-sigma ellipsoid,
+        x_i = mu_i^I + min(1, r / d_i) (x - mu_i^I), d_i the Mahalanobis distance
+        |x - mu_i^I| in S_i^II (the nearest point of the ellipsoid along the ray from its
+        mean). Inside every state's ellipsoid this is eq. 16 exactly; outside, state i's
+        linear regression no longer extrapolates beyond what its data supports, and its
+        output stays what it is r sigma out. Default None: eq. 16 everywhere.
 
     Attributes
     ----------
@@ -88,12 +95,13 @@ class Gmr(BaseEstimator):
     """
 
     def __init__(self, *, priors=None, means=None, covariances=None, input_dims=None,
-                 output_dims=None):  # fmt: skip
+                 output_dims=None, support_radius=None):  # fmt: skip
         self.priors = priors
         self.means = means
         self.covariances = covariances
         self.input_dims = input_dims
         self.output_dims = output_dims
+        self.support_radius = support_radius
 
     def fit(self, X=None, y=None):
         """Check the mixture and the index split; precompute the regression (eqs. 16-17).
@@ -137,6 +145,9 @@ class Gmr(BaseEstimator):
             )
         if np.unique(both).size != both.size:
             raise ValueError("input_dims and output_dims must not overlap")
+        radius = self.support_radius
+        if radius is not None and not (np.isfinite(radius) and radius > 0):
+            raise ValueError(f"support_radius must be None or a finite number > 0, got {radius!r}")
         for name, value in (("means", means), ("covariances", covariances), ("priors", priors)):
             if not np.all(np.isfinite(value)):
                 raise ValueError(f"{name} contain NaN or inf")
@@ -183,13 +194,21 @@ class Gmr(BaseEstimator):
         return softmax(self.log_priors_ + self.log_input_likelihood(x))
 
     def component_means(self, x):
-        """mu_i^O + S_i^OI (S_i^II)^-1 (x - mu_i^I) (eq. 16); shape (T, N, O) or (N, O)."""
+        """mu_i^O + S_i^OI (S_i^II)^-1 (x_i - mu_i^I) (eq. 16); shape (T, N, O) or (N, O).
+
+        x_i = x, or with ``support_radius`` r the input clipped onto state i's r-sigma
+        ellipsoid."""
         queries, single = self._as_queries(x)
         means = self._component_means(queries)
         return means[0] if single else means
 
     def _component_means(self, queries):
         diff = queries[:, None, :] - self.input_means_[None]  # (T, N, I)
+        if self.support_radius is not None:
+            whitened = np.einsum("nij,tnj->tni", self._input_whitening[0], diff)
+            distance = np.sqrt(np.square(whitened).sum(axis=2))  # Mahalanobis, (T, N)
+            scale = self.support_radius / np.maximum(distance, self.support_radius)
+            diff = diff * scale[:, :, None]
         return self.output_means_[None] + np.einsum("noi,tni->tno", self.gains_, diff)
 
     def predict(self, x, weights=None):

@@ -67,6 +67,11 @@ STILL = 0.05
 # reproductions, temporal weighting (docs/reproduction.md): all 8 that diverged (15-98 mm
 # after DTW) had a state at 14-30 1/s; none of the 59 below 3.5 1/s went beyond 8.1 mm.
 UNSTABLE_RATE = 10.0
+# GMR's support: each state conditions on the input clipped onto its SUPPORT_RADIUS-sigma
+# ellipsoid (hemg_drake.learning.gmr.Gmr's support_radius), so eq. 16 does not extrapolate
+# from a start far from the demonstrations (issue 23: 4 cm beside the pin's ring, eq. 16 sent
+# k* to K_max and x* 11 cm up at t = 0). Measured in docs/reproduction.md ("Starts").
+SUPPORT_RADIUS = 3.0
 
 
 def check_position(x, n_position, name):
@@ -109,14 +114,16 @@ def check_gmr_stability(model, *, limit=UNSTABLE_RATE):
 
 
 def output_gmr(model):
-    """GMR of [xdot, k] given x over the model's states (eqs. 14-17), and the training
-    data's stiffness range (k* is clipped to it)."""
+    """GMR of [xdot, k] given x over the model's states (eqs. 14-17), each state conditioned
+    within SUPPORT_RADIUS sigma of its mean, and the training data's stiffness range (k* is
+    clipped to it)."""
     gmr = Gmr(
         priors=model.occupancy_,
         means=model.means_,
         covariances=model.covariances_,
         input_dims=model.position_dims_,
         output_dims=np.concatenate([model.velocity_dims_, model.stiffness_dims_]),
+        support_radius=SUPPORT_RADIUS,
     ).fit()
     return gmr, model.data_range_[:, model.stiffness_dims_]
 

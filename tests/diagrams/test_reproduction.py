@@ -11,7 +11,7 @@ from hemg_drake.diagrams import reproduction
 from hemg_drake.diagrams.reproduction import (
     build_reproduction_diagram,
     run_reproduction,
-    settled_arm_positions,
+    settled_plant_state,
 )
 from hemg_drake.learning.hsmm import HSMM
 from hemg_drake.learning.reproduce import reproduce
@@ -118,7 +118,7 @@ def test_bad_input(scenario, model):
 
 def test_a_start_beside_the_grasped_ring_begins_at_rest(scenario, model):
     # 3 cm beside the ring the grasp pulls 150 N on the tool: the arm starts where the PD,
-    # holding x*_0 there, balances it (settled_arm_positions), not at rest 3 cm away, where
+    # holding x*_0 there, balances it (settled_plant_state), not at rest 3 cm away, where
     # the released grasp would snap the tool back to the ring (1.5 m/s, measured).
     start = START + [0.03, 0.0, 0.0]
     result = run_reproduction(
@@ -133,11 +133,10 @@ def test_a_start_beside_the_grasped_ring_begins_at_rest(scenario, model):
     np.testing.assert_allclose(log.f_WE[0, 0], -5000.0 * aside, rtol=0.1)
     assert np.max(np.abs(log.v_WE[:, 0])) < 0.2
     # With the grasp unstretched, the arm rests with its tool on the start.
-    q = settled_arm_positions(build_reproduction_diagram(scenario, model))
-    built = build_reproduction_diagram(scenario, model, scene=False)
+    built = build_reproduction_diagram(scenario, model)
     context = built.plant.CreateDefaultContext()
+    built.plant.SetPositionsAndVelocities(context, settled_plant_state(built))
     arm = built.station.arm
-    built.plant.SetPositions(context, arm.model_instance, q)
     p_WE = arm.tool_frame.CalcPoseInWorld(context).translation()
     np.testing.assert_allclose(p_WE, START, atol=1e-3)
 
@@ -194,3 +193,27 @@ def test_the_holding_reproducer_keeps_its_start_and_first_stiffness(scenario, mo
     set_holding(reproducer, own, False)
     simulator.AdvanceTo(0.5)
     assert not np.array_equal(reproducer.GetOutputPort("x_star").Eval(own), first[0])
+
+
+@pytest.mark.parametrize("aside", [[0.0, 0.04, 0.0], [0.0, -0.04, 0.0], [0.04, 0.0, 0.0]])
+def test_a_start_4_cm_aside_does_not_extrapolate_gmr(model, aside):
+    # Issue 23: 4 cm beside the ring (80 sigma of the demonstrations' lateral spread) eq. 16's
+    # regressions extrapolated: x* ran 10-16 cm along the lift or below the ring, and k*_0
+    # left the stiffness the demonstrations started with (111 against 20-28). Each state now
+    # conditions within its 3-sigma ellipsoid: x* stays within the demonstrated lift (5 cm,
+    # 1 cm margin) and k*_0 within what the demonstrations held over the first state's third
+    # of the task (20 + 130 s(t) for t < 1/3: 20-47, noise 2).
+    rollout = reproduce(model, START + aside, 100, weighting="temporal", restoring_gain=2.0)
+    lift = rollout.x[:, 2] - START[2]
+    assert -0.01 < lift.min() and lift.max() < 0.06
+    assert 18.0 < rollout.k[0, 0] < 49.0
+
+
+def test_a_start_above_the_grasped_ring_does_not_stretch_the_grasp(scenario, model):
+    # Issue 23: 3 cm above the ring, settling holds x*_0 there and draws the pin out with it
+    # (the detent gives at 50 N); the run restarted the pin in the fixture under the settled
+    # arm, stretching the grasp to 147 N at t = 0. The scene now starts where it settled.
+    built = build_reproduction_diagram(scenario, model, start=START + [0.0, 0.0, 0.03])
+    log = run_reproduction(built, duration=0.1).log
+    assert np.linalg.norm(log.f_WE[0]) < 5.0
+    assert 0.02 < log.p_WE[0, 2] - START[2] < 0.031  # the tool and the ring, up together

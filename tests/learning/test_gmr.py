@@ -124,3 +124,44 @@ def test_predictive_covariance_of_a_long_batch_agrees_with_the_gmr_package():
                          for m, c in zip(mixture["means"], mixture["covariances"])], axis=1)
     np.testing.assert_allclose(gaussian_log_pdf(x, mixture["means"], mixture["covariances"]),
                                expected, rtol=1e-12)
+
+
+def test_support_radius_conditions_on_the_input_clipped_onto_each_states_ellipsoid():
+    # One state, input 1-D with sigma = 2, r = 3: a query 10 from the mean is clipped to 6
+    # (by hand), so the output is mu^O + S^OI / S^II * 6, whatever the query beyond 6.
+    covariance = np.array([[4.0, 1.0], [1.0, 2.0]])
+    model = Gmr(priors=[1.0], means=[[1.0, -2.0]], covariances=[covariance], input_dims=[0],
+                support_radius=3.0).fit()  # fmt: skip
+    np.testing.assert_allclose(model.predict([11.0])[0], [-2.0 + 0.25 * 6.0], rtol=1e-12)
+    np.testing.assert_allclose(model.predict([-99.0])[0], [-2.0 - 0.25 * 6.0], rtol=1e-12)
+    np.testing.assert_allclose(model.predict([4.0])[0], [-2.0 + 0.25 * 3.0], rtol=1e-12)
+    # Two states, 2-D input: inside a state's ellipsoid eq. 16; outside, eq. 16 at the point
+    # of the ellipsoid on the ray from its mean (found by bisection on scipy's distance).
+    from scipy.spatial.distance import mahalanobis
+
+    rng = np.random.default_rng(3)
+    mixture = random_mixture(rng, 2, 4)
+    clipped = Gmr(**mixture, input_dims=[2, 0], support_radius=1.5).fit()
+    plain = Gmr(**mixture, input_dims=[2, 0]).fit()
+    for query in (mixture["means"][0][[2, 0]] + 0.1, rng.standard_normal(2) * 8.0):
+        expected = []
+        for mu, sigma in zip(mixture["means"], mixture["covariances"], strict=True):
+            single = Gmr(priors=[1.0], means=[mu], covariances=[sigma], input_dims=[2, 0]).fit()
+            inverse = np.linalg.inv(sigma[np.ix_([2, 0], [2, 0])])
+            centre = mu[[2, 0]]
+            point = query
+            if mahalanobis(query, centre, inverse) > 1.5:
+                low, high = 0.0, 1.0
+                for _ in range(200):
+                    middle = 0.5 * (low + high)
+                    inside = mahalanobis(centre + middle * (query - centre), centre, inverse)
+                    low, high = (middle, high) if inside < 1.5 else (low, middle)
+                point = centre + low * (query - centre)
+            expected.append(single.predict(point)[0])
+        np.testing.assert_allclose(clipped.component_means(query), expected, rtol=1e-9)
+    near = mixture["means"][0][[2, 0]] + 1e-3  # deep inside state 0's ellipsoid: eq. 16
+    np.testing.assert_allclose(
+        clipped.component_means(near)[0], plain.component_means(near)[0], rtol=1e-12
+    )
+    with pytest.raises(ValueError, match="support_radius"):
+        Gmr(**mixture, input_dims=[0], support_radius=0.0).fit()
