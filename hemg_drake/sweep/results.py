@@ -28,13 +28,13 @@ def finished_record(out, trial):
 
 
 def table_rows(records, spec):
-    """One row per trial: trial, status, seed, the axes' labels, elapsed_s, error, metrics."""
+    """One row per trial: trial, status, seed, the axes' labels, error, metrics (the same
+    bytes however the sweep ran: a trial's elapsed time is in its ``trial.json`` only)."""
     rows = []
     for record in records:
         row = {"trial": record["id"], "status": record["status"], "seed": record["seed"]}
         for axis in spec.axes:
             row[axis.name] = record["labels"].get(axis.name, "")
-        row["elapsed_s"] = round(float(record.get("elapsed_s", 0.0)), 3)
         row["error"] = record.get("error", "")
         for name in spec.metrics:
             row[name] = record["metrics"].get(name, "")
@@ -59,7 +59,10 @@ def write_results(records, spec, out):
     except ImportError:
         pass
     else:
-        table = pa.Table.from_pylist([{k: _cell(v) for k, v in row.items()} for row in rows])
+        # A metric a trial lacks is null (an empty string would clash with numbers).
+        table = pa.Table.from_pylist(
+            [{k: _cell(v) for k, v in row.items()} for row in rows]
+        )
         sink = io.BytesIO()
         pq.write_table(table, sink)
         write_bytes_atomic(out / "results.parquet", sink.getvalue())
@@ -70,7 +73,9 @@ def write_results(records, spec, out):
 
 
 def _cell(value):
-    return "" if value is None else str(value) if isinstance(value, (list, dict)) else value
+    if value is None or value == "":
+        return None
+    return str(value) if isinstance(value, (list, dict)) else value
 
 
 def _number(value):
