@@ -218,10 +218,16 @@ def _trial_metrics(task, run):
 DISK_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EIO)
 
 
-def _shown(filename, tmp, final):
-    """A path inside the trial's temporary folder shown at its final place."""
-    text = str(filename)
-    return re.sub(r"/\.tmp-(.+?)-\d+(?=/|$)", r"/\1", text.replace(str(tmp), str(final), 1))
+def _shown(filename):
+    """A path with each temporary folder of a trial, a cache entry or a run folder's new
+    version (``.tmp-<id>-<pid>``, ``.<name>.hemg-drake-new-<pid>``) shown by its final name."""
+    from hemg_drake.run_folder import NEW
+
+    parts = []
+    for part in Path(filename).parts:
+        part = re.sub(rf"^\.(.+)\.{NEW}-\d+$", r"\1", part)
+        parts.append(re.sub(r"^\.tmp-(.+)-\d+$", r"\1", part))
+    return str(Path(*parts))
 
 
 def run_trial(task):
@@ -267,7 +273,7 @@ def run_trial(task):
     except OSError as error:
         shutil.rmtree(tmp, ignore_errors=True)
         if error.errno in DISK_ERRORS:
-            where = _shown(error.filename or final, tmp, final)
+            where = _shown(error.filename or final)
             raise OSError(error.errno, error.strerror or os.strerror(error.errno), where) from None
         raise
     except BaseException:
