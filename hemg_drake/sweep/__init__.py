@@ -36,6 +36,8 @@ The package's modules: :mod:`~hemg_drake.sweep.spec` (the sweep file and its tri
 :mod:`~hemg_drake.sweep.results` (the table, the figure, resume bookkeeping).
 """
 
+from hemg_drake.sweep.checks import METRICS, known_metrics
+from hemg_drake.sweep.folder import MARKER, sweep_folder
 from hemg_drake.sweep.results import (
     finished_record,
     plot_results,
@@ -73,7 +75,8 @@ from hemg_drake.sweep.trial import (
 )
 
 __all__ = [
-    "BACKENDS", "DEFAULT_METRICS", "DESIGNS", "RAY_OBJECT_STORE_BYTES", "STEPS", "SWEEPS",
+    "BACKENDS", "DEFAULT_METRICS", "DESIGNS", "MARKER", "METRICS", "RAY_OBJECT_STORE_BYTES",
+    "STEPS", "SWEEPS", "known_metrics", "sweep_folder",
     "THREAD_ENV", "TRIAL_FILE", "Axis", "Progress", "SweepSpec", "Trial",
     "demonstration_metrics", "finished_record", "flatten", "heldout_metrics", "load_sweep",
     "only_loopback", "parse_sweep", "plot_results", "run_sweep", "run_trial", "summary",

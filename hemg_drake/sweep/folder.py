@@ -15,6 +15,7 @@ import contextlib
 import hashlib
 import json
 import os
+import re
 import shutil
 from pathlib import Path
 
@@ -22,6 +23,8 @@ from hemg_drake.fileio import write_text_atomic
 from hemg_drake.sweep.trial import TRIAL_FILE
 
 MARKER = "sweep.json"
+# fileio.atomic_open's temporary file of the marker (".sweep.json.<random>.tmp").
+_MARKER_TMP = re.compile(rf"^\.{re.escape(MARKER)}\.[^/]+\.tmp$")
 # The fields of a sweep that its trials' results depend on beyond their overrides.
 _SAME = ("scenario_sha256", "set", "steps", "heldout")
 
@@ -45,7 +48,7 @@ def finished_trials(out):
 
 def _check(out, wanted, resume):
     """Raise ValueError unless a sweep may write the existing folder ``out`` now."""
-    names = os.listdir(out)
+    names = [n for n in os.listdir(out) if not _MARKER_TMP.match(n)]
     if not names:
         if resume:
             raise ValueError(f"{out}: no sweep to resume there (no {MARKER}); run without --resume")
@@ -80,7 +83,12 @@ def _check(out, wanted, resume):
 
 
 def tidy(out):
-    """Remove the temporary folders of trials and cache entries that did not finish."""
+    """Remove the temporary folders of trials and cache entries that did not finish, and
+    the temporary file of a ``sweep.json`` being written."""
+    for name in os.listdir(out):
+        if _MARKER_TMP.match(name):
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(Path(out) / name)
     for folder in (Path(out) / "trials", Path(out) / "cache"):
         if folder.is_dir():
             for stale in folder.glob(".tmp-*"):
@@ -109,10 +117,11 @@ def sweep_folder(out, spec, scenario_text, spec_text, *, resume):
             _check(out, wanted, resume)
             try:
                 tidy(out)
-                (out / "trials").mkdir(exist_ok=True)
+                # The record first: killed at any moment, the folder is empty or a sweep's.
                 record = dict(tool="hemg-drake sweep", identity=wanted)
                 write_text_atomic(out / MARKER, json.dumps(record, indent=2) + "\n")
                 write_text_atomic(out / "sweep.yaml", spec_text)
+                (out / "trials").mkdir(exist_ok=True)
                 yield out
             except BaseException:
                 tidy(out)
