@@ -7,8 +7,9 @@ folder for the whole command, so a second sweep on the same folder is refused in
 naming the first one's PID. ``--resume`` continues only the sweep that wrote the folder: the
 same base scenario (its text), ``set``, ``steps`` and ``heldout`` (axes, seeds and metrics
 may grow: a trial's id is the digest of its overrides). The sweep removes only what it
-names as its own: the temporary folders (``.tmp-*``) of trials and cache entries that did
-not finish, and, when it made the folder and fails before any trial finished, the folder.
+names as its own: the temporary folders (``.tmp-*``, and ``..tmp-*`` built beside them) of
+trials and cache entries that did not finish, and, when it made the folder and fails before
+any trial finished, the folder.
 """
 
 import contextlib
@@ -91,7 +92,11 @@ def tidy(out):
                 os.unlink(Path(out) / name)
     for folder in (Path(out) / "trials", Path(out) / "cache"):
         if folder.is_dir():
+            # A trial's or cache entry's folder being built (".tmp-<name>-<pid>"), and the
+            # next version of one that a run-folder stage builds beside it (".<that>.*").
             for stale in folder.glob(".tmp-*"):
+                shutil.rmtree(stale, ignore_errors=True)
+            for stale in folder.glob("..tmp-*"):
                 shutil.rmtree(stale, ignore_errors=True)
 
 
