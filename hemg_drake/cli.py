@@ -10,10 +10,9 @@ import argparse
 import math
 import signal
 import sys
+import warnings
 
 from hemg_drake.commands import (
-    check_output_file,
-    check_output_folder,
     demo_command,
     demonstrate_command,
     emg_figure_command,
@@ -31,6 +30,15 @@ SET_HELP = (
     "override a scenario key, in YAML value syntax (repeatable), e.g. --set emg.k_max=150 "
     "--set scene.position=[0.65,-0.80,0.12]"
 )
+# learn and reproduce read some sections of the dataset's scenario only (commands.READS).
+LEARN_SET_HELP = (
+    "override a learning key of the dataset's scenario, in YAML value syntax (repeatable), "
+    "e.g. --set learning.num_states=6 --set learning.init=kmeans"
+)
+REPRODUCE_SET_HELP = (
+    "override a reproduction or scene key of the dataset's scenario, in YAML value syntax "
+    "(repeatable), e.g. --set reproduction.tracker=lqr --set scene.yaw_deg=20"
+)
 # Longest demonstration (s), as the scenario's check has it.
 MAX_DURATION = 600.0
 # The extra that installs each optional package a command may need (pyproject.toml).
@@ -40,9 +48,14 @@ OPTIONAL_EXTRAS = {
 # emg-figure's synthetic recording: at most this long (s); a longer one takes minutes and
 # gigabytes to plot for no more insight.
 MAX_EMG_FIGURE_DURATION = 600.0
+# Drake's RandomGenerator takes 32-bit seeds (2**32 draws what 0 draws).
+MAX_SEED = 2**32 - 1
+MAX_PORT = 65535
+# EM iterations at most (the scenario's learning.n_iter has the same bound).
+MAX_ITERATIONS = 1000
 
 
-def _int_at_least(name, minimum):
+def _int_at_least(name, minimum, maximum=None):
     def parse(text):
         try:
             value = int(text)
@@ -51,17 +64,19 @@ def _int_at_least(name, minimum):
         if value < minimum:
             bound = "must not be negative" if minimum == 0 else f"must be at least {minimum}"
             raise argparse.ArgumentTypeError(f"{name} {bound}, got {value}")
+        if maximum is not None and value > maximum:
+            raise argparse.ArgumentTypeError(f"{name} must be at most {maximum}, got {value}")
         return value
 
     return parse
 
 
-def _positive_int(name):
-    return _int_at_least(name, 1)
+def _positive_int(name, maximum=None):
+    return _int_at_least(name, 1, maximum)
 
 
-def _non_negative_int(name):
-    return _int_at_least(name, 0)
+def _non_negative_int(name, maximum=None):
+    return _int_at_least(name, 0, maximum)
 
 
 def _finite_float(name, *, positive=False, maximum=math.inf):
@@ -113,13 +128,13 @@ def build_parser():
         formatter_class=_Formatter,
     )
     parser.add_argument("--version", action="version", version=f"hemg-drake {_version()}")
-    commands = parser.add_subparsers(dest="command", required=True)
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     def command(name, help):
         return commands.add_parser(name, help=help, description=help, formatter_class=_Formatter)
 
-    def add_set(sub):
-        sub.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help=SET_HELP)
+    def add_set(sub, help=SET_HELP):
+        sub.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help=help)
 
     demo = command("demo", "the main job (make demo): demonstrate, learn, reproduce both tasks")
     demo.add_argument("--out", default="runs", help="output folder (one sub-folder per task)")
@@ -152,7 +167,7 @@ def build_parser():
         help="seconds per demonstration (default: the scenario's duration)",
     )  # fmt: skip
     demonstrate.add_argument(
-        "--seed", type=_non_negative_int("--seed"),
+        "--seed", type=_non_negative_int("--seed", MAX_SEED),
         help="seed of the first demonstration (default: the scenario's seed)",
     )
     demonstrate.add_argument("--no-replay", action="store_true", help="write no HTML replays")
@@ -162,10 +177,10 @@ def build_parser():
     learn = command("learn", "fit the HSMM of a run folder's dataset")
     learn.add_argument("run", help="run folder holding dataset.npz, e.g. runs/cotter_pin/")
     learn.add_argument(
-        "--iterations", type=_positive_int("--iterations"),
+        "--iterations", type=_positive_int("--iterations", MAX_ITERATIONS),
         help="EM iterations at most (default: the scenario's learning.n_iter)",
     )  # fmt: skip
-    add_set(learn)
+    add_set(learn, LEARN_SET_HELP)
     learn.set_defaults(func=learn_command)
 
     reproduce = command("reproduce", "simulate the learnt task; write replay, figures, metrics")
@@ -192,7 +207,7 @@ def build_parser():
     )  # fmt: skip
     reproduce.add_argument("--out", help="output folder (default: the run folder)")
     reproduce.add_argument("--no-replay", action="store_true", help="write no HTML replay")
-    add_set(reproduce)
+    add_set(reproduce, REPRODUCE_SET_HELP)
     reproduce.set_defaults(func=reproduce_command)
 
     emg = command("emg-figure", "Fig. 6: summed sEMG and its moving-RMS envelopes")
@@ -206,7 +221,7 @@ def build_parser():
     )  # fmt: skip
     emg.add_argument("--per-channel", action="store_true", help="per-channel RMS summed")
     emg.add_argument(
-        "--seed", type=_non_negative_int("--seed"), default=0,
+        "--seed", type=_non_negative_int("--seed", MAX_SEED), default=0,
         help="seed of the synthetic recording",
     )  # fmt: skip
     emg.add_argument(
@@ -251,7 +266,7 @@ def build_parser():
     teleop.add_argument("scenario", help="scenario YAML file, or a shipped one: cotter_pin, drawing")
     teleop.add_argument("--out", required=True, help="run folder; the take joins its dataset.npz")
     teleop.add_argument(
-        "--port", type=_non_negative_int("--port"), default=7000,
+        "--port", type=_non_negative_int("--port", MAX_PORT), default=7000,
         help="Meshcat's port on localhost (0: a free one)",
     )  # fmt: skip
     teleop.add_argument(
@@ -325,11 +340,41 @@ def _terminate(signum, frame):
     raise Terminated()
 
 
+def _commands_list(parser):
+    """The usage line and one line per command with its help (``hemg-drake`` alone)."""
+    (commands,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    width = max(len(c.dest) for c in commands._choices_actions)
+    lines = [f"  {c.dest:<{width}}  {c.help}" for c in commands._choices_actions]
+    return parser.format_usage() + "commands:\n" + "\n".join(lines) + "\n"
+
+
+def _missing_package(error):
+    """One sentence for an ImportError: the optional package and the extra that installs it
+    (pyproject.toml), else the error's own first line."""
+    name = (error.name or "").split(".")[0]
+    extra = OPTIONAL_EXTRAS.get(name)
+    if extra:
+        return f"needs the optional package {name}: pip install 'hemg-drake[{extra}]'"
+    if error.name:
+        return f"needs the package {error.name}, which is not installed"
+    return _one_line(error)
+
+
 def main(argv=None):
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    if not (sys.argv[1:] if argv is None else argv):
+        sys.stderr.write(_commands_list(parser))
+        return 2
+    args = parser.parse_args(argv)
     previous = signal.signal(signal.SIGTERM, _terminate)
+
+    def one_line_warning(message, category, *_):  # a warning, like an error, in one line
+        print(f"hemg-drake {args.command}: warning: {_one_line(message)}", file=sys.stderr)
+
     try:
-        status = args.func(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = one_line_warning
+            status = args.func(args)
     except KeyboardInterrupt as error:
         # A command may say what it kept (sweep: its finished trials) in the error's args.
         kept = str(error) or "no partial output kept"
@@ -341,13 +386,7 @@ def main(argv=None):
         return 143
     except ImportError as error:
         # An optional dependency (pyproject.toml's extras) that this install lacks.
-        extra = OPTIONAL_EXTRAS.get((error.name or "").split(".")[0])
-        how = f": pip install 'hemg-drake[{extra}]'" if extra else ""
-        print(
-            f"hemg-drake {args.command}: error: needs the optional package "
-            f"{error.name or error}{how}",
-            file=sys.stderr,
-        )
+        print(f"hemg-drake {args.command}: error: {_missing_package(error)}", file=sys.stderr)
         return 2
     except (ValueError, OSError) as error:
         # Bad input and unwritable or missing files are reported in one line.

@@ -10,6 +10,24 @@ import sys
 from pathlib import Path
 
 
+# The scenario keys that learn and reproduce read from the dataset's scenario (pipeline.learn:
+# learning_data, fit_model; pipeline.reproduce: the placement, build_reproduction_diagram);
+# a --set of any other key would do nothing, and is refused.
+READS = {
+    "learn": ("learning", "seed"),
+    "reproduce": (
+        "reproduction", "scene.position", "scene.yaw_deg", "scene.cotter_pin", "scene.drawing",
+        "plant", "simulator", "visualization", "clik", "pd", "emg.k_min", "emg.k_max",
+    ),
+}  # fmt: skip
+
+
+# Longest delay stability linearises (ms each way): the loop has about 10 states per ms of
+# delay and its Jacobian is dense, so memory grows as the square and time as about the cube
+# (measured: 200 ms 2040 states, 0.46 GB, 16 s; 400 ms 4040 states, 1 GB, 48 s of CPU).
+MAX_STABILITY_DELAY_MS = 500.0
+
+
 def _print(line):
     """Print, and keep working if the reader went away (``| head``)."""
     try:
@@ -58,7 +76,7 @@ def _scenario_path(name):
 
 def demo_command(args):
     """``hemg-drake demo``: demonstrate, learn and reproduce each task into ``args.out``."""
-    from hemg_drake.pipeline import run_demo
+    from hemg_drake.demo import run_demo
 
     check_output_folder(args.out)
     run_demo(
@@ -97,18 +115,22 @@ def demonstrate_command(args):
 def learn_command(args):
     """``hemg-drake learn``: fit the HSMM of a run folder's dataset."""
     from hemg_drake.pipeline import learn
+    from hemg_drake.scenario import check_overrides_read
 
+    check_overrides_read(args.set, READS["learn"], reader="learn")
     learn(args.run, overrides=args.set, n_iter=args.iterations, progress=_print)
 
 
 def reproduce_command(args):
     """``hemg-drake reproduce``: simulate the learnt task of a run folder."""
     from hemg_drake.pipeline import reproduce
+    from hemg_drake.scenario import check_overrides_read
 
     overrides = _with_flags(
         args, weighting="reproduction.weighting", restoring_gain="reproduction.restoring_gain",
         tracker="reproduction.tracker",
     )  # fmt: skip
+    check_overrides_read(overrides, READS["reproduce"], reader="reproduce")
     if args.out is not None:
         check_output_folder(args.out)
     reproduce(
@@ -263,7 +285,7 @@ def _fps(metadata):
 def _hsmm_states(folder, demos, metadata):
     """Each demonstration's HSMM states (segmental Viterbi), if the run folder holds a model
     that its manifest records as learnt from this dataset; None otherwise."""
-    from hemg_drake.pipeline import demonstration_frames, learning_data, placed_model
+    from hemg_drake.pipeline import demonstration_frames, learning_data
     from hemg_drake.scenario import parse_scenario
 
     if folder is None or not folder.model.is_file() or "scenario" not in metadata:
@@ -327,6 +349,11 @@ def stability_command(args):
         check_output_file(args.output)
     period_ms = 1e3 * scenario.master.period
     for delay in args.delays:
+        if delay > MAX_STABILITY_DELAY_MS:
+            raise ValueError(
+                f"--delays {delay:g}: at most {MAX_STABILITY_DELAY_MS:g} ms (the linearised "
+                "loop grows by 10 states per ms: 4040 states take 1 GB and 48 s at 400 ms)"
+            )
         if delay < 0 or abs(round(delay / period_ms) * period_ms - delay) > 1e-9:
             raise ValueError(
                 f"--delays {delay:g}: a delay must be a whole number of the master's "

@@ -12,7 +12,7 @@ import dataclasses as dc
 import numpy as np
 
 # The checks a field may carry (numbers must be >= 0 unless ``signed``).
-CHECKS = ("positive", "signed", "fraction", "maximum", "size", "choices")
+CHECKS = ("positive", "signed", "fraction", "maximum", "why", "size", "choices")
 
 
 def checked(default, **checks):
@@ -22,7 +22,8 @@ def checked(default, **checks):
     ----------
     default : the value; a list, tuple or array is copied per instance.
     **checks : ``positive`` (> 0), ``signed`` (negative allowed), ``fraction`` (in [0, 1]),
-        ``maximum``, ``size`` (a vector's length, or a tuple of allowed lengths), ``choices``
+        ``maximum``, ``why`` (what the maximum stands for, said in its message: "10 s of 1 ms
+        samples"), ``size`` (a vector's length, or a tuple of allowed lengths), ``choices``
         (the allowed values).
     """
     unknown = set(checks) - set(CHECKS)
@@ -107,6 +108,7 @@ def _check_value(key, value, checks):
         raise ValueError(f"key '{key}' must not be negative, got {value!r}")
     maximum = checks.get("maximum")
     if maximum is not None and np.any(numbers > maximum):
-        raise ValueError(f"key '{key}' must be at most {maximum:g}, got {value!r}")
+        why = f" ({checks['why']})" if checks.get("why") else ""
+        raise ValueError(f"key '{key}' must be at most {maximum:g}{why}, got {value!r}")
     if checks.get("fraction") and np.any(numbers > 1):
         raise ValueError(f"key '{key}' must lie in [0, 1], got {value!r}")

@@ -121,8 +121,3 @@ def folder_lock(path, *, shared=False):
     finally:
         del _HELD[key]
         os.close(lock.fd)
-
-
-def held_lock(path):
-    """The lock this process holds on ``path``, or None."""
-    return _HELD.get(os.path.realpath(path))

@@ -9,11 +9,10 @@ wrote in the folder's manifest (:class:`~hemg_drake.run_folder.RunFolder`)::
 
 Every setting comes from the scenario (stored in the dataset): the learning settings in its
 ``learning`` section, the reproduction's in ``reproduction``; ``overrides`` (``--set``)
-change any of them for one call. :func:`run_demo` runs the three stages for both shipped
-scenarios (``make demo``).
+change any of them for one call. :func:`hemg_drake.demo.run_demo` runs the three stages for both
+shipped scenarios (``make demo``).
 """
 
-import contextlib
 import functools
 import json
 import time
@@ -28,7 +27,8 @@ TASKS = ("cotter_pin", "drawing")
 
 
 def _demonstrate_hint(folder):
-    return f"hemg-drake demonstrate SCENARIO --out {folder.path}"
+    # Never advice that replaces what is there (a person's takes): a new run goes elsewhere.
+    return "hemg-drake demonstrate SCENARIO --out NEW_FOLDER for a new run"
 
 
 def demonstrate_seed(built, seed, *, replay_path=None, title=None):
@@ -226,7 +226,7 @@ def learn(run_dir, *, overrides=(), n_iter=None, diagrams=False, progress=print)
 
 
 def _learn(folder, overrides, n_iter, diagrams, progress):
-    from hemg_drake.placements import last_frames
+    from hemg_drake.placements import last_frames, scene_placements
     from hemg_drake.viz.run_figures import write_state_activations_figure
 
     folder.check("demonstrate", folder.dataset, run_hint=_demonstrate_hint(folder))
@@ -236,6 +236,7 @@ def _learn(folder, overrides, n_iter, diagrams, progress):
     frames = demonstration_frames(demos, scenario)
     start = time.perf_counter()
     model = fit_model(data, scenario, n_iter=n_iter, frames=frames)
+    model.learnt_at_ = scene_placements(frames)  # stored in model.npz
     iterations = f"{model.n_iter_} EM iteration{'s' if model.n_iter_ != 1 else ''}"
     frame_names = scenario.learning.task_frames.replace("_", " ")
     kind = "HSMM" if not hasattr(model, "at") else f"TP-HSMM (task frames: {frame_names})"
@@ -269,17 +270,20 @@ def placed_model(model, scenario):
     return model.at(*last_frames(task_frames(scenario), model.n_frames_))
 
 
-def _checked_model(folder, scenario):
+def _checked_model(folder, scenario, frames):
     """The run folder's model at the scenario's placement, refused unless it was fitted on
-    the folder's dataset."""
+    the folder's dataset; a warning if a world-frame model is moved from where it learnt."""
     from hemg_drake.diagrams.reproduction import check_model
     from hemg_drake.learning.tphsmm import load_model
+    from hemg_drake.placements import check_learnt_placement
 
     hint = f"hemg-drake learn {folder.path}"
     folder.check("demonstrate", folder.dataset, run_hint=_demonstrate_hint(folder))
     folder.check("learn", folder.model, run_hint=hint)
     folder.check_made_from("learn", folder.dataset, run_hint=hint)
-    model = placed_model(load_model(folder.model), scenario)
+    learnt = load_model(folder.model)
+    check_learnt_placement(learnt, scenario, frames, source=folder.model)
+    model = placed_model(learnt, scenario)
     try:
         check_model(model)
     except ValueError as error:
@@ -326,7 +330,7 @@ def _checked_reproduce(folder, out, overrides, start_offset, replay, progress):
 
     demos, recorded = load_demonstrations(folder.dataset)
     scenario = recorded.replaced(overrides)
-    model = _checked_model(folder, scenario)
+    model = _checked_model(folder, scenario, demonstration_frames(demos, recorded))
     offset = np.asarray(start_offset, dtype=float)
     if offset.shape != (3,) or not np.all(np.isfinite(offset)):
         raise ValueError(f"start offset must be 3 finite numbers (m), got {start_offset!r}")
@@ -407,145 +411,3 @@ def write_diagrams(scenario, model, run_dir, *, progress=print):
         ).diagram,
     }
     return write_diagram_pictures(diagrams, run_dir, progress=progress)
-
-
-# run_demo(placements=True): each task demonstrated at placements drawn from a modest range
-# around its shipped pose, then reproduced at a pose beyond it (position m, yaw deg).
-PLACEMENT_DEMOS = {
-    "cotter_pin": (
-        ["scene.placements.position_range=[[0.622,-0.857,0.11],[0.662,-0.817,0.13]]",
-         "scene.placements.yaw_range_deg=[-20,20]"],
-        ([0.66, -0.80, 0.12], 25.0),
-    ),
-    "drawing": (
-        ["scene.placements.position_range=[[0.585,-0.715,0.085],[0.615,-0.685,0.095]]",
-         "scene.placements.yaw_range_deg=[-8,8]"],
-        ([0.615, -0.685, 0.09], 12.0),
-    ),
-}  # fmt: skip
-
-
-def placement_demo(scenario, run_dir, *, replays=True, progress=print):
-    """Demonstrate ``scenario`` at the placements of ``PLACEMENT_DEMOS`` (its task), learn the
-    TP-HSMM and reproduce at the new pose; writes the stages' outputs and
-    ``placements.png`` (demonstrations grey, the reproduction red, from above).
-
-    Returns
-    -------
-    dict, run name ("TASK (new placement)") -> metrics.
-    """
-    from hemg_drake.diagrams.reproduction import ReproductionLog
-    from hemg_drake.viz.run_figures import write_placements_figure
-
-    ranges, (position, yaw) = PLACEMENT_DEMOS[scenario.task]
-    folder = Path(run_dir)
-    demonstrate(scenario.replaced(ranges), folder, replays=False, progress=progress)
-    learn(folder, progress=progress)
-    values = ",".join(repr(float(v)) for v in position)
-    new = [f"scene.position=[{values}]", f"scene.yaw_deg={float(yaw)!r}"]
-    metrics = reproduce(folder, overrides=new, replay=replays, progress=progress)
-    demos, recorded = load_demonstrations(folder / "dataset.npz")
-    with np.load(folder / "reproduction.npz") as arrays:
-        log = ReproductionLog(**{name: arrays[name] for name in arrays.files})
-    X_WT = recorded.replaced(new).X_WT()
-    write_placements_figure(demos, log, scenario.task, X_WT, folder / "placements.png")
-    progress(f"wrote {folder / 'placements.png'}")
-    return {f"{scenario.task} (new placement)": metrics}
-
-
-def run_demo(
-    out_dir="runs", *, tasks=TASKS, overrides=(), replays=True, placements=False, progress=print
-):  # fmt: skip
-    """The full demo: for each task, demonstrate, learn, reproduce (from the demonstrated
-    start and from each of ``reproduction.start_offsets``), draw and measure.
-
-    Per task, ``out_dir/TASK/`` gets the demonstrate, learn and reproduce outputs, one more
-    reproduction per start offset in ``start_offset/`` (``start_offset_<i>/`` for more than
-    one), and the diagrams. ``out_dir/metrics.json`` gathers the metrics; the table is
-    printed.
-
-    Parameters
-    ----------
-    out_dir : path-like
-    tasks : sequence of task names (the shipped scenarios)
-    overrides : sequence of str, ``key=value`` changes for every task's scenario (e.g.
-        ``"num_demonstrations=2"`` for small-scale runs).
-    replays : bool, write the HTML replays.
-    placements : bool
-        Also demonstrate each task at several placements and reproduce it at a new one
-        (:func:`placement_demo`, in ``out_dir/TASK/placements/``).
-    progress : callable taking one line of text.
-
-    Returns
-    -------
-    dict, run name -> metrics.
-    """
-    from hemg_drake.evaluation import format_metrics
-    from hemg_drake.scenario import load_scenario, shipped_scenario
-
-    from hemg_drake.folder_lock import folder_lock
-
-    unknown = [task for task in tasks if task not in TASKS]
-    if unknown or not tasks:
-        raise ValueError(f"tasks must be among {TASKS}, got {list(tasks)}")
-    out_dir = Path(out_dir)
-    scenarios = {task: load_scenario(shipped_scenario(task), overrides=overrides) for task in tasks}
-    summary = out_dir / "metrics.json"
-    made = not out_dir.exists()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    try:
-        with folder_lock(out_dir):
-            _check_demo_summary(out_dir, summary)
-            results = _run_demo(scenarios, out_dir, replays, placements, progress)
-            # The folder holds the tasks' runs and other folders: its manifest lists only
-            # the summary (it is not a run folder of its own).
-            write_text_atomic(summary, json.dumps(results, indent=2) + "\n")
-            RunFolder(out_dir).finish("demo", [summary])
-    except BaseException:
-        if made:
-            with contextlib.suppress(OSError):
-                out_dir.rmdir()
-        raise
-    progress(format_metrics(results))
-    progress(f"wrote {summary}")
-    return results
-
-
-def _check_demo_summary(out_dir, summary):
-    """Refuse to overwrite a ``metrics.json`` that no demo recorded writing."""
-    from hemg_drake.run_folder import MANIFEST
-
-    listed = RunFolder(out_dir).manifest().get("demo", {}).get("files", {})
-    if summary.exists() and "metrics.json" not in listed:
-        raise ValueError(
-            f"{summary}: not written by hemg-drake demo (no demo in {out_dir / MANIFEST} "
-            "lists it), and the demo writes that name: move it away or choose another --out"
-        )
-
-
-def _run_demo(scenarios, out_dir, replays, placements, progress):
-    results, began = {}, time.perf_counter()
-    for task, scenario in scenarios.items():
-        run_dir = out_dir / task
-        progress(
-            f"== {task}: {scenario.num_demonstrations} demonstrations of {scenario.duration:g} s, "
-            f"N = {scenario.learning.num_states} states -> {run_dir}/"
-        )
-        for path in demonstrate(scenario, run_dir, replays=replays, progress=progress):
-            progress(f"wrote {path}")
-        learn(run_dir, diagrams=True, progress=progress)
-        results[task] = reproduce(run_dir, replay=replays, progress=progress)
-        offsets = scenario.reproduction.start_offsets
-        for i, offset in enumerate(offsets):
-            name = "start_offset" if len(offsets) == 1 else f"start_offset_{i + 1}"
-            distance = 100 * float(np.linalg.norm(offset))
-            results[f"{task} (start {distance:.0f} cm away)"] = reproduce(
-                run_dir, start_offset=offset, out_dir=run_dir / name, replay=False,
-                progress=progress,
-            )  # fmt: skip
-        if placements:
-            results.update(
-                placement_demo(scenario, run_dir / "placements", replays=replays, progress=progress)
-            )
-        progress(f"== {task} done after {time.perf_counter() - began:.0f} s")
-    return results

@@ -167,3 +167,49 @@ def moved_demonstration(demo, frame_from, frame_to):
         v_WE=demo.v_WE @ R.T,
         f_WE=demo.f_WE @ R.T,
     )
+
+
+def scene_placements(frames):
+    """The distinct scene placements of the demonstrations' task frames (list of (A, b)), as
+    a model stores them (``learnt_at_``): JSON-ready ``{"position": [x, y, z], "rotation":
+    R (3 x 3)}`` of the scene frame, in the demonstrations' order."""
+    placements = []
+    for A, b in frames:
+        R, p = scene_frame(A, b)
+        entry = {"position": np.asarray(p, float).tolist(),
+                 "rotation": np.asarray(R, float).tolist()}  # fmt: skip
+        if entry not in placements:
+            placements.append(entry)
+    return placements
+
+
+def check_learnt_placement(model, scenario, frames=None, source="model"):
+    """Warn (``UserWarning``, naming ``source``) when ``model`` is reproduced where it cannot
+    do the task it learnt; returns the warning's text, or None.
+
+    A world-frame model (a plain HSMM) reproduces its demonstrations where they were: at a
+    scene placement that is none of those it was learnt at (its ``learnt_at_``, see
+    :func:`scene_placements`; for a model file written without them, the placements of
+    the demonstrations' ``frames``) it pulls the pin or draws the strokes where the scene
+    was. A TP-HSMM (with ``at``) is placed by its frames; unknown placements say nothing.
+    """
+    import warnings
+
+    learnt_at = getattr(model, "learnt_at_", None) or (frames and scene_placements(frames))
+    if hasattr(model, "at") or not learnt_at:
+        return None
+    R, p = scene_frame(*task_frames(scenario))
+    here = [(np.linalg.norm(p - e["position"]), np.abs(R - e["rotation"]).max()) for e in learnt_at]
+    if any(distance <= 1e-6 and turn <= 1e-9 for distance, turn in here):
+        return None
+    nearest = learnt_at[int(np.argmin([distance for distance, _ in here]))]
+    R0 = np.asarray(nearest["rotation"])
+    yaw = np.degrees(np.arctan2(R0[1, 0], R0[0, 0]))
+    message = (
+        f"{source}: a world-frame HSMM learnt with the scene at "
+        f"{np.round(nearest['position'], 3).tolist()} m, yaw {yaw:.1f} deg, reproduced with "
+        f"the {describe_placement(scenario)}: it reproduces the task where it was learnt, and "
+        f"is checked where the scene is now (demonstrate at several placements for a TP-HSMM)"
+    )
+    warnings.warn(message, stacklevel=3)
+    return message

@@ -24,6 +24,7 @@ the CLI's ``--set``)::
 
 import copy
 import dataclasses as dc
+import functools
 import importlib.resources
 import math
 import re
@@ -33,7 +34,7 @@ from pathlib import Path
 import yaml
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.plant import MultibodyPlantConfig
-from pydrake.systems.analysis import SimulatorConfig
+from pydrake.systems.analysis import GetIntegrationSchemes, SimulatorConfig
 from pydrake.visualization import VisualizationConfig
 
 from hemg_drake.config_fields import check_config, checked
@@ -45,12 +46,24 @@ from hemg_drake.tasks import plans
 from hemg_drake.tasks.config import PlanConfig, SceneConfig
 from hemg_drake.tasks.placement import master_orientation, task_scene_pose, to_world
 from hemg_drake.teleop.config import FeedbackConfig, MappingConfig, MasterConfig, OperatorConfig
-from hemg_drake.yaml_schema import check_types, first_line, override_data, parse_yaml
+from hemg_drake.yaml_schema import (
+    check_types, first_line, override_data, parse_yaml, schema_fields,
+)  # fmt: skip
 
 TASKS = ("cotter_pin", "drawing")
+# The largest seed: Drake's RandomGenerator takes a 32-bit seed (2**32 draws what 0 draws,
+# measured), and demonstration c runs with seed + c - 1.
+MAX_SEED = 2**32 - 1
+# Strings of Drake's config structs that Drake does not check against a list: any bus name
+# (the Visualization maps it to Drake's null bus, hemg_drake.diagrams.visualization).
+FREE_STRINGS = ("visualization.lcm_bus",)
 # Longest demonstration (s): 10 minutes of a 1 kHz diagram is minutes to simulate and about
 # 0.5 GB of logs; a longer one is more likely a typo than a plan.
 MAX_DURATION = 600.0
+# Most demonstrations C: the paper takes 3 and 4. A simulated second costs about 0.6 s of CPU
+# (measured on the cotter pin), so 100 demonstrations of the shipped 4.5 s take about 5 min
+# and of the longest 600 s about 10 h: more is a typo, not a plan.
+MAX_DEMONSTRATIONS = 100
 # The scenarios shipped with the package (hemg_drake/scenarios/<name>.yaml).
 SCENARIOS = importlib.resources.files("hemg_drake") / "scenarios"
 
@@ -93,7 +106,7 @@ class Scenario:
     # Sample period of the logged demonstration (s; Table I: 0.01).
     log_period: float = checked(0.01, positive=True)
     # Number of demonstrations C (cotter pin 4, drawing 3).
-    num_demonstrations: int = checked(4, positive=True)
+    num_demonstrations: int = checked(4, positive=True, maximum=MAX_DEMONSTRATIONS)
     # Demonstration c (1-based) is run with seed ``seed + c - 1``: plan variability, sEMG
     # noise; the HSMM's initialisation takes ``seed``.
     seed: int = checked(0)
@@ -136,9 +149,30 @@ class Scenario:
         return WorkspaceMapping(scale=self.mapping.scale, R_WM=self.R_WM(), p_WMo=p_WMo)
 
     def check(self, key=""):
-        """The rules that span sections or need a model (each section checks its own): a
-        plant step of at most ``MAX_TIME_STEP``, a log period that is a whole number of plant
-        steps, a pin detent shorter than the pin. Raises ValueError naming the key."""
+        """The rules that span sections or need a model (each section checks its own): the
+        strings of Drake's config structs among the values Drake accepts
+        (:func:`drake_choices`), point contact for the drawing, a plant step of at most
+        ``MAX_TIME_STEP``, a log period that is a whole number of plant steps, a pin detent
+        shorter than the pin, seeds within Drake's 32 bits. Raises ValueError naming the
+        key."""
+        for path, choices in drake_choices().items():
+            section, name = path.split(".")
+            value = getattr(getattr(self, section), name)
+            if value not in choices:
+                raise ValueError(f"key '{path}' = {value!r} is not one of {choices} (Drake's)")
+        if self.task == "drawing" and self.plant.contact_model != "point":
+            raise ValueError(
+                f"key 'plant.contact_model' = {self.plant.contact_model!r} does not go with "
+                "'task' = 'drawing': the drawing scene needs point contact (the pen is tuned "
+                "for it; hemg_drake.tasks.drawing says why)"
+            )
+        last_seed = self.seed + self.num_demonstrations - 1
+        if last_seed > MAX_SEED:
+            raise ValueError(
+                f"key 'seed' = {self.seed} with 'num_demonstrations' = "
+                f"{self.num_demonstrations} seeds up to {last_seed}; Drake's random generator "
+                f"takes seeds up to {MAX_SEED} (2**32 - 1)"
+            )
         time_step = self.plant.time_step
         if not 0 < time_step <= MAX_TIME_STEP:
             raise ValueError(
@@ -181,6 +215,85 @@ class Scenario:
         """
         return _layered(copy.deepcopy(self), [], overrides, source="the scenario",
                         overrides_source=source)  # fmt: skip
+
+
+@functools.cache
+def drake_choices():
+    """The strings Drake accepts in each string field of the scenario's Drake config
+    structs, asked of Drake: ``{"plant.contact_model": ("point", ...), ...}``.
+
+    ``simulator.integration_scheme``: ``GetIntegrationSchemes()``. The plant's strings
+    (``contact_model``, ``discrete_contact_approximation``,
+    ``contact_surface_representation``): the list that each field's documentation in
+    pydrake gives ("Valid strings are: ..."), since Drake binds no function that lists
+    them. The strings of ``FREE_STRINGS`` take any value.
+    """
+    choices = {"simulator.integration_scheme": tuple(GetIntegrationSchemes())}
+    for field in MultibodyPlantConfig.__fields__:
+        if field.type is str:
+            doc = getattr(MultibodyPlantConfig, field.name).__doc__ or ""
+            items = re.match(r'(\s*-\s*"\w+")*', doc.partition("Valid strings are:")[2])
+            choices[f"plant.{field.name}"] = tuple(re.findall(r'"(\w+)"', items.group()))
+    return choices
+
+
+def check_overrides_read(overrides, reads, *, reader, source="--set"):
+    """Refuse an override of a key that ``reader`` does not read, in one line.
+
+    Parameters
+    ----------
+    overrides : sequence of str, ``key=value`` as for :func:`load_scenario`.
+    reads : sequence of str, the key paths ``reader`` reads: a section (``"learning"``: every
+        key under it) or a key (``"seed"``).
+    reader : str, who reads them, e.g. ``"learn"``.
+
+    Raises
+    ------
+    ValueError
+        ``--set emg.k_max=150: learn does not use emg.*: it reads learning.* and seed``; an
+        override of ``task``: the task of a run folder is fixed. A malformed override is
+        left for :func:`load_scenario` to name.
+    """
+    shown = [key if _leaf(key) else f"{key}.*" for key in reads]
+    said = ", ".join(shown[:-1]) + f" and {shown[-1]}" if len(shown) > 1 else shown[0]
+    for override in overrides:
+        try:
+            keys = _key_paths(override_data(override, Scenario))
+        except ValueError:
+            continue
+        for key in keys:
+            if key == "task":
+                raise ValueError(
+                    f"{source} {override}: the task of a run folder is fixed (its dataset's); "
+                    "demonstrate the other task into a folder of its own"
+                )
+            if not any(key == read or key.startswith(f"{read}.") for read in reads):
+                section = key.split(".")[0]
+                partly = _leaf(section) or any(r.split(".")[0] == section for r in reads)
+                unused = key if partly else f"{section}.*"
+                raise ValueError(f"{source} {override}: {reader} does not use {unused}: it "
+                                 f"reads {said}")  # fmt: skip
+
+
+def _key_paths(data, path=""):
+    """The dotted key paths of the values in nested mappings ``data``."""
+    if not isinstance(data, dict) or not data:
+        return [path]
+    return [key for name, value in data.items()
+            for key in _key_paths(value, f"{path}.{name}" if path else str(name))]  # fmt: skip
+
+
+def _leaf(key):
+    """True if ``key`` (a dotted path in Scenario) holds a value, not a section."""
+    schema = Scenario
+    for name in key.split("."):
+        fields = schema_fields(schema)
+        if name not in fields:
+            return True
+        schema = fields[name]
+        if typing.get_origin(schema) is typing.Union:
+            schema = next(a for a in typing.get_args(schema) if a is not type(None))
+    return not (dc.is_dataclass(schema) or hasattr(schema, "__fields__"))
 
 
 def load_scenario(path, *, overrides=()):

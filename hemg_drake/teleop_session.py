@@ -191,7 +191,7 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
 
 
 def _takes_hint(folder):
-    return f"hemg-drake teleop SCENARIO --out {folder.path} (or hemg-drake demonstrate)"
+    return "hemg-drake teleop SCENARIO --out NEW_FOLDER for new takes"
 
 
 # Keys a take does not read (its length is the person's; the count is demonstrate's):

@@ -91,15 +91,51 @@ def check_types(value, schema, key=""):
 
 
 def parse_yaml(text, source):
-    """The data of YAML ``text``; malformed YAML is a one-line ValueError naming ``source``
-    (with the line and column)."""
+    """The data of YAML ``text``; malformed YAML, or a key given twice in one mapping (YAML
+    loaders keep the last without a word), is a one-line ValueError naming ``source`` (with
+    the line and column, or the key path and its lines)."""
+    if not text.strip():
+        return None
     try:
-        return yaml.safe_load(text) if text.strip() else None
+        twice = _key_given_twice(yaml.compose(text, Loader=yaml.SafeLoader))
+        if twice is not None:
+            key, first, second = twice
+            lines = f"on line {first}" if first == second else f"at lines {first} and {second}"
+            raise ValueError(f"{source}: key '{key}' is given twice, {lines}: give it once")
+        return yaml.safe_load(text)
     except yaml.YAMLError as error:
         mark = getattr(error, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = getattr(error, "problem", None) or first_line(error)
         raise ValueError(f"{source}: malformed YAML{where}: {problem}") from None
+
+
+def _key_given_twice(node, path="", seen=None):
+    """(key path, first line, second line) of the first key that a mapping under ``node`` (a
+    composed YAML node) holds twice, else None. Merge keys (``<<``) may be overridden."""
+    seen = set() if seen is None else seen
+    if node is None or id(node) in seen:  # an alias is checked where its anchor is
+        return None
+    seen.add(id(node))
+    if isinstance(node, yaml.MappingNode):
+        lines = {}
+        for key_node, value_node in node.value:
+            name = key_node.value if isinstance(key_node, yaml.ScalarNode) else None
+            child = f"{path}.{name}" if path else str(name)
+            if name is not None and key_node.tag != "tag:yaml.org,2002:merge":
+                line = key_node.start_mark.line + 1
+                if name in lines:
+                    return child, lines[name], line
+                lines[name] = line
+            found = _key_given_twice(value_node, child, seen)
+            if found is not None:
+                return found
+    elif isinstance(node, yaml.SequenceNode):
+        for i, item in enumerate(node.value):
+            found = _key_given_twice(item, f"{path}[{i}]", seen)
+            if found is not None:
+                return found
+    return None
 
 
 def override_data(override, schema):

@@ -9,6 +9,7 @@ from importlib.metadata import version
 import numpy as np
 import pytest
 
+import hemg_drake.demo as demo
 import hemg_drake.pipeline as pipeline
 from hemg_drake.cli import main
 from hemg_drake.learning.demos import Demonstration, save_dataset
@@ -86,7 +87,7 @@ def test_output_paths_are_checked_before_any_simulation(tmp_path, run_cli, no_si
 
 def test_writable_output_folder_reaches_the_pipeline(tmp_path, run_cli, monkeypatch):
     calls = []
-    monkeypatch.setattr(pipeline, "run_demo", lambda out, **kwargs: calls.append((out, kwargs)))
+    monkeypatch.setattr(demo, "run_demo", lambda out, **kwargs: calls.append((out, kwargs)))
     out = tmp_path / "new" / "runs"
     code, _, err = run_cli(["demo", "--out", str(out), "--tasks", "drawing", "--no-replay",
                             "--set", "num_demonstrations=2"])  # fmt: skip
@@ -182,7 +183,7 @@ def test_ctrl_c_is_one_line_and_exit_130(tmp_path, run_cli, monkeypatch, command
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(pipeline, job, interrupted)
+    monkeypatch.setattr(demo if job == "run_demo" else pipeline, job, interrupted)
     try:
         code, _, err = run_cli([a.format(tmp=tmp_path) for a in command])
     except KeyboardInterrupt:

@@ -4,13 +4,14 @@ and calls, and no module holds more than one job's worth of lines.
 Layers, lowest first; a module may import its own layer and those below, never above:
 
 0. configs and base helpers: the ``config.py`` of each package, ``config_fields``,
-   ``_validate``, ``fileio``, ``folder_lock``, ``yaml_schema``;
+   ``_validate``, ``fileio``, ``folder_lock``, ``folder_versions``,
+   ``yaml_schema``;
 1. systems: ``emg``, ``control``, ``teleop``, ``learning``, ``robots``, ``tasks``;
 2. station and diagrams: ``diagrams``, the ``scenario`` that composes the configs for the
    builders, ``placements``;
 3. analysis of logs: ``analysis``, ``evaluation``, ``tasks.metrics``;
 4. visualisation: ``viz``;
-5. applications: ``pipeline``, ``run_folder``, ``sweep``, ``cli`` and its ``commands``,
+5. applications: ``pipeline``, ``demo``, ``run_folder``, ``sweep``, ``cli`` and its ``commands``,
    ``teleop_session``, ``notebook``.
 """
 
@@ -30,6 +31,7 @@ PLACES = {
     "_validate": "configs",
     "fileio": "configs",
     "folder_lock": "configs",
+    "folder_versions": "configs",
     "yaml_schema": "configs",
     "emg": "systems",
     "control": "systems",
@@ -47,6 +49,7 @@ PLACES = {
     "tasks.metrics": "analysis",
     "viz": "viz",
     "pipeline": "applications",
+    "demo": "applications",
     "run_folder": "applications",
     "sweep": "applications",
     "cli": "applications",

@@ -11,7 +11,8 @@ import pytest
 from hemg_drake.cli import main
 from hemg_drake.learning.demos import load_dataset, save_dataset
 from hemg_drake.learning.hsmm import HSMM
-from hemg_drake.pipeline import demonstrate, learn, learning_data, reproduce, run_demo
+from hemg_drake.demo import run_demo
+from hemg_drake.pipeline import demonstrate, learn, learning_data, reproduce
 from hemg_drake.run_folder import RunFolder, file_hash
 from hemg_drake.scenario import load_scenario, shipped_scenario
 
@@ -134,7 +135,7 @@ def test_learn_refuses_a_dataset_no_demonstrate_recorded(pin_run, tmp_path, caps
         learn(tmp_path, progress=quiet)
     message = str(error.value)
     assert "\n" not in message and "no finished 'demonstrate' recorded it" in message
-    assert message.endswith(f"run hemg-drake demonstrate SCENARIO --out {tmp_path}")
+    assert message.endswith("run hemg-drake demonstrate SCENARIO --out NEW_FOLDER for a new run")
     assert not (tmp_path / "model.npz").exists()
     assert main(["learn", str(tmp_path)]) == 2
     err = capsys.readouterr().err

@@ -183,7 +183,7 @@ def test_cli_reproduces_at_a_new_placement(tmp_path, capsys):
 
 
 def test_run_demo_with_placements_reproduces_each_task_at_a_new_placement(tmp_path):
-    from hemg_drake.pipeline import PLACEMENT_DEMOS, run_demo
+    from hemg_drake.demo import PLACEMENT_DEMOS, run_demo
 
     results = run_demo(tmp_path, tasks=["cotter_pin"],
                        overrides=["num_demonstrations=2", "duration=1.0"],

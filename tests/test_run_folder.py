@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from hemg_drake import run_folder
+from hemg_drake import folder_versions, run_folder
 from hemg_drake.fileio import write_text_atomic
 from hemg_drake.folder_lock import FolderBusy, folder_lock
 from hemg_drake.run_folder import MANIFEST, RunFolder, repair
@@ -308,7 +308,7 @@ def test_what_a_killed_stage_left_beside_is_tidied_by_the_next(full):
 
 
 def test_the_two_rename_fallback_and_its_recovery(full, monkeypatch):
-    monkeypatch.setattr(run_folder, "_renameat2", lambda: None)
+    monkeypatch.setattr(folder_versions, "_renameat2", lambda: None)
     run_stage(full, "reproduce", ["metrics.json"])
     assert (full / "metrics.json").read_text() == "reproduce again: metrics.json\n"
     # A crash between its two renames: the folder is missing and its last version is
@@ -386,3 +386,13 @@ def test_check_made_from_refuses_a_model_of_another_dataset(full):
     message = str(error.value)
     assert message.startswith(f"{full.model}: was not made from this folder's dataset.npz")
     assert message.endswith("run hemg-drake learn runs/x")
+
+
+def test_a_stage_is_refused_from_inside_the_folder(full, monkeypatch):
+    # The swap would leave the shell in a deleted folder.
+    before = snapshot(full.path)
+    for where in (full.path, full.path / "mine"):
+        monkeypatch.chdir(where)
+        with pytest.raises(ValueError, match="is the folder this command runs in"):
+            run_stage(RunFolder.output("."), "reproduce", ["metrics.json"])
+    assert snapshot(full.path) == before

@@ -236,7 +236,9 @@ def VariableGainPd_(T):
 VariableGainPd = VariableGainPd_[None]
 
 
-def add_variable_gain_pd(builder, *, plant, arm, state_port, config=None, name="pd"):
+def add_variable_gain_pd(
+    builder, *, plant, arm, state_port, config=None, name="pd", system=None
+):
     """Add eq. 20 to ``builder``: a :class:`VariableGainPd` reading ``state_port`` and, if
     ``config.gravity_compensation``, Drake's ``InverseDynamics`` (``kGravityCompensation``,
     named ``<name>_gravity``) on ``plant`` reading it too and feeding the PD's
@@ -251,6 +253,9 @@ def add_variable_gain_pd(builder, *, plant, arm, state_port, config=None, name="
     state_port : OutputPort, the arm's [q; v] (the simulated plant's arm state).
     config : PdConfig.
     name : str, the PD's name in the builder.
+    system : VariableGainPd (or a subclass: the Cartesian impedance of
+        :mod:`hemg_drake.control.impedance`) to add; default ``VariableGainPd(plant=plant,
+        arm=arm, config=config)``.
 
     Returns
     -------
@@ -260,7 +265,9 @@ def add_variable_gain_pd(builder, *, plant, arm, state_port, config=None, name="
     config = PdConfig() if config is None else config
     if plant.num_velocities() != len(arm.joint_names):
         raise ValueError("add_variable_gain_pd needs a plant of the arm alone")
-    pd = builder.AddNamedSystem(name, VariableGainPd(plant=plant, arm=arm, config=config))
+    if system is None:
+        system = VariableGainPd(plant=plant, arm=arm, config=config)
+    pd = builder.AddNamedSystem(name, system)
     builder.Connect(state_port, pd.state_input)
     if config.gravity_compensation:
         gravity = builder.AddNamedSystem(

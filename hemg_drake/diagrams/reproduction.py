@@ -5,6 +5,7 @@ Signal flow (each box a system of this package or Drake, named as in the diagram
     reproducer --x_star--> station (clik -> pd -> plant)
     x_star (default) or the station's p_WE --> reproducer (the position it observes)
     reproducer --k_star--> stiffness_limits --gain--> station
+    reproducer --stiffness_shape--> station        (reproduction.stiffness: spd only)
     reproducer --x_star, xdot_star--> tracking_force (goal x_g) --F_tr--> exported port
     logger (every log_period): x*, xdot*, k*, h, p_WE, v_WE, f_WE, F_tr
 
@@ -70,6 +71,9 @@ class ReproductionLog:
     p_WE, v_WE : arrays, shape (T, 3), the slave's actual tool point (m, m/s).
     f_WE : array, shape (T, 3), force of the task on the tool point (N, W).
     F_tr : array, shape (T, 3), the tracking force of eq. 23 (N).
+    stiffness_shape : array, shape (T, 9), or None
+        ``reproduction.stiffness: spd``: the Cartesian stiffness' shape S_hat fed to the
+        station (row-major 3 x 3, unit determinant); None in the scalar case.
     """
 
     time: np.ndarray
@@ -81,14 +85,15 @@ class ReproductionLog:
     v_WE: np.ndarray
     f_WE: np.ndarray
     F_tr: np.ndarray
+    stiffness_shape: np.ndarray = None
 
     def observations(self):
         """[x, xdot, k] of the *actual* slave, shape (T, 7): what Table II compares."""
         return np.column_stack([self.p_WE, self.v_WE, self.k_star])
 
     def arrays(self):
-        """The log as a dict of arrays (for an NPZ file)."""
-        return dc.asdict(self)
+        """The log as a dict of arrays (for an NPZ file); None fields left out."""
+        return {name: value for name, value in dc.asdict(self).items() if value is not None}
 
 
 @dc.dataclass(frozen=True, eq=False)
@@ -118,16 +123,20 @@ class ReproductionDiagram(StationDiagram):
     def log(self, context):
         """The :class:`ReproductionLog` recorded so far in the diagram's ``context``."""
         log = self.logger.FindLog(context)
-        fields = split_log(log, _log_widths(self.model.n_states))
+        spd = self.scenario.reproduction.stiffness == "spd"
+        fields = split_log(log, _log_widths(self.model.n_states, spd))
         fields["k_star"] = fields["k_star"][:, 0]
         return ReproductionLog(time=log.sample_times(), **fields)
 
 
-def _log_widths(n_states):
-    return {
+def _log_widths(n_states, spd=False):
+    widths = {
         "x_star": 3, "xdot_star": 3, "k_star": 1, "h": n_states,
         "p_WE": 3, "v_WE": 3, "f_WE": 3, "F_tr": 3,
     }  # fmt: skip
+    if spd:
+        widths["stiffness_shape"] = 9
+    return widths
 
 
 def check_model(model):
@@ -144,7 +153,11 @@ def make_reproducer(scenario, model, start):
     """The reproducer of the scenario's ``reproduction.tracker``: ``HsmmGmrReproducer``
     (eqs. 12-18) or ``HsmmLqrReproducer`` (the LQR tracker), at the log period."""
     settings = scenario.reproduction
-    common = dict(model=model, start=start, dt=scenario.log_period, weighting=settings.weighting)
+    common = dict(
+        model=model, start=start, dt=scenario.log_period, weighting=settings.weighting,
+        stiffness_ratio=settings.stiffness_ratio,
+        stiffness_normalisation=settings.stiffness_normalisation,
+    )  # fmt: skip
     if settings.tracker == "gmr":
         return HsmmGmrReproducer(**common, restoring_gain=settings.restoring_gain)
     return HsmmLqrReproducer(
@@ -160,8 +173,9 @@ def _add_station(builder, scenario, start, *, scene, q0=None, visualization=None
     """The station, with the reproduced stiffness k* clipped to [k_min, k_max] before its
     gain input. Returns the station and the ``stiffness_limits`` Saturation."""
     station = make_slave_station(
-        scenario, start=start, q0=q0, scene=scene, visualization=visualization
-    )
+        scenario, start=start, q0=q0, scene=scene, visualization=visualization,
+        stiffness=scenario.reproduction.stiffness,
+    )  # fmt: skip
     slave = builder.AddSystem(station.diagram)
     limits = builder.AddNamedSystem(
         "stiffness_limits", Saturation([scenario.emg.k_min], [scenario.emg.k_max])
@@ -254,6 +268,9 @@ def build_reproduction_diagram(
     connect(observed, reproducer.GetInputPort("p_WE"))
     connect(reproducer.GetOutputPort("x_star"), slave.GetInputPort("p_WE_desired"))
     connect(reproducer.GetOutputPort("k_star"), limits.get_input_port())
+    spd = settings.stiffness == "spd"
+    if spd:
+        connect(reproducer.GetOutputPort("stiffness_shape"), slave.GetInputPort("stiffness_shape"))
     connect(reproducer.GetOutputPort("x_star"), tracking.GetInputPort("x_star"))
     connect(reproducer.GetOutputPort("xdot_star"), tracking.GetInputPort("xdot_star"))
     connect(goal_source.get_output_port(), tracking.GetInputPort("x_goal"))
@@ -268,10 +285,10 @@ def build_reproduction_diagram(
         "v_WE": slave.GetOutputPort("v_WE"),
         "f_WE": slave.GetOutputPort("f_WE"),
         "F_tr": tracking.GetOutputPort("F_tr"),
+        "stiffness_shape": reproducer.GetOutputPort("stiffness_shape"),
     }
-    logger = add_logger(
-        builder, {name: sources[name] for name in _log_widths(model.n_states)}, scenario.log_period
-    )
+    widths = _log_widths(model.n_states, spd)
+    logger = add_logger(builder, {name: sources[name] for name in widths}, scenario.log_period)
     diagram = builder.Build()
     diagram.set_name("reproduction")
     return ReproductionDiagram(

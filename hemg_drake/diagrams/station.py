@@ -33,6 +33,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from hemg_drake.control.clik import Clik
 from hemg_drake.control.ik import solve_tool_point_ik
+from hemg_drake.control.impedance import add_cartesian_impedance_pd
 from hemg_drake.control.pd import add_variable_gain_pd
 from hemg_drake.diagrams.visualization import apply_visualization
 from hemg_drake.robots.baxter import add_baxter_arm, make_arm_controller_plant
@@ -43,6 +44,8 @@ from hemg_drake.tasks.drawing import add_drawing_scene
 SCENE_BUILDERS = {"cotter_pin": add_cotter_pin_scene, "drawing": add_drawing_scene}
 # How the station is driven: a tool-point reference through the CLIK, or joint references.
 REFERENCES = ("tool_point", "joints")
+# The PD's stiffness: eq. 20's scalar K, or a Cartesian stiffness at the tool.
+STIFFNESSES = ("scalar", "spd")
 
 
 @TemplateSystem.define("ToolPointKinematics_", T_list=[float, AutoDiffXd])
@@ -131,7 +134,9 @@ class SlaveStation:
     diagram : Diagram, named ``station``. Input ports: ``p_WE_desired`` (3, m, W) or, with
         ``reference="joints"``, ``q_desired`` and ``v_desired`` (7 each, rad, rad/s);
         ``gain`` (1, the PD's K); ``applied_generalized_force`` (the plant's, free; may
-        stay unconnected). Output ports: ``p_WE``, ``v_WE`` (3, m and m/s, W), ``f_WE``
+        stay unconnected); with ``stiffness="spd"`` also ``stiffness_shape`` (9, the
+        Cartesian stiffness' shape, :class:`~hemg_drake.control.impedance.
+        CartesianImpedancePd`; the identity when unconnected). Output ports: ``p_WE``, ``v_WE`` (3, m and m/s, W), ``f_WE``
         (3, N: the scene's force on the tool point, zero in free space), ``arm_state``
         (14: [q; v]), ``q_desired`` (7, the CLIK's joint reference; absent with joint
         references), ``contact_results``, ``query_object``. Subsystems: ``plant``,
@@ -182,6 +187,7 @@ def make_slave_station(
     scene=True,
     visualization=None,
     name="station",
+    stiffness="scalar",
 ):
     """Build the slave station of a scenario.
 
@@ -204,6 +210,10 @@ def make_slave_station(
         (``ApplyVisualizationConfig``); to record it, see :mod:`hemg_drake.viz.recording`.
     name : str
         The diagram's name.
+    stiffness : {"scalar", "spd"}
+        The PD: eq. 20's :class:`~hemg_drake.control.pd.VariableGainPd` (the joints'
+        stiffness scaled by K), or :class:`~hemg_drake.control.impedance.
+        CartesianImpedancePd` (K times a shape at the tool, eq. 20's in the null space).
 
     Returns
     -------
@@ -216,6 +226,8 @@ def make_slave_station(
     """
     if reference not in REFERENCES:
         raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
+    if stiffness not in STIFFNESSES:
+        raise ValueError(f"stiffness must be one of {STIFFNESSES}, got {stiffness!r}")
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(scenario.plant, builder)
     arm = add_baxter_arm(plant)
@@ -247,7 +259,8 @@ def make_slave_station(
     controller_plant, controller_arm = make_arm_controller_plant()
     SharedPointerSystem.AddToBuilder(builder, controller_plant)
     arm_state = plant.get_state_output_port(arm.model_instance)
-    pd = add_variable_gain_pd(
+    add_pd = add_variable_gain_pd if stiffness == "scalar" else add_cartesian_impedance_pd
+    pd = add_pd(
         builder, plant=controller_plant, arm=controller_arm, state_port=arm_state,
         config=scenario.pd,
     )  # fmt: skip
@@ -275,6 +288,8 @@ def make_slave_station(
         builder.ExportInput(pd.q_desired_input, "q_desired")
         builder.ExportInput(pd.v_desired_input, "v_desired")
     builder.ExportInput(pd.gain_input, "gain")
+    if stiffness == "spd":
+        builder.ExportInput(pd.shape_input, "stiffness_shape")
     builder.ExportInput(plant.get_applied_generalized_force_input_port(), "applied_generalized_force")
 
     if task_scene is not None:

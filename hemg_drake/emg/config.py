@@ -16,6 +16,9 @@ MYO_RATE = 200.0
 MYO_PERIOD = 1.0 / MYO_RATE
 MYO_CHANNELS = 8
 INT8_MIN, INT8_MAX = -128, 127
+# Longest calibration recording (s): a minute each of rest and contraction is 12 000 samples
+# of 8 channels; the shipped scenarios take 2 s (1e9 s would ask for 13 TB).
+MAX_CALIBRATION_DURATION = 60.0
 
 
 @dc.dataclass
@@ -86,7 +89,7 @@ class EmgConfig:
     k_max: float = checked(_GAIN.k_max)
     # Length of the synthetic rest and maximum-contraction recordings (s) from which the
     # envelope's calibration is computed before each demonstration.
-    calibration_duration: float = checked(2.0, positive=True)
+    calibration_duration: float = checked(2.0, positive=True, maximum=MAX_CALIBRATION_DURATION)
     # Where the raw sEMG comes from: "synthetic" (make_synthetic_emg_source, driven by the
     # operator's activation), or a live armband read by LiveEmgSource: "myo" (pyomyo,
     # hemg-drake[myo]) or "libemg" (a LibEMG streamer's shared memory, tag libemg_tag).
@@ -96,9 +99,14 @@ class EmgConfig:
     libemg_tag: str = "emg"
 
     def check(self, key=""):
-        """The rules between fields (their ranges are the fields' own): k_min < k_max, and a
-        calibration at least one RMS window long. Raises ValueError naming the keys under
-        ``key``."""
+        """The rules between fields (their ranges are the fields' own): a non-zero A_emg
+        (eq. 22 divides by exp(A_emg) - 1), k_min < k_max, and a calibration at least one
+        RMS window long. Raises ValueError naming the keys under ``key``."""
+        if self.A_emg == 0:
+            raise ValueError(
+                f"key '{key_path(key, 'A_emg')}' must not be 0 (eq. 22 divides by "
+                "exp(A_emg) - 1)"
+            )
         if not self.k_min < self.k_max:
             raise ValueError(
                 f"keys '{key_path(key, 'k_min')}' < '{key_path(key, 'k_max')}' required, got "

@@ -10,6 +10,21 @@ HSMM_INITS = ("kmeans", "time", "polyline")
 WEIGHTINGS = ("temporal", "spatial", "forward")
 TRACKERS = ("gmr", "lqr")
 STATE_COSTS = ("active", "mixture")
+# Most HSMM states: the paper's tasks take 4, the drawing 18; each state needs at least 8
+# samples (pipeline.check_enough_data) and an EM iteration with 100 states on 3 x 1000
+# samples takes 0.3 s (measured; 4 states 0.004 s, 18 states 0.09 s).
+MAX_STATES = 100
+# Most EM iterations: 10x the default; 1000 iterations of the drawing's 18 states on 3000
+# samples take about 1.5 min (0.09 s each, measured). The shipped fits converge in fewer.
+MAX_ITERATIONS = 1000
+# Longest LQR horizon (steps): 10 s planned ahead at the 0.01 s log period. A forward-weighted
+# step costs about 33 us per horizon step (measured: 3 ms at 100, 33 ms at 1000, 0.4 s at
+# 10 000), so a 5.5 s reproduction (550 steps) takes about 18 s at 1000.
+MAX_HORIZON = 1000
+# Longest settling before a reproduction (s, simulated): the arm comes to rest in about 1 s.
+MAX_SETTLE_TIME = 60.0
+# The stiffness the reproduction applies (docs/reproduction.md, "A full stiffness matrix").
+STIFFNESS_MODES = ("scalar", "spd")
 
 
 @dc.dataclass
@@ -17,7 +32,7 @@ class LearningConfig:
     """What the HSMM (eqs. 4-11) learns from the demonstrations, and how it starts."""
 
     # Number of HSMM states N.
-    num_states: int = checked(4, positive=True)
+    num_states: int = checked(4, positive=True, maximum=MAX_STATES)
     # Positions of the observations [x, xdot, k]: "tool" (the measured tool point p_WE,
     # v_WE) or "reference" (the reference the CLIK received and its rate: what the slave
     # tracked with the gain k; a pen pressed into the sheet only shows in the reference).
@@ -28,7 +43,7 @@ class LearningConfig:
     # Covariance floor, relative to each dimension's variance in the data.
     reg_covar: float = checked(1e-2, positive=True)
     # EM iterations at most.
-    n_iter: int = checked(100, positive=True)
+    n_iter: int = checked(100, positive=True, maximum=MAX_ITERATIONS)
     # Fit a task-parameterised HSMM (frames: robot base and scene; learning/tphsmm.py) even
     # when the demonstrations share one placement (it is fitted whenever they do not).
     task_parameterised: bool = checked(False)
@@ -60,15 +75,26 @@ class ReproductionConfig:
     # LQR tracker: steps planned ahead, the control cost r (s^4/m^2), how far its plan may
     # lead the measured tool point (m), and whose precision costs a step: "active" (the
     # most probable state's) or "mixture" (weighted by h).
-    horizon: int = checked(100, positive=True)
+    horizon: int = checked(100, positive=True, maximum=MAX_HORIZON,
+                           why="10 s of 0.01 s steps")  # fmt: skip
     control_cost: float = checked(1.0, positive=True)
     max_lead: float = checked(0.02)
     state_cost: str = checked("active", choices=STATE_COSTS)
     # K_ptr (N/m) and K_dtr (N s/m) of the tracking force (eq. 23; Table I: 50 and 50).
     tracking_gains: list[float] = checked([50.0, 50.0], size=2)
+    # The stiffness the station applies: "scalar" (eq. 20: k* scales the joints' stiffness)
+    # or "spd" (a Cartesian stiffness at the tool: k* times the shape learnt from the
+    # states' position precision, interpolated on the SPD manifold; control/impedance.py).
+    stiffness: str = checked("scalar", choices=STIFFNESS_MODES)
+    # "spd": the largest ratio of the shape's largest to smallest eigenvalue (>= 1).
+    stiffness_ratio: float = checked(10.0, positive=True)
+    # "spd": the shape at unit determinant (its geometric mean is eq. 20's harmonic-mean
+    # stiffness at the tool) or with its smallest eigenvalue 1 ("softest": the learnt
+    # shape only stiffens).
+    stiffness_normalisation: str = checked("softest", choices=("determinant", "softest"))
     # Simulated time to let the arm come to rest in the scene, holding x*_0, before the
     # reproduction starts (s).
-    settle_time: float = checked(1.0)
+    settle_time: float = checked(1.0, maximum=MAX_SETTLE_TIME)
     # Start offsets (m, in the scene frame T) of the extra reproductions that the full
     # demo runs, each from the demonstrations' mean start plus the offset.
     start_offsets: list[list[float]] = checked([], signed=True)
@@ -81,6 +107,11 @@ class ReproductionConfig:
                 f"key '{key_path(key, 'weighting')}' = 'spatial' does not go with "
                 f"'{key_path(key, 'tracker')}' = 'lqr' (it tracks a state sequence: 'temporal' "
                 "or 'forward')"
+            )
+        if self.stiffness_ratio < 1:
+            raise ValueError(
+                f"key '{key_path(key, 'stiffness_ratio')}' must be >= 1 (largest / smallest "
+                f"eigenvalue), got {self.stiffness_ratio}"
             )
         if any(len(offset) != 3 for offset in self.start_offsets):
             raise ValueError(

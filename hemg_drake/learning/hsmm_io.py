@@ -89,13 +89,30 @@ def _check_loaded(model, path, kind):
         raise ValueError(f"{damaged}, bad duration parameters")
 
 
+def learnt_at_array(model):
+    """The placements ``model`` was learnt at (``learnt_at_``, JSON-ready, set by
+    ``hemg_drake.pipeline.learn``) as the file's ``learnt_at`` entry; none if unset."""
+    learnt_at = getattr(model, "learnt_at_", None)
+    return {} if learnt_at is None else {"learnt_at": np.array(json.dumps(learnt_at))}
+
+
+def read_learnt_at(arrays, path):
+    """A model file's ``learnt_at`` (JSON), or None: files written before it was stored."""
+    if "learnt_at" not in arrays:
+        return None
+    try:
+        return json.loads(str(arrays["learnt_at"]))
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}: damaged model file, learnt_at is not JSON ({error})") from None
+
+
 class PersistenceMixin:
     """:meth:`save` and :meth:`load` of :class:`~hemg_drake.learning.hsmm.HSMM`."""
 
     def save(self, path):
         """Write the fitted model to ``path`` (NPZ with a format version), atomically."""
         check_fitted(self)
-        save_fitted(path, self, FORMAT_VERSION, self.get_params())
+        save_fitted(path, self, FORMAT_VERSION, self.get_params(), **learnt_at_array(self))
 
     @classmethod
     def load(cls, path):
@@ -126,4 +143,5 @@ class PersistenceMixin:
             check_parameters(model)
         except (TypeError, ValueError) as error:  # (json.JSONDecodeError is a ValueError)
             raise ValueError(f"{path}: damaged HSMM model settings ({error})") from None
-        return load_fitted(model, arrays, path)
+        load_fitted(model, arrays, path).learnt_at_ = read_learnt_at(arrays, path)
+        return model

@@ -17,11 +17,18 @@ from hemg_drake.learning.reproduce import (
     HsmmGmrPolicy,
     HsmmLqrPolicy,
 )
+from hemg_drake.learning.stiffness import (
+    DEFAULT_MAX_RATIO,
+    DEFAULT_NORMALISATION,
+    SpdStiffness,
+)
 
 
 def _declare_reproducer(system, T, start, xdot, k, h, predicted, dt):
-    """What both reproducers declare: input ``p_WE``; the state groups x*, xdot*, k*, h and
-    the predicted forward variable, updated every ``dt``; the first four as state outputs;
+    """What both reproducers declare: input ``p_WE``; the state groups x*, xdot*, k*, h,
+    the predicted forward variable and the stiffness shape S_hat(h) (P x P, row-major;
+    :mod:`hemg_drake.learning.stiffness`), updated every ``dt``; all but the forward
+    variable as state outputs;
     the numeric parameter ``holding`` (1: every update keeps the state, so the reproducer
     holds x*_0 and k*_0 while the arm settles; 0, the default: it reproduces)."""
     system._forward_shape = predicted.shape
@@ -32,6 +39,7 @@ def _declare_reproducer(system, T, start, xdot, k, h, predicted, dt):
     system._k_star_state = system.DeclareDiscreteState(k)
     system._h_state = system.DeclareDiscreteState(h)
     system._forward_state = system.DeclareDiscreteState(predicted.ravel())
+    system._shape_state = system.DeclareDiscreteState(system._stiffness.shape(h).ravel())
     system.DeclarePeriodicDiscreteUpdateEvent(
         period_sec=dt, offset_sec=0.0, update=system._calc_step
     )
@@ -40,6 +48,7 @@ def _declare_reproducer(system, T, start, xdot, k, h, predicted, dt):
         ("xdot_star", system._xdot_star_state),
         ("k_star", system._k_star_state),
         ("h", system._h_state),
+        ("stiffness_shape", system._shape_state),
     ):
         system.DeclareStateOutputPort(name, index)
 
@@ -67,6 +76,7 @@ def _store(system, discrete_state, x_star, xdot_star, k_star, h, predicted):
     discrete_state.set_value(system._k_star_state, k_star)
     discrete_state.set_value(system._h_state, h)
     discrete_state.set_value(system._forward_state, predicted.ravel())
+    discrete_state.set_value(system._shape_state, system._stiffness.shape(h).ravel())
 
 
 @TemplateSystem.define("HsmmGmrReproducer_", T_list=[float, AutoDiffXd])
@@ -84,6 +94,7 @@ def HsmmGmrReproducer_(T):
             - xdot_star
             - k_star
             - h
+            - stiffness_shape
 
         Units: m, m/s, the stiffness channel's units (N/m); h is dimensionless.
         Equations 12-18 of the paper, one step of
@@ -120,17 +131,30 @@ def HsmmGmrReproducer_(T):
         restoring_gain : float
             kappa of the cross-track attractor in 1/s (0: eqs. 15-18 alone); an offset
             across the demonstrated path decays with the time constant 1 / kappa.
+        stiffness_ratio : float
+            rho >= 1, the bound on the stiffness shape's eigenvalue ratio.
+        stiffness_normalisation : {"determinant", "softest"}
+            The shape at unit determinant, or with its smallest eigenvalue 1.
+
+        ``stiffness_shape`` (P*P, dimensionless, row-major) is S_hat(h_k) =
+        expm(sum_i h_k,i L_i), the log-Euclidean mean of the states' normalised
+        position precisions (:mod:`hemg_drake.learning.stiffness`): the shape of the
+        Cartesian stiffness the station applies with ``reproduction.stiffness: spd``.
         """
 
         def _construct(
             self, *, model, start, dt=DEFAULT_DT, weighting=DEFAULT_WEIGHTING,
-            restoring_gain=DEFAULT_RESTORING_GAIN, converter=None,
+            restoring_gain=DEFAULT_RESTORING_GAIN, stiffness_ratio=DEFAULT_MAX_RATIO,
+            stiffness_normalisation=DEFAULT_NORMALISATION,
+            converter=None,
         ):  # fmt: skip
             LeafSystem_[T].__init__(self, converter)
             self._arguments = dict(
                 model=model, start=start, dt=dt, weighting=weighting,
-                restoring_gain=restoring_gain,
+                restoring_gain=restoring_gain, stiffness_ratio=stiffness_ratio,
+                stiffness_normalisation=stiffness_normalisation,
             )  # fmt: skip
+            self._stiffness = SpdStiffness(model, stiffness_ratio, stiffness_normalisation)
             self._policy = HsmmGmrPolicy(
                 model, weighting=weighting, dt=dt, restoring_gain=restoring_gain
             )
@@ -170,6 +194,7 @@ def HsmmLqrReproducer_(T):
             - xdot_star
             - k_star
             - h
+            - stiffness_shape
 
         Units: m, m/s, the stiffness channel's units (N/m); h is dimensionless. The
         tracking alternative to eqs. 15-18 (docs/reproduction.md, "Trackers"): one step of
@@ -214,18 +239,25 @@ def HsmmLqrReproducer_(T):
             How far the plan may lead the measured ``p_WE``, m (>= 0; default 0.02).
         state_cost : {"active", "mixture"}
             The cost per step: the most probable state's, or all states' weighted by h.
+        stiffness_ratio, stiffness_normalisation
+            As for :class:`HsmmGmrReproducer` (so is ``stiffness_shape``).
         """
 
         def _construct(
             self, *, model, start, dt=DEFAULT_DT, weighting=DEFAULT_WEIGHTING,
             horizon=DEFAULT_HORIZON, control_cost=DEFAULT_CONTROL_COST,
-            max_lead=DEFAULT_MAX_LEAD, state_cost=DEFAULT_STATE_COST, converter=None,
+            max_lead=DEFAULT_MAX_LEAD, state_cost=DEFAULT_STATE_COST,
+            stiffness_ratio=DEFAULT_MAX_RATIO,
+            stiffness_normalisation=DEFAULT_NORMALISATION, converter=None,
         ):  # fmt: skip
             LeafSystem_[T].__init__(self, converter)
             self._arguments = dict(
                 model=model, start=start, dt=dt, weighting=weighting, horizon=horizon,
                 control_cost=control_cost, max_lead=max_lead, state_cost=state_cost,
+                stiffness_ratio=stiffness_ratio,
+                stiffness_normalisation=stiffness_normalisation,
             )  # fmt: skip
+            self._stiffness = SpdStiffness(model, stiffness_ratio, stiffness_normalisation)
             self._policy = HsmmLqrPolicy(
                 model, weighting=weighting, dt=dt, horizon=horizon,
                 control_cost=control_cost, state_cost=state_cost,

@@ -49,6 +49,7 @@ from sklearn.base import BaseEstimator
 from hemg_drake.fileio import load_npz
 from hemg_drake.learning.hsmm import HSMM, check_demos
 from hemg_drake.learning.hsmm_io import FITTED, load_fitted, save_fitted, settings_of
+from hemg_drake.learning.hsmm_io import learnt_at_array, read_learnt_at
 from hemg_drake.learning.hsmm_params import check_parameters
 from hemg_drake.learning.sequences import check_fitted
 
@@ -304,7 +305,8 @@ class TaskParameterisedHSMM(BaseEstimator):
             n_states=self.n_states, parameters=self._hsmm_parameters(), n_frames=self.n_frames_,
             n_position=self.n_position_, n_stiffness=self.n_stiffness_,
         )  # fmt: skip
-        save_fitted(path, source, FORMAT_VERSION, settings, kind=np.array(KIND))
+        extra = dict(kind=np.array(KIND), **learnt_at_array(self))
+        save_fitted(path, source, FORMAT_VERSION, settings, **extra)
 
     @classmethod
     def load(cls, path):
@@ -338,6 +340,7 @@ class TaskParameterisedHSMM(BaseEstimator):
         if stacked.means_.shape[1] != len(stacked._block_mask):
             raise ValueError(f"{path}: damaged TP-HSMM model file, means_ do not fit the frames")
         model.stacked_ = stacked
+        model.learnt_at_ = read_learnt_at(arrays, path)
         return model
 
 

@@ -59,10 +59,7 @@ def write_results(records, spec, out):
     except ImportError:
         pass
     else:
-        # A metric a trial lacks is null (an empty string would clash with numbers).
-        table = pa.Table.from_pylist(
-            [{k: _cell(v) for k, v in row.items()} for row in rows]
-        )
+        table = pa.table({name: _column([row[name] for row in rows]) for name in columns})
         sink = io.BytesIO()
         pq.write_table(table, sink)
         write_bytes_atomic(out / "results.parquet", sink.getvalue())
@@ -72,10 +69,18 @@ def write_results(records, spec, out):
     return written
 
 
-def _cell(value):
-    if value is None or value == "":
-        return None
-    return str(value) if isinstance(value, (list, dict)) else value
+def _column(values):
+    """A Parquet column: missing cells (None, "") null; numbers, or else text throughout
+    (a failed trial's empty metric beside the others' floats stays a float column)."""
+    values = [None if v is None or v == "" else v for v in values]
+    present = [v for v in values if v is not None]
+    if all(isinstance(v, bool) for v in present) or all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) for v in present
+    ):
+        return values
+    if all(isinstance(v, (int, float)) for v in present):
+        return [None if v is None else float(v) for v in values]
+    return [None if v is None else str(v) for v in values]
 
 
 def _number(value):

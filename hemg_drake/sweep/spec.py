@@ -9,7 +9,7 @@ from pathlib import Path
 import yaml
 
 from hemg_drake.fileio import read_yaml_text
-from hemg_drake.yaml_schema import check_types, first_line
+from hemg_drake.yaml_schema import check_types, first_line, parse_yaml
 
 STEPS = ("demonstrate", "learn", "reproduce", "heldout")
 DESIGNS = ("grid", "one_at_a_time")
@@ -104,13 +104,7 @@ def parse_sweep(text, *, source="<sweep>"):
     """
     from pydrake.common.yaml import yaml_load_typed
 
-    try:
-        raw = yaml.safe_load(text) if text.strip() else None
-    except yaml.YAMLError as error:
-        mark = getattr(error, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(error, "problem", error)
-        raise ValueError(f"{source}: malformed YAML{where}: {problem}") from None
+    raw = parse_yaml(text, source)  # malformed YAML, a key given twice: one line
     if raw is None:
         raise ValueError(f"{source}: the sweep file is empty; give at least its 'scenario'")
     try:

@@ -9,6 +9,12 @@ from hemg_drake.config_fields import checked
 # Force-feedback modes and passivity layers (teleop/feedback.py).
 FEEDBACK_MODES = ("force", "position_error")
 FEEDBACK_PASSIVITY = ("none", "tdpa")
+# Longest transport delay each way, in master samples: 10 s at the 1 kHz servo rate. The
+# delay line holds that many samples (16 numbers each way) and shifts them every sample: a
+# demonstration with 10 000 samples each way simulates about 2x slower than without delay,
+# 5.6x at 100 000 (measured; 1e9 asked 48 GB and failed).
+MAX_DELAY_STEPS = 10_000
+DELAY_BOUND = "10 s of the master's 1 ms samples"
 
 
 @dc.dataclass
@@ -25,7 +31,7 @@ class MappingConfig:
     # the way it faces.
     rpy_deg: list[float] = checked([90.0, 0.0, -90.0], signed=True, size=3)
     # Constant transport delay of the teleoperation channel, in master samples (1 ms each).
-    delay_steps: int = checked(0)
+    delay_steps: int = checked(0, maximum=MAX_DELAY_STEPS, why=DELAY_BOUND)
 
 
 @dc.dataclass
@@ -104,7 +110,7 @@ class FeedbackConfig:
     # Slave-to-master transport delay of the fed-back force (or of the slave's position in
     # mode "position_error"), in master samples (1 ms each); mapping.delay_steps is the
     # master-to-slave half.
-    delay_steps: int = checked(0)
+    delay_steps: int = checked(0, maximum=MAX_DELAY_STEPS, why=DELAY_BOUND)
     # "none", or "tdpa": a time-domain passivity observer and controller at the master's
     # port (Hannaford & Ryu 2002) keeps the channel from giving the master more energy
     # than it took. Mode "force" needs the master's v_MS connected to it.

@@ -1,5 +1,7 @@
 """The slave station through Drake: its ports, its free input, its scenes and where they stand."""
 
+import copy
+
 import numpy as np
 import pytest
 from pydrake.geometry import Box
@@ -230,7 +232,11 @@ def test_a_push_above_the_hold_force_pops_the_pin(pushed_pin):
 def test_the_drawing_scene_needs_point_contact():
     scenario = Scenario(task="drawing")
     assert scenario.plant.contact_model == "point"
-    hydro = scenario.replaced(["plant.contact_model=hydroelastic_with_fallback"])
+    # A scenario refuses the pair (tests/test_scenario_checks.py); the station on its own too.
+    with pytest.raises(ValueError, match=r"'plant\.contact_model' = 'hydroelastic_with_fallback'"):
+        scenario.replaced(["plant.contact_model=hydroelastic_with_fallback"])
+    hydro = copy.deepcopy(scenario)
+    hydro.plant.contact_model = "hydroelastic_with_fallback"
     with pytest.raises(ValueError, match=r"drawing scene needs point contact.*contact_model"):
         make_slave_station(hydro)
     # Free space takes any contact model.

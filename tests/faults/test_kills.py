@@ -9,14 +9,9 @@ import time
 
 import pytest
 
-from tooling.faults import COMMANDS, Case, _env, kill_many, leftovers, make_base, snapshot
+from tooling.faults import COMMANDS, Case, _env, kill_many, leftovers, snapshot
 
 SEED = 2025  # the kills' moments; the benchmark draws others
-
-
-@pytest.fixture(scope="module")
-def base(tmp_path_factory):
-    return make_base(tmp_path_factory.mktemp("base"))
 
 
 @pytest.mark.slow
@@ -25,11 +20,11 @@ def test_a_killed_command_leaves_the_earlier_run_or_the_new_one(base, tmp_path, 
     case = Case(name, base, tmp_path).learn_states()
     assert len(case.points) >= 4, case.points  # the writes and the swap are fault points
     assert any("swapped" in point for point in case.points)
-    results = kill_many(case, SEED, times=1, points=2)
+    results = kill_many(case, SEED, times=1, points=1)
     for result in results:
         assert result.state in ("before", "after"), result
         assert result.next_ok, result
-    assert sum(r.killed for r in results) >= 2
+    assert any(r.killed for r in results)
 
 
 def test_a_kill_at_each_moment_of_the_swap(base, tmp_path):
@@ -49,7 +44,7 @@ def test_a_kill_at_each_moment_of_the_swap(base, tmp_path):
         def randrange(self, start, stop):
             return self.point
 
-    for point in range(first + 1, len(case.points) + 1, 3):
+    for point in range(first + 1, len(case.points) + 1, 4):
         result = kill_once(case, Fixed(point), "point", point, check_next=False)
         assert result.killed and result.state in ("before", "after"), result
 
