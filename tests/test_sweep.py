@@ -29,7 +29,7 @@ axes:
   - name: range
     cases:
       paper: []
-      bad: [learning.num_states=400]   # too many states for the data: fails at learn
+      bad: [learning.num_states=90]   # too many states for the data: fails at learn
 seeds: [3]
 metrics: [demonstration.tracking_error_m, demonstration.gain_lag_s, reproduction.position_rmse_m,
           reproduction.success]
@@ -65,7 +65,7 @@ def test_every_trial_has_a_row_and_a_failed_one_is_recorded(swept):
         assert "seed=3" in record["overrides"]
         if row["range"] == "bad":
             assert row["status"] == "failed"
-            assert "N = 400" in row["error"] and "\n" not in row["error"]
+            assert "N = 90" in row["error"] and "\n" not in row["error"]
         else:
             assert row["status"] == "done", row["error"]
             assert float(row["reproduction.position_rmse_m"]) < 0.05
