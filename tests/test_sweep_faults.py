@@ -160,10 +160,11 @@ def test_killed_at_seeded_moments_resume_ends_with_the_same_table(sweep_file, tm
         except subprocess.TimeoutExpired:
             workers = _children(child.pid)
             child.kill()  # SIGKILL: no handler runs
-            child.communicate()
+            child.wait()
             killed += 1
             # The workers die with it (PR_SET_PDEATHSIG), so nothing writes on.
             assert _gone_within(workers, 2.0), _running(workers)
+            child.communicate(timeout=10)  # the pipes close with the last worker
         after = _records(out)  # every record complete
         assert {name: after[name] for name in before} == before  # finished ones untouched
     assert killed >= 2
