@@ -30,10 +30,18 @@ axis, the mean over seeds and its spread, +-1 standard deviation).
 Demonstrations do not depend on the ``learning`` and ``reproduction`` sections, so trials
 that differ only there share them: they are recorded once per seed in ``OUT/cache/``.
 
+Before the first trial every trial's scenario is loaded with its overrides and the metric
+names are checked (:mod:`~hemg_drake.sweep.checks`); the sweep then holds ``OUT`` alone
+(:mod:`~hemg_drake.sweep.folder`: ``sweep.json`` marks a sweep's folder, a lock refuses a
+second sweep, ``--resume`` continues only the same sweep). Ctrl-C, SIGTERM, SIGKILL or a
+full disk stop the workers with the sweep and leave only finished trials.
+
 The package's modules: :mod:`~hemg_drake.sweep.spec` (the sweep file and its trials),
 :mod:`~hemg_drake.sweep.trial` (one trial in a worker, and its metrics),
-:mod:`~hemg_drake.sweep.runners` (the local process pool, Ray, :func:`run_sweep`) and
-:mod:`~hemg_drake.sweep.results` (the table, the figure, resume bookkeeping).
+:mod:`~hemg_drake.sweep.runners` (the local process pool, Ray, :func:`run_sweep`),
+:mod:`~hemg_drake.sweep.results` (the table, the figure, resume bookkeeping),
+:mod:`~hemg_drake.sweep.checks` (before the first trial) and :mod:`~hemg_drake.sweep.folder`
+(the sweep's folder).
 """
 
 from hemg_drake.sweep.checks import METRICS, known_metrics
