@@ -283,7 +283,7 @@ def test_a_bad_trial_is_refused_before_any_trial_in_one_line(tmp_path, capfd, ax
 def test_an_unknown_metric_is_refused_listing_the_known_ones(tmp_path, capfd):
     path = tmp_path / "m.yaml"
     path.write_text("scenario: drawing\nsteps: [demonstrate, learn]\n"
-                    "metrics: [learn.n_iter, demonstration.pin_out, reproduction.success]\n")  # fmt: skip
+                    "metrics: [learn.n_iter, demonstration.pin_out, reproduction.success]\n")
     assert main(["sweep", str(path), "--out", str(tmp_path / "out")]) == 2
     err = capfd.readouterr().err
     assert err.count("\n") == 1 and "key 'metrics'" in err
@@ -316,7 +316,7 @@ def test_a_folder_the_sweep_did_not_write_is_refused_and_untouched(swept, tmp_pa
         assert main(["sweep", str(path), "--out", str(mine), *extra]) == 2
         err = capfd.readouterr().err
         assert err == (f"hemg-drake sweep: error: {mine}: holds files hemg-drake sweep did "
-                       f"not write (no sweep.json): give a new or empty folder for the sweep\n")  # fmt: skip
+                       f"not write (no sweep.json): give a new or empty folder for the sweep\n")
     assert (_files(mine), sorted(p.name for p in mine.rglob("*"))) == before
 
 
