@@ -374,12 +374,15 @@ def main(argv=None):
     try:
         with warnings.catch_warnings():
             warnings.showwarning = one_line_warning
-            args.func(args)
-    except KeyboardInterrupt:
-        print(f"hemg-drake {args.command}: interrupted; no partial output kept", file=sys.stderr)
+            status = args.func(args)
+    except KeyboardInterrupt as error:
+        # A command may say what it kept (sweep: its finished trials) in the error's args.
+        kept = str(error) or "no partial output kept"
+        print(f"hemg-drake {args.command}: interrupted; {kept}", file=sys.stderr)
         return 130
-    except Terminated:
-        print(f"hemg-drake {args.command}: terminated; no partial output kept", file=sys.stderr)
+    except Terminated as error:
+        kept = str(error) or "no partial output kept"
+        print(f"hemg-drake {args.command}: terminated; {kept}", file=sys.stderr)
         return 143
     except ImportError as error:
         # An optional dependency (pyproject.toml's extras) that this install lacks.
@@ -391,7 +394,7 @@ def main(argv=None):
         return 2
     finally:
         signal.signal(signal.SIGTERM, previous)
-    return 0
+    return status or 0  # a command's own status (sweep: 1 when a trial failed)
 
 
 if __name__ == "__main__":

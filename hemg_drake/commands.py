@@ -202,8 +202,14 @@ def emg_figure_command(args):
 
 
 def sweep_command(args):
-    """``hemg-drake sweep``: run a sweep file's trials; print the summary and failures."""
+    """``hemg-drake sweep``: run a sweep file's trials; the summary on stdout, each failed
+    trial on stderr, and exit status 1 when any trial failed.
+
+    Interrupted (Ctrl-C, SIGTERM), the workers stop with it and the one line says where the
+    finished trials are kept.
+    """
     from hemg_drake.sweep import load_sweep, run_sweep, summary
+    from hemg_drake.sweep.folder import finished_trials
 
     if args.address and args.backend != "ray":
         raise ValueError("--address joins a Ray cluster: it needs --backend ray")
@@ -213,17 +219,23 @@ def sweep_command(args):
             args.sweep, args.out, backend=args.backend, workers=args.workers,
             address=args.address, resume=args.resume,
         )  # fmt: skip
-    except KeyboardInterrupt:
-        print(f"hemg-drake sweep: finished trials are kept in {args.out}/trials/: run again "
-              f"with --resume to go on", file=sys.stderr)  # fmt: skip
+    except BaseException as error:
+        # KeyboardInterrupt, or the entry point's Terminated: main prints its args.
+        if not isinstance(error, Exception):
+            kept = len(finished_trials(args.out))
+            if kept:
+                error.args = (f"no partial trial kept; {kept} finished trial(s) in "
+                              f"{Path(args.out) / 'trials'}: --resume goes on",)  # fmt: skip
         raise
     spec = load_sweep(args.sweep)[0]
     for line in summary(records, spec):
         _print(line)
     failed = [r for r in records if r["status"] == "failed"]
     for record in failed:
-        _print(f"failed: {record['id']}: {record['error']}")
+        print(f"hemg-drake sweep: trial {record['id']} failed: {record['error']}",
+              file=sys.stderr)  # fmt: skip
     _print(f"wrote {Path(args.out) / 'results.csv'} ({len(records)} trials, {len(failed)} failed)")
+    return 1 if failed else 0
 
 
 def export_command(args):

@@ -1,10 +1,13 @@
 """hemg-drake sweep: the local backend through the CLI on tiny trials, the sweep file's
-checks, and the Ray backend's call pattern against a fake ``ray`` module."""
+checks (every trial's overrides and the metric names before the first trial), the sweep
+folder's rules, and the Ray backend's call pattern against a fake ``ray`` module. Signals,
+kills and a full disk: ``tests/test_sweep_faults.py``."""
 
 import csv
 import json
 import sys
 import types
+from pathlib import Path
 
 import pytest
 
@@ -26,7 +29,7 @@ axes:
   - name: range
     cases:
       paper: []
-      bad: [emg.k_min=-5]      # out of range: this trial fails, the sweep goes on
+      bad: [learning.num_states=90]   # too many states for the data: fails at learn
 seeds: [3]
 metrics: [demonstration.tracking_error_m, demonstration.gain_lag_s, reproduction.position_rmse_m,
           reproduction.success]
@@ -49,9 +52,9 @@ def swept(tmp_path_factory):
     return path, out, code
 
 
-def test_every_trial_has_a_row_and_a_failed_one_is_recorded(swept, capsys):
+def test_every_trial_has_a_row_and_a_failed_one_is_recorded(swept):
     _, out, code = swept
-    assert code == 0
+    assert code == 1  # a trial failed
     rows = read_table(out / "results.csv")
     assert [(r["window"], r["range"]) for r in rows] == [
         ("10", "paper"), ("10", "bad"), ("30", "paper"), ("30", "bad")
@@ -62,7 +65,7 @@ def test_every_trial_has_a_row_and_a_failed_one_is_recorded(swept, capsys):
         assert "seed=3" in record["overrides"]
         if row["range"] == "bad":
             assert row["status"] == "failed"
-            assert "emg.k_min" in row["error"] and "\n" not in row["error"]
+            assert "N = 90" in row["error"] and "\n" not in row["error"]
         else:
             assert row["status"] == "done", row["error"]
             assert float(row["reproduction.position_rmse_m"]) < 0.05
@@ -82,21 +85,28 @@ def test_resume_skips_finished_trials_and_retries_failed_ones(swept, capfd):
     assert "--resume" in capfd.readouterr().err
     # A killed sweep leaves a trial's temporary folder: resume removes it.
     (out / "trials" / ".tmp-killed-123").mkdir()
-    assert main(["sweep", str(path), "--out", str(out), "--resume", "--workers", "1"]) == 0
+    assert main(["sweep", str(path), "--out", str(out), "--resume", "--workers", "1"]) == 1
     assert not (out / "trials" / ".tmp-killed-123").exists()
-    err = capfd.readouterr().err
-    assert "4/4 done (2 failed)" in err
+    captured = capfd.readouterr()
+    assert "4/4 done (2 failed)" in captured.err
+    # Each failed trial on stderr, the summary and the table's path on stdout.
+    failures = [line for line in captured.err.splitlines() if "failed:" in line]
+    assert len(failures) == 2 and all("trial window=" in line for line in failures)
+    assert not [line for line in captured.out.splitlines() if "failed:" in line]
+    assert captured.out.splitlines()[-1].endswith("(4 trials, 2 failed)")
     assert stamps == {t: (out / "trials" / t / "trial.json").stat().st_mtime_ns for t in done}
 
 
 def test_one_worker_gives_the_same_numbers_as_two(swept, tmp_path):
     path, out, _ = swept
     serial = tmp_path / "serial"
-    assert main(["sweep", str(path), "--out", str(serial), "--workers", "1"]) == 0
+    assert main(["sweep", str(path), "--out", str(serial), "--workers", "1"]) == 1
     numbers = ["demonstration.tracking_error_m", "reproduction.position_rmse_m"]
     two = {r["trial"]: [r[n] for n in numbers] for r in read_table(out / "results.csv")}
     one = {r["trial"]: [r[n] for n in numbers] for r in read_table(serial / "results.csv")}
     assert one == two
+    # The table holds no timing: the same bytes however the trials ran.
+    assert (serial / "results.csv").read_bytes() == (out / "results.csv").read_bytes()
 
 
 def test_trials_of_a_grid_and_one_at_a_time():
@@ -156,7 +166,7 @@ def test_shipped_sweeps_load(tmp_path):
 
 
 class FakeRay(types.ModuleType):
-    """Records the call pattern and runs each task in this process."""
+    """Records the call pattern; each task "fails" at once (no simulation)."""
 
     def __init__(self):
         super().__init__("ray")
@@ -175,7 +185,10 @@ class FakeRay(types.ModuleType):
                 def remote(task):
                     fake.calls.append(("submit", task["id"]))
                     ref = len(fake.results)
-                    fake.results[ref] = function(task)
+                    fake.results[ref] = dict(
+                        id=task["id"], labels=task["labels"], seed=task["seed"],
+                        overrides=task["overrides"], status="failed", error="fake", metrics={},
+                    )  # fmt: skip
                     return ref
 
             return Remote
@@ -196,15 +209,14 @@ def test_ray_backend_call_pattern_with_a_fake_ray(tmp_path, monkeypatch):
     fake = FakeRay()
     monkeypatch.setitem(sys.modules, "ray", fake)
     path = tmp_path / "fails.yaml"
-    # Trials that fail at once (out of range): the call pattern without any simulation.
     path.write_text(
-        "scenario: cotter_pin\naxes: [{name: emg.k_min, values: [-1, -2]}]\nseeds: [0]\n"
+        "scenario: cotter_pin\naxes: [{name: emg.k_min, values: [10, 20]}]\nseeds: [0]\n"
     )
     # Outside a loopback-only namespace a local Ray would bind the machine's address: refused.
     monkeypatch.setattr(sweep.runners, "only_loopback", lambda: False)
     with pytest.raises(ValueError, match="binds this machine's network address"):
         sweep.run_sweep(path, tmp_path / "refused", backend="ray", workers=3)
-    assert fake.calls == []
+    assert fake.calls == [] and not (tmp_path / "refused").exists()
     monkeypatch.setattr(sweep.runners, "only_loopback", lambda: True)
     records = sweep.run_sweep(path, tmp_path / "out", backend="ray", workers=3)
     assert [r["status"] for r in records] == ["failed", "failed"]
@@ -230,3 +242,124 @@ def test_progress_bar_counts_and_time_left():
     lines = stream.getvalue().splitlines()
     assert lines[-1].startswith("[############------------] 2/4 done (1 failed), 2 running")
     assert lines[-1].endswith("left")
+
+
+def _files(folder):
+    """Every file under ``folder`` with its bytes."""
+    return {p.relative_to(folder).as_posix(): p.read_bytes()
+            for p in sorted(folder.rglob("*")) if p.is_file()}  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "axes, words",
+    [
+        # An unknown key: the trial, the axis, the value, and the keys there are.
+        ("- {name: w, keys: [emg.windw], values: [10]}",
+         ["trial w=10-seed=0-", "(axis 'w', value '10')", "emg.windw", "EmgConfig has ["]),
+        # A bad value of a case.
+        ("- {name: r, cases: {ok: [], low: [emg.k_min=-5]}}",
+         ["trial r=low-seed=0-", "(axis 'r', case 'low')", "emg.k_min=-5", "must not be negative"]),
+        # Not an integer.
+        ("- {name: d, keys: [mapping.delay_steps], values: [0, 2.5]}",
+         ["(axis 'd', value '2.5')", "mapping.delay_steps", "must be an integer"]),
+        # Two axes fine alone, bad together.
+        ("- {name: lo, keys: [emg.k_min], values: [10, 150]}\n"
+         "  - {name: hi, keys: [emg.k_max], values: [200, 100]}",
+         ["trial lo=150-hi=100-seed=0-", "this combination", "'emg.k_min' < 'emg.k_max'"]),
+    ],
+)  # fmt: skip
+def test_a_bad_trial_is_refused_before_any_trial_in_one_line(tmp_path, capfd, axes, words):
+    path = tmp_path / "bad.yaml"
+    path.write_text(f"scenario: cotter_pin\naxes:\n  {axes}\n")
+    assert main(["sweep", str(path), "--out", str(tmp_path / "out")]) == 2
+    captured = capfd.readouterr()
+    err = captured.err
+    assert err.startswith(f"hemg-drake sweep: error: {path}: ") and err.count("\n") == 1
+    for word in words:
+        assert word in err, (word, err)
+    assert not (tmp_path / "out").exists() and captured.out == ""
+
+
+def test_an_unknown_metric_is_refused_listing_the_known_ones(tmp_path, capfd):
+    path = tmp_path / "m.yaml"
+    path.write_text("scenario: drawing\nsteps: [demonstrate, learn]\n"
+                    "metrics: [learn.n_iter, demonstration.pin_out, reproduction.success]\n")
+    assert main(["sweep", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capfd.readouterr().err
+    assert err.count("\n") == 1 and "key 'metrics'" in err
+    assert "unknown metric(s) ['demonstration.pin_out', 'reproduction.success']" in err
+    assert "(['reproduction.success'] need more steps" in err
+    assert "'demonstration.three_strokes'" in err and "'learn.converged'" in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_known_metrics_are_the_ones_a_trial_records(swept):
+    # Drift guard: the names a real cotter-pin trial records against the declared ones.
+    _, out, _ = swept
+    recorded = set()
+    for path in (out / "trials").glob("*/trial.json"):
+        record = json.loads(path.read_text())
+        if record["status"] == "done":
+            recorded |= set(record["metrics"])
+    steps = ["demonstrate", "learn", "reproduce"]
+    assert recorded == set(sweep.known_metrics(["cotter_pin"], steps))
+
+
+def test_a_folder_the_sweep_did_not_write_is_refused_and_untouched(swept, tmp_path, capfd):
+    path, _, _ = swept
+    mine = tmp_path / "mine"
+    (mine / "trials").mkdir(parents=True)
+    (mine / "notes.txt").write_text("a person's notes\n")
+    (mine / "trials" / ".tmp-x-1").mkdir()  # even names the sweep would tidy
+    before = _files(mine), sorted(p.name for p in mine.rglob("*"))
+    for extra in ([], ["--resume"]):
+        assert main(["sweep", str(path), "--out", str(mine), *extra]) == 2
+        err = capfd.readouterr().err
+        assert err == (f"hemg-drake sweep: error: {mine}: holds files hemg-drake sweep did "
+                       f"not write (no sweep.json): give a new or empty folder for the sweep\n")
+    assert (_files(mine), sorted(p.name for p in mine.rglob("*"))) == before
+
+
+def test_resume_only_the_same_sweep(swept, tmp_path, capfd):
+    path, out, _ = swept
+    before = _files(out)
+    other = tmp_path / "other.yaml"
+    other.write_text(path.read_text().replace("learning.n_iter=3", "learning.n_iter=4"))
+    assert main(["sweep", str(other), "--out", str(out), "--resume"]) == 2
+    err = capfd.readouterr().err
+    assert err.count("\n") == 1 and "was written by another sweep (its 'set' differ)" in err
+    assert _files(out) == before
+    # Nothing to resume in a new folder: refused, and nothing is left there.
+    assert main(["sweep", str(path), "--out", str(tmp_path / "new"), "--resume"]) == 2
+    assert "no sweep to resume there (no sweep.json)" in capfd.readouterr().err
+    assert not (tmp_path / "new").exists()
+
+
+def test_two_sweeps_on_one_folder_one_is_refused_naming_the_other(tmp_path, capfd):
+    import os
+    import signal
+    import subprocess
+    import time
+
+    path = tmp_path / "slow.yaml"
+    path.write_text("scenario: drawing\nset: [num_demonstrations=1, duration=0.5]\n"
+                    "steps: [demonstrate]\nmetrics: [demonstration.strokes]\n")  # fmt: skip
+    out = tmp_path / "out"
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    first = subprocess.Popen(
+        [sys.executable, "-m", "hemg_drake.cli", "sweep", str(path), "--out", str(out)],
+        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 60
+        while not (out / "sweep.json").is_file() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert (out / "sweep.json").is_file()
+        for extra in ([], ["--resume"]):
+            assert main(["sweep", str(path), "--out", str(out), *extra]) == 2
+            err = capfd.readouterr().err
+            assert err.count("\n") == 1 and f"(PID {first.pid}) is using it" in err, err
+    finally:
+        first.send_signal(signal.SIGINT)
+        first.communicate(timeout=60)
+    assert first.returncode in (0, 130)

@@ -30,7 +30,7 @@ set: [num_demonstrations=2, duration=1.0, learning.n_iter=3, learning.num_states
       reproduction.settle_time=0.2]
 axes:
   - {name: emg.window, values: [10, 30]}
-  - {name: emg.k_min, values: [10, -1]}    # -1: out of range, a failed trial
+  - {name: learning.num_states, values: [2, 90]}   # 90: too many for the data, fails at learn
 seeds: [3]
 metrics: [demonstration.tracking_error_m, reproduction.position_rmse_m]
 """

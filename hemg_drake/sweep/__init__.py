@@ -30,12 +30,22 @@ axis, the mean over seeds and its spread, +-1 standard deviation).
 Demonstrations do not depend on the ``learning`` and ``reproduction`` sections, so trials
 that differ only there share them: they are recorded once per seed in ``OUT/cache/``.
 
+Before the first trial every trial's scenario is loaded with its overrides and the metric
+names are checked (:mod:`~hemg_drake.sweep.checks`); the sweep then holds ``OUT`` alone
+(:mod:`~hemg_drake.sweep.folder`: ``sweep.json`` marks a sweep's folder, a lock refuses a
+second sweep, ``--resume`` continues only the same sweep). Ctrl-C, SIGTERM, SIGKILL or a
+full disk stop the workers with the sweep and leave only finished trials.
+
 The package's modules: :mod:`~hemg_drake.sweep.spec` (the sweep file and its trials),
 :mod:`~hemg_drake.sweep.trial` (one trial in a worker, and its metrics),
-:mod:`~hemg_drake.sweep.runners` (the local process pool, Ray, :func:`run_sweep`) and
-:mod:`~hemg_drake.sweep.results` (the table, the figure, resume bookkeeping).
+:mod:`~hemg_drake.sweep.runners` (the local process pool, Ray, :func:`run_sweep`),
+:mod:`~hemg_drake.sweep.results` (the table, the figure, resume bookkeeping),
+:mod:`~hemg_drake.sweep.checks` (before the first trial) and :mod:`~hemg_drake.sweep.folder`
+(the sweep's folder).
 """
 
+from hemg_drake.sweep.checks import METRICS, known_metrics
+from hemg_drake.sweep.folder import MARKER, sweep_folder
 from hemg_drake.sweep.results import (
     finished_record,
     plot_results,
@@ -73,7 +83,8 @@ from hemg_drake.sweep.trial import (
 )
 
 __all__ = [
-    "BACKENDS", "DEFAULT_METRICS", "DESIGNS", "RAY_OBJECT_STORE_BYTES", "STEPS", "SWEEPS",
+    "BACKENDS", "DEFAULT_METRICS", "DESIGNS", "MARKER", "METRICS", "RAY_OBJECT_STORE_BYTES",
+    "STEPS", "SWEEPS", "known_metrics", "sweep_folder",
     "THREAD_ENV", "TRIAL_FILE", "Axis", "Progress", "SweepSpec", "Trial",
     "demonstration_metrics", "finished_record", "flatten", "heldout_metrics", "load_sweep",
     "only_loopback", "parse_sweep", "plot_results", "run_sweep", "run_trial", "summary",

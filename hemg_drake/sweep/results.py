@@ -28,13 +28,13 @@ def finished_record(out, trial):
 
 
 def table_rows(records, spec):
-    """One row per trial: trial, status, seed, the axes' labels, elapsed_s, error, metrics."""
+    """One row per trial: trial, status, seed, the axes' labels, error, metrics (the same
+    bytes however the sweep ran: a trial's elapsed time is in its ``trial.json`` only)."""
     rows = []
     for record in records:
         row = {"trial": record["id"], "status": record["status"], "seed": record["seed"]}
         for axis in spec.axes:
             row[axis.name] = record["labels"].get(axis.name, "")
-        row["elapsed_s"] = round(float(record.get("elapsed_s", 0.0)), 3)
         row["error"] = record.get("error", "")
         for name in spec.metrics:
             row[name] = record["metrics"].get(name, "")

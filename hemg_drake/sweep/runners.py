@@ -1,17 +1,16 @@
 """Running a sweep's trials: a local process pool or Ray, with a progress bar."""
 
 import contextlib
-import itertools
 import os
-import shutil
+import signal
 import sys
 import time
-from pathlib import Path
 
-from hemg_drake.fileio import write_text_atomic
+from hemg_drake.sweep.checks import check_metrics, check_trials
+from hemg_drake.sweep.folder import sweep_folder
 from hemg_drake.sweep.results import finished_record, write_results
 from hemg_drake.sweep.spec import load_sweep, sweep_path, trials
-from hemg_drake.sweep.trial import run_trial
+from hemg_drake.sweep.trial import DISK_ERRORS, run_trial
 from hemg_drake.yaml_schema import first_line
 
 BACKENDS = ("local", "ray")
@@ -97,23 +96,59 @@ def _thread_env():
                 os.environ[name] = value
 
 
+def _worker_init(parent):
+    """In each worker: die with the sweep (SIGKILL when the parent process ends, however it
+    ends: Linux ``PR_SET_PDEATHSIG``), and leave Ctrl-C to the parent (a terminal sends it
+    to the whole process group; the parent stops the workers and tidies their folders)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    with contextlib.suppress(OSError, AttributeError):
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != parent:  # the parent ended before the line above
+        os._exit(1)
+
+
+_PR_SET_PDEATHSIG = 1
+
+
+def _stop_workers(pool):
+    """Kill a process pool's workers at once (their running trials are abandoned) and wait
+    for them to end."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    for process in processes:
+        with contextlib.suppress(Exception):
+            process.kill()
+    for process in processes:
+        with contextlib.suppress(Exception):
+            process.join(timeout=5)
+    pool.shutdown(wait=False, cancel_futures=True)
+
+
 def _run_local(tasks, workers, on_record):
     import concurrent.futures as cf
     import multiprocessing
 
     context = multiprocessing.get_context("spawn")
-    with _thread_env(), cf.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-        futures = {pool.submit(run_trial, task): task for task in tasks}
-        try:
-            for future in cf.as_completed(futures):
-                try:
-                    record = future.result()
-                except Exception as error:  # noqa: BLE001 - a worker died
-                    record = _crashed(futures[future], error)
-                on_record(record)
-        except BaseException:
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
+    pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=context,
+                                  initializer=_worker_init, initargs=(os.getpid(),))  # fmt: skip
+    try:
+        with _thread_env():
+            futures = {pool.submit(run_trial, task): task for task in tasks}
+        for future in cf.as_completed(futures):
+            try:
+                record = future.result()
+            except OSError as error:
+                if error.errno in DISK_ERRORS:
+                    raise  # the disk, not the trial: stop the sweep
+                record = _crashed(futures[future], error)
+            except Exception as error:  # noqa: BLE001 - a worker died
+                record = _crashed(futures[future], error)
+            on_record(record)
+    except BaseException:
+        _stop_workers(pool)
+        raise
+    pool.shutdown(wait=True)
 
 
 def _crashed(task, error):
@@ -168,9 +203,18 @@ def _run_ray(tasks, workers, address, on_record):
                 task = pending.pop(ref)
                 try:
                     record = ray.get(ref)
+                except OSError as error:
+                    if error.errno in DISK_ERRORS:
+                        raise
+                    record = _crashed(task, error)
                 except Exception as error:  # noqa: BLE001 - the task's worker died
                     record = _crashed(task, error)
                 on_record(record)
+    except BaseException:
+        for ref in pending:  # stop the running trials with the sweep (force: kill them)
+            with contextlib.suppress(Exception):
+                ray.cancel(ref, force=True)
+        raise
     finally:
         ray.shutdown()
 
@@ -189,9 +233,15 @@ def run_sweep(path, out, *, backend="local", workers=None, address=None, resume=
     workers : int, optional
         Processes (local) or CPUs of the local Ray instance; default all cores.
     resume : bool
-        Skip the trials already done in ``out`` (failed ones run again). Without it, a
-        folder that holds trials is refused.
+        Skip the trials already done in ``out`` (failed ones run again); only in a folder
+        that the same sweep wrote (:mod:`~hemg_drake.sweep.folder`). Without it, a folder
+        that holds trials is refused.
     stream : file, the progress bar's (default stderr).
+
+    Every trial's overrides and the metric names are checked first (ValueError in one
+    line); the folder is then held (:func:`~hemg_drake.sweep.folder.sweep_folder`: a
+    second sweep on it is refused). Interrupted (Ctrl-C, SIGTERM) or stopped by a full
+    disk, the workers are killed and no unfinished trial's folder remains.
 
     Returns
     -------
@@ -204,39 +254,32 @@ def run_sweep(path, out, *, backend="local", workers=None, address=None, resume=
         raise ValueError(f"workers must be at least 1, got {workers}")
     spec, text, source = load_sweep(path)
     spec_text = sweep_path(path).read_text(encoding="utf-8")
-    out = Path(out)
-    trials_dir = out / "trials"
-    if not resume and trials_dir.is_dir() and any(trials_dir.iterdir()):
-        raise ValueError(
-            f"{out}: holds a sweep's trials already: pass --resume to continue it, or "
-            f"choose another --out"
-        )
-    trials_dir.mkdir(parents=True, exist_ok=True)
-    for stale in itertools.chain(trials_dir.glob(".tmp-*"), (out / "cache").glob(".tmp-*")):
-        shutil.rmtree(stale, ignore_errors=True)
-    write_text_atomic(out / "sweep.yaml", spec_text)
     all_trials = trials(spec)
-    records = {}
-    for trial in all_trials:
-        record = finished_record(out, trial) if resume else None
-        if record is not None:
-            records[trial.id] = record
-    todo = [t for t in all_trials if t.id not in records]
-    progress = Progress(len(all_trials), min(workers, max(len(todo), 1)), stream)
-    # Trials done in an earlier run count as done, not in the time left.
-    progress.done = progress.skipped = len(records)
-    progress.update()
+    # Every trial's scenario and the metric names, before anything is written.
+    tasks_run = check_trials(spec, all_trials, text, source, str(sweep_path(path)))
+    check_metrics(spec, tasks_run, str(sweep_path(path)))
+    with sweep_folder(out, spec, text, spec_text, resume=resume) as out:
+        records = {}
+        for trial in all_trials:
+            record = finished_record(out, trial) if resume else None
+            if record is not None:
+                records[trial.id] = record
+        todo = [t for t in all_trials if t.id not in records]
+        progress = Progress(len(all_trials), min(workers, max(len(todo), 1)), stream)
+        # Trials done in an earlier run count as done, not in the time left.
+        progress.done = progress.skipped = len(records)
+        progress.update()
 
-    def on_record(record):
-        records[record["id"]] = record
-        progress.update(record["status"])
+        def on_record(record):
+            records[record["id"]] = record
+            progress.update(record["status"])
 
-    tasks = [_task(t, spec, text, source, out) for t in todo]
-    if tasks:
-        if backend == "local":
-            _run_local(tasks, workers, on_record)
-        else:
-            _run_ray(tasks, workers, address, on_record)
-    ordered = [records[t.id] for t in all_trials]
-    write_results(ordered, spec, out)
+        tasks = [_task(t, spec, text, source, out) for t in todo]
+        if tasks:
+            if backend == "local":
+                _run_local(tasks, workers, on_record)
+            else:
+                _run_ray(tasks, workers, address, on_record)
+        ordered = [records[t.id] for t in all_trials]
+        write_results(ordered, spec, out)
     return ordered

@@ -3,9 +3,11 @@
 
 import contextlib
 import dataclasses as dc
+import errno
 import hashlib
 import json
 import os
+import re
 import shutil
 import time
 from pathlib import Path
@@ -211,11 +213,31 @@ def _trial_metrics(task, run):
     return result
 
 
+# Errors of the disk itself: the sweep stops (every later trial would fail the same way)
+# rather than recording them as the trial's result.
+DISK_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EIO)
+
+
+def _shown(filename):
+    """A path with each temporary folder of a trial, a cache entry or a run folder's new
+    version (``.tmp-<id>-<pid>``, ``.<name>.hemg-drake-new-<pid>``) shown by its final name."""
+    from hemg_drake.run_folder import NEW
+
+    parts = []
+    for part in Path(filename).parts:
+        part = re.sub(rf"^\.(.+)\.{NEW}-\d+$", r"\1", part)
+        parts.append(re.sub(r"^\.tmp-(.+)-\d+$", r"\1", part))
+    return str(Path(*parts))
+
+
 def run_trial(task):
     """Run one trial (a dict of plain data, see :func:`_task`) in this process.
 
-    Builds ``task["dir"]`` in a temporary folder beside it and renames it when done, so
-    a trial folder exists only complete. Any error is caught and recorded in one line.
+    Builds ``task["dir"]`` in a temporary folder beside it (``.tmp-<id>-<pid>``) and
+    swaps it in when done, so a trial folder exists only complete: interrupted or killed,
+    a trial leaves at most its temporary folder, which the sweep removes. Any error of the
+    trial is recorded in one line; an error of the disk (full, read-only, I/O) is raised
+    as an OSError naming the file, its temporary folder removed.
 
     Returns
     -------
@@ -226,19 +248,38 @@ def run_trial(task):
     final = Path(task["dir"])
     tmp = final.parent / f".tmp-{final.name}-{os.getpid()}"
     shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    record = dict(id=task["id"], labels=task["labels"], seed=task["seed"],
-                  overrides=task["overrides"], status="done", error="", metrics={})  # fmt: skip
     try:
-        record["metrics"] = _trial_metrics(task, tmp / "run")
-    except Exception as error:  # noqa: BLE001 - a failed trial is a result, not a crash
-        record.update(status="failed", error=f"{type(error).__name__}: {first_line(error)}")
-    record["elapsed_s"] = time.perf_counter() - began
-    write_text_atomic(tmp / TRIAL_FILE, json.dumps(record, indent=2, default=_json_default) + "\n")
-    if final.exists():
-        shutil.rmtree(final)
-    os.rename(tmp, final)
-    return json.loads((final / TRIAL_FILE).read_text(encoding="utf-8"))
+        tmp.mkdir(parents=True)
+        record = dict(id=task["id"], labels=task["labels"], seed=task["seed"],
+                      overrides=task["overrides"], status="done", error="", metrics={})  # fmt: skip
+        try:
+            record["metrics"] = _trial_metrics(task, tmp / "run")
+        except OSError as error:
+            if error.errno in DISK_ERRORS:
+                raise
+            record.update(status="failed", error=f"{type(error).__name__}: {first_line(error)}")
+        except Exception as error:  # noqa: BLE001 - a failed trial is a result, not a crash
+            record.update(status="failed", error=f"{type(error).__name__}: {first_line(error)}")
+        record["elapsed_s"] = time.perf_counter() - began
+        text = json.dumps(record, indent=2, default=_json_default) + "\n"
+        write_text_atomic(tmp / TRIAL_FILE, text)
+        if final.exists():  # a failed trial run again: swap, then drop the old one
+            from hemg_drake.run_folder import exchange
+
+            exchange(tmp, final)
+            shutil.rmtree(tmp, ignore_errors=True)
+        else:
+            os.rename(tmp, final)
+    except OSError as error:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if error.errno in DISK_ERRORS:
+            where = _shown(error.filename or final)
+            raise OSError(error.errno, error.strerror or os.strerror(error.errno), where) from None
+        raise
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return json.loads(text)
 
 
 def _json_default(value):
