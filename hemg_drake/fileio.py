@@ -61,6 +61,28 @@ def atomic_open(path, mode="w", **kwargs):
         raise
 
 
+def named_as_moved(error, built, final):
+    """``error`` (an OSError raised while a folder was built at ``built`` to become ``final``:
+    a full disk, an I/O error) naming its file as it would be in ``final`` (``built``'s name
+    means nothing to a person; ``final`` when it names no file), saying ``final`` is as it
+    was. Errors naming other files, and ones without an errno, are returned as they are."""
+    if error.errno is None:
+        return error
+    shown = None
+    for name in (error.filename2, error.filename):  # shutil.copy2 names the copy second
+        if name is not None:
+            rel = os.path.relpath(os.path.realpath(name), os.path.realpath(built))
+            if rel != os.pardir and not rel.startswith(os.pardir + os.sep):
+                shown = Path(final) if rel == "." else Path(final) / rel
+                break
+    if shown is None:
+        if error.filename is not None:
+            return error
+        shown = Path(final)
+    reason = error.strerror or str(error) or type(error).__name__
+    return OSError(error.errno, f"{reason}; nothing in {final}/ was changed", str(shown))
+
+
 def _umask():
     mask = os.umask(0)
     os.umask(mask)

@@ -33,7 +33,7 @@ import os
 import shutil
 from pathlib import Path
 
-from hemg_drake.fileio import fault_point, write_text_atomic
+from hemg_drake.fileio import fault_point, named_as_moved, write_text_atomic
 from hemg_drake.folder_lock import folder_lock, lock_new_folder
 from hemg_drake.folder_versions import (
     MANIFEST,
@@ -200,6 +200,7 @@ class RunFolder:
         target = Path(os.path.realpath(self.path))
         made = [p for p in (target, *target.parents) if not p.exists()]
         target.mkdir(parents=True, exist_ok=True)
+        staging, swapped = target.parent / f".{target.name}.{NEW}-{os.getpid()}", False
         try:
             with folder_lock(target) as lock:
                 recover(target)
@@ -211,7 +212,6 @@ class RunFolder:
                         "this would replace: give another folder"
                     )
                 dropped, folders, entries = folder._dropped(stage, keep_own)
-                staging = target.parent / f".{target.name}.{NEW}-{os.getpid()}"
                 if staging.exists():
                     shutil.rmtree(staging)
                 fd = lock_new_folder(staging)
@@ -232,6 +232,7 @@ class RunFolder:
                         raise RuntimeError(f"the {stage} stage did not record its files")
                     fault_point("before the swap")
                     exchange(staging, target)
+                    swapped = True
                     fault_point("swapped")
                 except BaseException:
                     os.close(fd)
@@ -244,10 +245,12 @@ class RunFolder:
                 kept = discard_old(old, target)
                 if kept and progress is not None:
                     progress(f"kept {old}/: it holds files changed while this command ran")
-        except BaseException:
+        except BaseException as error:
             for path in made:  # only folders this call made, and only if still empty
                 with contextlib.suppress(OSError):
                     path.rmdir()
+            if isinstance(error, OSError) and not swapped:  # a full disk, an I/O error
+                raise named_as_moved(error, staging, target) from None
             raise
 
     def finish(self, stage, written, *, inputs=(), command=None):
