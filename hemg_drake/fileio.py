@@ -12,8 +12,9 @@ import numpy as np
 
 
 # Fault injection for tests/faults (off unless set): HEMG_DRAKE_FAULT_AT=N kills the
-# process (SIGKILL) at the N-th fault point; HEMG_DRAKE_FAULT_LOG=FILE appends each point's
-# label there, so a harness can count them.
+# process (SIGKILL) at the N-th fault point, or with HEMG_DRAKE_FAULT_ERRNO=E raises an
+# OSError of errno E there that names no file (as a failing write may);
+# HEMG_DRAKE_FAULT_LOG=FILE appends each point's label there, so a harness can count them.
 _FAULTS = {"count": 0}
 
 
@@ -28,6 +29,9 @@ def fault_point(label):
         with open(log, "a", encoding="utf-8") as f:
             f.write(f"{_FAULTS['count']} {label}\n")
     if at is not None and _FAULTS["count"] == int(at):
+        code = os.environ.get("HEMG_DRAKE_FAULT_ERRNO")
+        if code is not None:
+            raise OSError(int(code), os.strerror(int(code)))
         os.kill(os.getpid(), signal.SIGKILL)
 
 

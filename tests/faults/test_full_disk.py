@@ -166,8 +166,7 @@ def test_repair_on_a_full_disk_keeps_the_folder(disk, base):
     before = everything(root)
     disk.leave(pages=0)
     done = run(["repair", "run"], cwd=root, check=False)
-    target = os.path.realpath(root / "run")
-    assert fails_in_one_line(done, "repair") == f"{target}/manifest.json: {NO_SPACE}"
+    assert fails_in_one_line(done, "repair") == f"run/manifest.json: {NO_SPACE}"  # as given
     assert everything(root) == before
     disk.release()
     run(["repair", "run"], cwd=root)
@@ -200,3 +199,22 @@ def test_demo_on_a_full_disk_stops_in_one_line_between_whole_stages(disk):
     disk.release()
     run(argv, cwd=disk.root)
     assert (disk.root / "runs" / "metrics.json").is_file()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["learn", "teleop"])
+def test_an_io_error_at_each_moment_before_the_swap_names_the_file(base, tmp_path_factory, name):
+    # An OSError naming no file (errno 5), raised at each fault point from the start to the
+    # swap: the new version's folder, its links, each write and rename, the manifest.
+    the_case = case(name, base, tmp_path_factory)
+    last = next(i for i, p in enumerate(the_case.points, 1) if p.endswith("before the swap"))
+    for point in range(1, last + 1):
+        root = the_case.fresh(f"io-error-{point}")
+        before = everything(root)
+        env = {"HEMG_DRAKE_FAULT_AT": str(point), "HEMG_DRAKE_FAULT_ERRNO": "5"}
+        line = fails_in_one_line(run(the_case.argv, cwd=root, check=False, env=env), name)
+        target = os.path.realpath(root / the_case.folder)
+        assert line.startswith(target), (the_case.points[point - 1], line)
+        assert line.endswith(f": Input/output error; nothing in {target}/ was changed"), line
+        assert everything(root) == before and not leftovers(root / the_case.folder)
+        shutil.rmtree(root)

@@ -57,6 +57,7 @@ def _env(extra):
     env = dict(os.environ, PYTHONPATH=str(REPO), MPLBACKEND="Agg")
     env.pop("HEMG_DRAKE_FAULT_AT", None)
     env.pop("HEMG_DRAKE_FAULT_LOG", None)
+    env.pop("HEMG_DRAKE_FAULT_ERRNO", None)
     env.update(extra or {})
     return env
 
