@@ -8,7 +8,7 @@ import subprocess
 
 import pytest
 
-from tooling.faults import SMALL, run
+from tooling.faults import SMALL, mount_tmpfs, run
 
 
 @pytest.fixture
@@ -28,10 +28,7 @@ def read_only(tmp_path):
         yield folder
         folder.chmod(0o755)
         return
-    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=64k", "tmpfs", str(folder)],
-                          capture_output=True, text=True)  # fmt: skip
-    if done.returncode != 0:
-        pytest.skip(f"root cannot mount a read-only tmpfs here: {done.stderr.strip()[:80]}")
+    mount_tmpfs(folder, "ro,size=64k")
     try:
         yield folder
     finally:
@@ -91,7 +88,8 @@ def test_an_early_failure_leaves_no_folder_it_made(root, fails, argv):
     [["demonstrate", "cotter_pin", "--out", "OUT", "--no-replay", *SMALL],
      ["reproduce", "run", "--out", "OUT", "--no-replay"],
      ["import", "demos.hdf5", "--out", "OUT"],
-     ["teleop", "cotter_pin", "--out", "OUT", "--no-replay", "--replay-inputs", "live/inputs_1.npz"],
+     ["teleop", "cotter_pin", "--out", "OUT", "--no-replay",
+      "--replay-inputs", "live/inputs_1.npz"],
      ["export", "run", "OUT", "--format", "lerobot"],
      ["export", "run", "OUT/demos.hdf5"],
      ["demo", "--out", "OUT", "--tasks", "cotter_pin", "--no-replay", "--no-placements", *SMALL],

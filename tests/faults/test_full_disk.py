@@ -4,7 +4,7 @@ new version's folder or its hard links): one line on stderr naming the file and 
 exit 2, no traceback, every folder exactly as it was and nothing left beside it; once there is
 space the same command works and writes the run a roomy disk gets (issue 25).
 
-Mounting needs root: skipped elsewhere, run by ``.ci/run`` (root).
+Mounting needs root: skipped elsewhere; ``.ci/run`` (root) requires them to run.
 """
 
 import os
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from tooling.faults import COMMANDS, SMALL, Case, leftovers, run, snapshot
+from tooling.faults import SMALL, Case, leftovers, mount_tmpfs, run, snapshot
 
 PAGE = 4096  # tmpfs allocates whole pages
 NO_SPACE = "No space left on device"
@@ -55,10 +55,7 @@ def disk(tmp_path):
     """A 32 MB tmpfs with 3000 inodes, mounted for the test (skipped where mount is refused)."""
     mount = tmp_path / "disk"
     mount.mkdir()
-    result = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=32m,nr_inodes=3000", "tmpfs",
-                             str(mount)], capture_output=True, text=True)  # fmt: skip
-    if result.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here: {result.stderr.strip()[:80]}")
+    mount_tmpfs(mount, "size=32m,nr_inodes=3000")
     try:
         yield SmallDisk(mount)
     finally:
@@ -218,3 +215,25 @@ def test_an_io_error_at_each_moment_before_the_swap_names_the_file(base, tmp_pat
         assert line.endswith(f": Input/output error; nothing in {target}/ was changed"), line
         assert everything(root) == before and not leftovers(root / the_case.folder)
         shutil.rmtree(root)
+
+
+def test_an_error_in_the_new_version_names_the_file_where_it_will_be(tmp_path):
+    from errno import EIO, ENOSPC
+
+    from hemg_drake.fileio import named_as_moved
+
+    built, final = tmp_path / ".run.hemg-drake-new-7", tmp_path / "run"
+    said = "; nothing in " + str(final) + "/ was changed"
+    error = named_as_moved(OSError(ENOSPC, NO_SPACE, str(built / "replay_1.html")), built, final)
+    assert (error.errno, error.filename, error.strerror) == (ENOSPC, str(final / "replay_1.html"),
+                                                             NO_SPACE + said)  # fmt: skip
+    # shutil.copy2 (a link refused) names the source first and the copy second.
+    copy = OSError(ENOSPC, NO_SPACE, str(final / "a.npz"), None, str(built / "a.npz"))
+    copied = named_as_moved(copy, built, final)
+    assert (copied.filename, copied.strerror) == (str(final / "a.npz"), NO_SPACE + said)
+    assert named_as_moved(OSError(ENOSPC, NO_SPACE, str(built)), built, final).filename == str(final)
+    assert named_as_moved(OSError(EIO, "Input/output error"), built, final).filename == str(final)
+    elsewhere = OSError(EIO, "Input/output error", str(tmp_path / "model.npz"))
+    assert named_as_moved(elsewhere, built, final) is elsewhere
+    message = FileNotFoundError("run folder not found: x")  # no errno: a message of its own
+    assert named_as_moved(message, built, final) is message

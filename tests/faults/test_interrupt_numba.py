@@ -64,7 +64,8 @@ def _in_a_ctypes_callback(body):
     namespace = {"__name__": "llvmlite.binding.stand_in", "body": body}
     exec(compile(source, "<llvmlite stand-in>", "exec"), namespace)
     values = (ctypes.c_int * 2)(1, 2)
-    ctypes.CDLL(None).qsort(values, 2, ctypes.sizeof(ctypes.c_int), compare_type(namespace["compare"]))
+    compare = compare_type(namespace["compare"])
+    ctypes.CDLL(None).qsort(values, 2, ctypes.sizeof(ctypes.c_int), compare)
 
 
 @pytest.mark.parametrize("signum, exception", [(signal.SIGINT, KeyboardInterrupt),
