@@ -338,8 +338,10 @@ class Terminated(BaseException):
     """SIGTERM, raised where the command is, so that it unwinds as Ctrl-C does."""
 
 
-# Retry delay (s) of a signal that arrived inside LLVM's JIT (numba compiling).
+# Retry delay (s) of a signal that arrived inside LLVM's JIT (numba compiling), and the
+# retries pending.
 SIGNAL_RETRY = 0.02
+_RETRIES = []
 
 
 def _in_llvm(frame):
@@ -366,6 +368,7 @@ def _raising(exception):
             retry = threading.Timer(SIGNAL_RETRY, os.kill, (os.getpid(), signum))
             retry.daemon = True
             retry.start()
+            _RETRIES.append(retry)  # cancelled if the command ends first
             return
         raise exception()
 
@@ -425,6 +428,8 @@ def main(argv=None):
         print(f"hemg-drake {args.command}: error: {_one_line(error)}", file=sys.stderr)
         return 2
     finally:
+        while _RETRIES:
+            _RETRIES.pop().cancel()
         for signum, handler in previous.items():
             signal.signal(signum, handler)
     return 0
