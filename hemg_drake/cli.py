@@ -8,8 +8,10 @@ is instant.
 
 import argparse
 import math
+import os
 import signal
 import sys
+import threading
 import warnings
 
 from hemg_drake.commands import (
@@ -336,8 +338,41 @@ class Terminated(BaseException):
     """SIGTERM, raised where the command is, so that it unwinds as Ctrl-C does."""
 
 
-def _terminate(signum, frame):
-    raise Terminated()
+# Retry delay (s) of a signal that arrived inside LLVM's JIT (numba compiling), and the
+# retries pending.
+SIGNAL_RETRY = 0.02
+_RETRIES = []
+
+
+def _in_llvm(frame):
+    """Whether ``frame`` or a caller runs llvmlite's code (numba compiling with LLVM)."""
+    while frame is not None:
+        if frame.f_globals.get("__name__", "").startswith("llvmlite."):
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _raising(exception):
+    """A signal handler raising ``exception`` where the command is.
+
+    Inside llvmlite, LLVM may be running a Python callback through ctypes (its object cache,
+    while numba compiles a kernel): an exception raised there is printed as "Exception
+    ignored" and dropped, and numba then fails with a traceback of its own (or the command
+    runs on as if never interrupted). There the signal is sent again a moment later, until
+    it arrives outside llvmlite.
+    """
+
+    def handle(signum, frame):
+        if _in_llvm(frame):
+            retry = threading.Timer(SIGNAL_RETRY, os.kill, (os.getpid(), signum))
+            retry.daemon = True
+            retry.start()
+            _RETRIES.append(retry)  # cancelled if the command ends first
+            return
+        raise exception()
+
+    return handle
 
 
 def _commands_list(parser):
@@ -366,7 +401,10 @@ def main(argv=None):
         sys.stderr.write(_commands_list(parser))
         return 2
     args = parser.parse_args(argv)
-    previous = signal.signal(signal.SIGTERM, _terminate)
+    previous = {
+        signal.SIGINT: signal.signal(signal.SIGINT, _raising(KeyboardInterrupt)),
+        signal.SIGTERM: signal.signal(signal.SIGTERM, _raising(Terminated)),
+    }
 
     def one_line_warning(message, category, *_):  # a warning, like an error, in one line
         print(f"hemg-drake {args.command}: warning: {_one_line(message)}", file=sys.stderr)
@@ -393,7 +431,10 @@ def main(argv=None):
         print(f"hemg-drake {args.command}: error: {_one_line(error)}", file=sys.stderr)
         return 2
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        while _RETRIES:
+            _RETRIES.pop().cancel()
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
     return status or 0  # a command's own status (sweep: 1 when a trial failed)
 
 

@@ -12,8 +12,9 @@ import numpy as np
 
 
 # Fault injection for tests/faults (off unless set): HEMG_DRAKE_FAULT_AT=N kills the
-# process (SIGKILL) at the N-th fault point; HEMG_DRAKE_FAULT_LOG=FILE appends each point's
-# label there, so a harness can count them.
+# process (SIGKILL) at the N-th fault point, or with HEMG_DRAKE_FAULT_ERRNO=E raises an
+# OSError of errno E there that names no file (as a failing write may);
+# HEMG_DRAKE_FAULT_LOG=FILE appends each point's label there, so a harness can count them.
 _FAULTS = {"count": 0}
 
 
@@ -28,6 +29,9 @@ def fault_point(label):
         with open(log, "a", encoding="utf-8") as f:
             f.write(f"{_FAULTS['count']} {label}\n")
     if at is not None and _FAULTS["count"] == int(at):
+        code = os.environ.get("HEMG_DRAKE_FAULT_ERRNO")
+        if code is not None:
+            raise OSError(int(code), os.strerror(int(code)))
         os.kill(os.getpid(), signal.SIGKILL)
 
 
@@ -59,6 +63,28 @@ def atomic_open(path, mode="w", **kwargs):
             # A write's error (a full disk) names no file: name the one being written.
             raise OSError(error.errno, error.strerror or str(error), str(path)) from None
         raise
+
+
+def named_as_moved(error, built, final):
+    """``error`` (an OSError raised while a folder was built at ``built`` to become ``final``:
+    a full disk, an I/O error) naming its file as it would be in ``final`` (``built``'s name
+    means nothing to a person; ``final`` when it names no file), saying ``final`` is as it
+    was. Errors naming other files, and ones without an errno, are returned as they are."""
+    if error.errno is None:
+        return error
+    shown = None
+    for name in (error.filename2, error.filename):  # shutil.copy2 names the copy second
+        if name is not None:
+            rel = os.path.relpath(os.path.realpath(name), os.path.realpath(built))
+            if rel != os.pardir and not rel.startswith(os.pardir + os.sep):
+                shown = Path(final) if rel == "." else Path(final) / rel
+                break
+    if shown is None:
+        if error.filename is not None:
+            return error
+        shown = Path(final)
+    reason = error.strerror or str(error) or type(error).__name__
+    return OSError(error.errno, f"{reason}; nothing in {final}/ was changed", str(shown))
 
 
 def _umask():

@@ -31,9 +31,10 @@ import contextlib
 import json
 import os
 import shutil
+import signal
 from pathlib import Path
 
-from hemg_drake.fileio import fault_point, write_text_atomic
+from hemg_drake.fileio import fault_point, named_as_moved, write_text_atomic
 from hemg_drake.folder_lock import folder_lock, lock_new_folder
 from hemg_drake.folder_versions import (
     MANIFEST,
@@ -50,6 +51,8 @@ from hemg_drake.folder_versions import (
 
 DATASET, MODEL = "dataset.npz", "model.npz"
 STAGES = ("demonstrate", "learn", "reproduce")
+# Signals held back while a stage swaps its new version in.
+_STOPS = {signal.SIGINT, signal.SIGTERM}
 # Files each stage writes (glob patterns, relative to the folder).
 OUTPUTS = {
     "demonstrate": (
@@ -207,6 +210,7 @@ class RunFolder:
             )
         made = [p for p in (target, *target.parents) if not p.exists()]
         target.mkdir(parents=True, exist_ok=True)
+        staging, swapped = target.parent / f".{target.name}.{NEW}-{os.getpid()}", False
         try:
             with folder_lock(target) as lock:
                 recover(target)
@@ -218,7 +222,6 @@ class RunFolder:
                         "this would replace: give another folder"
                     )
                 dropped, folders, entries = folder._dropped(stage, keep_own)
-                staging = target.parent / f".{target.name}.{NEW}-{os.getpid()}"
                 if staging.exists():
                     shutil.rmtree(staging)
                 fd = lock_new_folder(staging)
@@ -238,23 +241,34 @@ class RunFolder:
                     if new.manifest().get(stage) in (None, entries.get(stage)):
                         raise RuntimeError(f"the {stage} stage did not record its files")
                     fault_point("before the swap")
-                    exchange(staging, target)
-                    fault_point("swapped")
+                    # The swap and the lock's move are one step: Ctrl-C or SIGTERM waits
+                    # until the new version is in place (then the old one is tidied later).
+                    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, _STOPS)
+                    try:
+                        exchange(staging, target)
+                    except BaseException:
+                        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+                        raise
                 except BaseException:
                     os.close(fd)
                     shutil.rmtree(staging, ignore_errors=True)
                     raise
                 lock.moved_to(fd)
+                swapped = True
+                signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+                fault_point("swapped")
                 old = target.parent / f".{target.name}.{OLD}-{os.getpid()}"
                 os.rename(staging, old)
                 fault_point("old version aside")
                 kept = discard_old(old, target)
                 if kept and progress is not None:
                     progress(f"kept {old}/: it holds files changed while this command ran")
-        except BaseException:
+        except BaseException as error:
             for path in made:  # only folders this call made, and only if still empty
                 with contextlib.suppress(OSError):
                     path.rmdir()
+            if isinstance(error, OSError) and not swapped:  # a full disk, an I/O error
+                raise named_as_moved(error, staging, target) from None
             raise
 
     def finish(self, stage, written, *, inputs=(), command=None):

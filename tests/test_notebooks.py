@@ -3,10 +3,12 @@ without outputs.
 
 Each runs in a fresh kernel of this Python (the project's virtualenv) inside a temporary
 working directory, so nothing it writes lands in the repository; the kernel is shut down
-whatever happens, which also stops any Meshcat server it started.
+whatever happens, which also stops any Meshcat server it started. Graphviz is not needed:
+without it the diagrams are shown as their Graphviz text (one notebook is run so here).
 """
 
 import os
+import shutil
 import sys
 from pathlib import Path
 
@@ -77,12 +79,57 @@ def small_scale(monkeypatch):
     monkeypatch.setenv(SCALE_VARIABLE, "small")
 
 
+def _diagram_outputs(notebook):
+    """The display data of each cell that shows a diagram (``diagram_picture``)."""
+    return [
+        output.get("data", {})
+        for cell in notebook.cells
+        if cell.cell_type == "code" and "diagram_picture(" in cell.source
+        for output in cell.outputs
+        if output.output_type in ("execute_result", "display_data")
+    ]
+
+
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda path: path.name)
-def test_notebook_runs_top_to_bottom(path, tmp_path, small_scale, graphviz):
+def test_notebook_runs_top_to_bottom(path, tmp_path, small_scale):
+    # With or without Graphviz: the diagrams are drawn as SVG, or shown as their text.
     before = sorted(NOTEBOOKS_DIR.iterdir())
-    probe = _execute(nbformat.read(path, as_version=4), path.name, tmp_path)
+    notebook = nbformat.read(path, as_version=4)
+    probe = _execute(notebook, path.name, tmp_path)
     assert probe == [sys.prefix, "small", str(tmp_path)]
     assert sorted(NOTEBOOKS_DIR.iterdir()) == before, "the notebook wrote into notebooks/"
+    shown = _diagram_outputs(notebook)
+    assert shown, f"{path.name}: no diagram shown"
+    kind = "image/svg+xml" if shutil.which("dot") else "text/markdown"
+    assert all(kind in data for data in shown), [sorted(data) for data in shown]
+
+
+@pytest.fixture
+def no_graphviz(monkeypatch, tmp_path):
+    """A PATH holding every program of this one but Graphviz's ``dot``."""
+    folder = tmp_path / "bin_without_dot"
+    folder.mkdir()
+    for directory in os.environ.get("PATH", "").split(os.pathsep):
+        if not os.path.isdir(directory):
+            continue
+        for entry in os.scandir(directory):
+            if entry.name != "dot" and not (folder / entry.name).exists():
+                (folder / entry.name).symlink_to(entry.path)
+    monkeypatch.setenv("PATH", str(folder))
+    assert shutil.which("dot") is None
+
+
+def test_a_notebook_runs_without_graphviz_and_shows_the_diagram_as_text(
+    tmp_path, small_scale, no_graphviz
+):  # fmt: skip
+    path = NOTEBOOKS_DIR / "01_emg_to_stiffness.ipynb"
+    notebook = nbformat.read(path, as_version=4)
+    _execute(notebook, path.name, tmp_path)
+    (shown,) = _diagram_outputs(notebook)
+    assert "image/svg+xml" not in shown
+    assert "Graphviz's 'dot' is not on PATH" in shown["text/markdown"]
+    assert "digraph" in shown["text/markdown"]
+
 
 
 def test_a_failing_cell_fails_with_its_error(tmp_path, small_scale):

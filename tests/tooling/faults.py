@@ -44,6 +44,21 @@ def leftovers(folder):
     return sorted(p.name for p in folder.parent.glob(f".{folder.name}.hemg-drake-*"))
 
 
+def mount_tmpfs(folder, options):
+    """Mount a tmpfs with ``options`` (e.g. "size=32m") at the folder ``folder``: needs root.
+    Where mount is refused the test skips; under ``.ci/run`` as root (HEMG_DRAKE_MOUNT_TESTS=1)
+    it fails instead. The caller unmounts (``subprocess.run(["umount", folder])``)."""
+    import pytest
+
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(folder)],
+                          capture_output=True, text=True)  # fmt: skip
+    if done.returncode != 0:
+        reason = f"cannot mount a tmpfs here: {done.stderr.strip()[:80]}"
+        if os.environ.get("HEMG_DRAKE_MOUNT_TESTS") == "1":
+            pytest.fail(reason + " (HEMG_DRAKE_MOUNT_TESTS=1: .ci/run runs these as root)")
+        pytest.skip(reason)
+
+
 def run(argv, *, cwd, env=None, check=True):
     """``hemg-drake argv`` in a subprocess; returns it completed."""
     command = [sys.executable, "-m", "hemg_drake.cli", *argv]
@@ -57,6 +72,7 @@ def _env(extra):
     env = dict(os.environ, PYTHONPATH=str(REPO), MPLBACKEND="Agg")
     env.pop("HEMG_DRAKE_FAULT_AT", None)
     env.pop("HEMG_DRAKE_FAULT_LOG", None)
+    env.pop("HEMG_DRAKE_FAULT_ERRNO", None)
     env.update(extra or {})
     return env
 
