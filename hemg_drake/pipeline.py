@@ -16,6 +16,7 @@ shipped scenarios (``make demo``).
 import functools
 import json
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -282,13 +283,17 @@ def _checked_model(folder, scenario, frames):
     folder.check("learn", folder.model, run_hint=hint)
     folder.check_made_from("learn", folder.dataset, run_hint=hint)
     learnt = load_model(folder.model)
-    check_learnt_placement(learnt, scenario, frames, source=folder.model)
+    # Said once every check has passed (a refused run says one line: its error).
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_learnt_placement(learnt, scenario, frames, source=folder.model)
     model = placed_model(learnt, scenario)
     try:
         check_model(model)
     except ValueError as error:
         raise ValueError(f"{folder.model}: {error}") from None
-    return model
+    model_warnings = [str(w.message) for w in caught]
+    return model, model_warnings
 
 
 def reproduce(
@@ -330,7 +335,7 @@ def _checked_reproduce(folder, out, overrides, start_offset, replay, progress):
 
     demos, recorded = load_demonstrations(folder.dataset)
     scenario = recorded.replaced(overrides)
-    model = _checked_model(folder, scenario, demonstration_frames(demos, recorded))
+    model, notes = _checked_model(folder, scenario, demonstration_frames(demos, recorded))
     offset = np.asarray(start_offset, dtype=float)
     if offset.shape != (3,) or not np.all(np.isfinite(offset)):
         raise ValueError(f"start offset must be 3 finite numbers (m), got {start_offset!r}")
@@ -349,10 +354,11 @@ def _checked_reproduce(folder, out, overrides, start_offset, replay, progress):
             f"reproduction into a new folder or the run folder itself"
         )
     with out.transaction("reproduce", progress=progress) as new:
-        return _reproduce(scenario, model, demos, folder, new, start, offset, replay, progress)
+        return _reproduce(scenario, model, demos, folder, new, start, offset, replay, progress,
+                          notes)  # fmt: skip
 
 
-def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progress):
+def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progress, notes=()):
     from hemg_drake.diagrams.reproduction import build_reproduction_diagram, run_reproduction
     from hemg_drake.diagrams.visualization import Visualization
     from hemg_drake.evaluation import format_metrics, task_metrics
@@ -364,6 +370,8 @@ def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progr
     title = f"{scenario.task.replace('_', ' ')}: reproduction from {out.final.name}"
     visualization = Visualization() if replay else None
     built = build_reproduction_diagram(scenario, model, start=start, visualization=visualization)
+    for note in notes:  # the diagram is built: the scene is reachable, the run will go
+        warnings.warn(note, stacklevel=2)
     replay_path = out / "reproduction.html" if replay else None
     run = functools.partial(run_reproduction, duration=duration)
     result = record_run(built, run, replay_path, title=title) if replay else run(built)
