@@ -29,9 +29,11 @@ def _kills(name, base, work, seed, kills):
 
     case = Case(name, Path(base), Path(work)).learn_states()
     rng = random.Random(f"{seed}-{name}")
-    results = [
-        kill_once(case, rng, "time" if i % 2 == 0 else "point", i) for i in range(kills)
-    ]
+    results = []
+    for i in range(kills):
+        results.append(kill_once(case, rng, "time" if i % 2 == 0 else "point", i))
+        print(f"  {name} {i + 1}/{kills}: {results[-1].how} ({results[-1].detail}): "
+              f"{results[-1].state}", flush=True)  # progress, for a long run
     return case, results
 
 
