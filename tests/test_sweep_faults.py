@@ -143,6 +143,7 @@ def test_ctrl_c_and_sigterm_stop_the_workers_with_one_line(sweep_file, tmp_path,
 
 
 @pytest.mark.slow
+@pytest.mark.deep
 def test_killed_at_seeded_moments_resume_ends_with_the_same_table(sweep_file, tmp_path):
     reference = tmp_path / "reference"
     began = time.monotonic()

@@ -118,12 +118,16 @@ def check_full_disk(disk, case, *, pages=None, inodes=None):
 
 
 # (command, which of its writes runs out of space): the first, a middle one, the last.
+# make test runs one per command's worst place (its last write: the manifest); the rest
+# are .ci/run's deep step.
+DEEP = pytest.mark.deep
 POINTS = [
-    ("demonstrate", 0), ("demonstrate", 2), ("demonstrate", -1),
-    ("learn", 1), ("learn", -1),
-    ("reproduce", 0), ("reproduce", -1),
-    ("teleop", 0), ("teleop", -1),
-    ("import", 0), ("import", -1),
+    pytest.param("demonstrate", 0, marks=DEEP), pytest.param("demonstrate", 2, marks=DEEP),
+    ("demonstrate", -1),
+    pytest.param("learn", 1, marks=DEEP), ("learn", -1),
+    pytest.param("reproduce", 0, marks=DEEP), ("reproduce", -1),
+    pytest.param("teleop", 0, marks=DEEP), pytest.param("teleop", -1, marks=DEEP),
+    pytest.param("import", 0, marks=DEEP), ("import", -1),
 ]  # fmt: skip
 
 
@@ -171,6 +175,7 @@ def test_repair_on_a_full_disk_keeps_the_folder(disk, base):
 
 
 @pytest.mark.slow
+@pytest.mark.deep
 def test_demo_on_a_full_disk_stops_in_one_line_between_whole_stages(disk):
     # The demo's stages each swap in whole: the space runs out while learning (after the
     # demonstrations), and the task's folder holds the finished demonstrate stage alone.
@@ -199,6 +204,7 @@ def test_demo_on_a_full_disk_stops_in_one_line_between_whole_stages(disk):
 
 
 @pytest.mark.slow
+@pytest.mark.deep
 @pytest.mark.parametrize("name", ["learn", "teleop"])
 def test_an_io_error_at_each_moment_before_the_swap_names_the_file(base, tmp_path_factory, name):
     # An OSError naming no file (errno 5), raised at each fault point from the start to the

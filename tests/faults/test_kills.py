@@ -27,6 +27,7 @@ def test_a_killed_command_leaves_the_earlier_run_or_the_new_one(base, tmp_path, 
     assert any(r.killed for r in results)
 
 
+@pytest.mark.deep
 def test_a_kill_at_each_moment_of_the_swap(base, tmp_path):
     # Every fault point from the new version's first file to the end, for one command.
     import random
