@@ -20,6 +20,7 @@ def pytest_collection_modifyitems(config, items):
         if "deep" in item.keywords:
             item.add_marker(skip)
 
+
 REPO = Path(__file__).resolve().parents[1]
 # The published test vectors ship with the repository (docs/facts.md names their sources).
 FACTS = REPO / "docs" / "facts"
