@@ -208,13 +208,18 @@ def test_state_activation_titles_name_fig_8c_only_for_the_pin():
             state_activations_title("drawing", along)
 
 
-def _gmr_reference(model, x):
-    """Eq. 14 weights and eq. 16 conditional means, by hand (scipy's Gaussian density)."""
+def _gmr_reference(model, x, radius=3.0):
+    """Eq. 14 weights and eq. 16 conditional means, by hand (scipy's Gaussian density); each
+    state's eq. 16 conditions on x pulled onto its ``radius``-sigma ellipsoid (the policy's
+    support: it does not extrapolate)."""
     weights, velocities = [], []
     for prior, mean, covariance in zip(model.occupancy_, model.means_, model.covariances_):
         S_xx, S_vx = covariance[:3, :3], covariance[3:6, :3]
         weights.append(prior * multivariate_normal(mean[:3], S_xx).pdf(x))
-        velocities.append(mean[3:6] + S_vx @ np.linalg.solve(S_xx, x - mean[:3]))
+        d = x - mean[:3]
+        sigmas = np.sqrt(d @ np.linalg.solve(S_xx, d))
+        x_i = mean[:3] + d * min(1.0, radius / sigmas) if sigmas > 0 else x
+        velocities.append(mean[3:6] + S_vx @ np.linalg.solve(S_xx, x_i - mean[:3]))
     return np.average(velocities, axis=0, weights=weights)
 
 
