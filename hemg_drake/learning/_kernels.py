@@ -85,22 +85,47 @@ def _exp_kept(x):
     return _EXP_TABLE[k] * (1.0 + r * polynomial)
 
 
-@numba.njit(cache=True, inline="always")
-def _log_row(log_row, log_values, weights):
-    """log sum_j exp(log_row[j] + log_values[j]) as top and sum / e^top (0 if all -inf).
+@numba.njit(cache=True)
+def _finite_entries(log_matrix):
+    """The finite entries' columns of each row of ``log_matrix`` (N, N), compressed by row.
 
-    Terms more than _NEGLIGIBLE below the largest are left out; weights[j] is left
-    exp(term_j - top) (0 for those).
+    Returns
+    -------
+    start : array of int, shape (N + 1,)
+        Row i's entries are columns[start[i] : start[i + 1]], in increasing order.
+    columns : array of int
+    """
+    n_rows, n_columns = log_matrix.shape
+    start = np.zeros(n_rows + 1, dtype=np.int64)
+    columns = np.empty(n_rows * n_columns, dtype=np.int64)
+    k = 0
+    for i in range(n_rows):
+        for j in range(n_columns):
+            if log_matrix[i, j] > _NEG_INF:
+                columns[k] = j
+                k += 1
+        start[i + 1] = k
+    return start, columns[:k]
+
+
+@numba.njit(cache=True, inline="always")
+def _log_row(log_row, log_values, columns, low, high, weights):
+    """log sum_j exp(log_row[j] + log_values[j]) over j = columns[low:high] (the row's
+    finite entries: the others add exactly 0), as top and sum / e^top (0 if all -inf).
+
+    Terms more than _NEGLIGIBLE below the largest are left out; weights[k - low] is left
+    exp(term - top) of the k-th (0 for those).
     """
     top = _NEG_INF
-    for j in range(len(log_values)):
-        weights[j] = log_row[j] + log_values[j]
-        if weights[j] > top:
-            top = weights[j]
+    for k in range(low, high):
+        j = columns[k]
+        weights[k - low] = log_row[j] + log_values[j]
+        if weights[k - low] > top:
+            top = weights[k - low]
     total = 0.0
-    for j in range(len(log_values)):
-        weights[j] = _exp_kept(weights[j] - top) if weights[j] > top - _NEGLIGIBLE else 0.0
-        total += weights[j]
+    for k in range(high - low):
+        weights[k] = _exp_kept(weights[k] - top) if weights[k] > top - _NEGLIGIBLE else 0.0
+        total += weights[k]
     return top, total
 
 
@@ -215,6 +240,8 @@ def forward(log_emission, log_startprob, log_transmat, log_duration):
     )
     reversed_duration = np.ascontiguousarray(log_duration[:, ::-1])  # [i, n_durations - d]
     log_transmat_T = np.ascontiguousarray(log_transmat.T)
+    # The transitions into each state that can happen (a left-to-right model has one).
+    start, predecessors = _finite_entries(log_transmat_T)
     log_alpha = np.empty((n_steps, n_states))
     log_alpha_in = np.empty((n_steps, n_states))
     for t in range(n_steps):
@@ -222,7 +249,8 @@ def forward(log_emission, log_startprob, log_transmat, log_duration):
             if t == 0:
                 log_alpha_in[0, i] = log_startprob[i]
             else:
-                top, weight = _log_row(log_transmat_T[i], log_alpha[t - 1], weights)
+                top, weight = _log_row(log_transmat_T[i], log_alpha[t - 1], predecessors,
+                                       start[i], start[i + 1], weights)  # fmt: skip
                 log_alpha_in[t, i] = top + np.log(weight) if weight > 0.0 else _NEG_INF
             boundary[i, t] = log_alpha_in[t, i] - total[i, t]
             _push(chunk_top, i, t, boundary[i, t])
@@ -276,6 +304,7 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
     first, last, bound, total, chunk_top, end, weights, kept, where = _workspace(
         log_emission, log_duration
     )
+    start, successors = _finite_entries(log_transmat)  # the transitions out of each state
     log_beta = np.empty((n_steps, n_states))
     log_beta_in = np.empty((n_steps, n_states))
     starts = np.zeros((n_steps, n_states))
@@ -291,15 +320,16 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
             elif log_alpha[s, i] == _NEG_INF:
                 log_beta[s, i] = _NEG_INF  # not reached: left out (see Returns)
             else:
-                top, weight = _log_row(log_transmat[i], log_beta_in[s + 1], weights)
+                top, weight = _log_row(log_transmat[i], log_beta_in[s + 1], successors,
+                                       start[i], start[i + 1], weights)  # fmt: skip
                 log_beta[s, i] = top + np.log(weight) if weight > 0.0 else _NEG_INF
                 if weight > 0.0:
                     # p(segment of i ends at s | all), and the transitions i -> j it makes.
                     scale = np.exp(top + log_alpha[s, i] - log_likelihood)
                     ends[s, i] = weight * scale
                     if scale > 0.0:  # (most states' posterior underflows: adding 0 is a no-op)
-                        for j in range(n_states):
-                            transition_counts[i, j] += weights[j] * scale
+                        for k in range(start[i], start[i + 1]):
+                            transition_counts[i, successors[k]] += weights[k - start[i]] * scale
             end[i, s] = total[i, s + 1] + log_beta[s, i]
             _push(chunk_top, i, s, end[i, s])
         for i in range(n_states):
