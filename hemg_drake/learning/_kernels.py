@@ -31,10 +31,13 @@ _NEG_INF = -np.inf
 # relative, below double precision, and skipping them saves most of the time,
 # since durations far from a state's mean are that unlikely.
 _NEGLIGIBLE = 50.0
+# A posterior below e^-745 is 0 in double precision (the smallest subnormal is 4.9e-324):
+# the E-step leaves out segments whose paths carry less than e^-_UNDERFLOW of the likelihood.
+_UNDERFLOW = 750.0
 
 
 @numba.njit(cache=True)
-def _support(log_duration):
+def support(log_duration):
     """First and last duration index (0-based, inclusive) of each state with p_i(d) > 0."""
     n_states, n_durations = log_duration.shape
     first = np.zeros(n_states, dtype=np.int64)
@@ -49,7 +52,7 @@ def _support(log_duration):
 
 
 @numba.njit(cache=True)
-def _cumulative(log_emission):
+def cumulative(log_emission):
     """Per-state running sums, shape (N, T + 1): a segment's log-likelihood is a difference.
 
     State-major, like the other arrays the duration loops read, so that they read
@@ -190,12 +193,12 @@ def _window(values, chunk_top, weights, offset, low, high, bound, descending, ke
 @numba.njit(cache=True)
 def _workspace(log_emission, log_duration):
     """What both passes need: each state's support and largest log p_i(d), the running
-    sums of the emissions (:func:`_cumulative`), empty chunk maxima (:func:`_push`) with
+    sums of the emissions (:func:`cumulative`), empty chunk maxima (:func:`_push`) with
     the state-major array of the duration sums' values they bound, and scratch for
     :func:`_log_row` and :func:`_window`."""
     n_steps, n_states = log_emission.shape
     n_durations = log_duration.shape[1]
-    first, last = _support(log_duration)
+    first, last = support(log_duration)
     bound = np.full(n_states, _NEG_INF)
     for i in range(n_states):
         if last[i] >= first[i]:
@@ -205,13 +208,13 @@ def _workspace(log_emission, log_duration):
     weights = np.empty(n_states)
     kept = np.empty(n_durations)
     where = np.empty(n_durations, dtype=np.int64)
-    return (first, last, bound, _cumulative(log_emission), chunk_top, values, weights, kept,
+    return (first, last, bound, cumulative(log_emission), chunk_top, values, weights, kept,
             where)  # fmt: skip
 
 
 @numba.njit(cache=True)
 def forward(log_emission, log_startprob, log_transmat, log_duration):
-    """Segment forward variables (eq. 11) of one sequence.
+    """Segment forward variables (eq. 11) of one sequence, every path kept.
 
     Parameters
     ----------
@@ -230,6 +233,19 @@ def forward(log_emission, log_startprob, log_transmat, log_duration):
         log p(xi_0..t, a segment of state i ends at t).
     log_alpha_in : array, shape (T, N)
         log p(xi_0..t-1, a segment of state i starts at t).
+    """
+    n_steps = log_emission.shape[0]
+    return _forward(log_emission, log_startprob, log_transmat, log_duration, _NEG_INF,
+                    np.zeros(n_steps + 1))  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _forward(log_emission, log_startprob, log_transmat, log_duration, floor, suffix):
+    """:func:`forward` with the segment starts and ends that cannot matter left out.
+
+    A segment start (end) at t whose forward value plus ``suffix[t]`` (``suffix[t + 1]``),
+    an upper bound on the rest's log-likelihood (:func:`_suffix_bound`), is below ``floor``
+    is set to -inf: the paths through it carry at most e^floor. ``floor`` -inf keeps all.
     """
     n_steps, n_states = log_emission.shape
     n_durations = log_duration.shape[1]
@@ -252,6 +268,8 @@ def forward(log_emission, log_startprob, log_transmat, log_duration):
                 top, weight = _log_row(log_transmat_T[i], log_alpha[t - 1], predecessors,
                                        start[i], start[i + 1], weights)  # fmt: skip
                 log_alpha_in[t, i] = top + np.log(weight) if weight > 0.0 else _NEG_INF
+            if log_alpha_in[t, i] + suffix[t] < floor:
+                log_alpha_in[t, i] = _NEG_INF
             boundary[i, t] = log_alpha_in[t, i] - total[i, t]
             _push(chunk_top, i, t, boundary[i, t])
         for i in range(n_states):
@@ -264,7 +282,31 @@ def forward(log_emission, log_startprob, log_transmat, log_duration):
                                          where)  # fmt: skip
                 if weight > 0.0:
                     log_alpha[t, i] = total[i, t + 1] + top + np.log(weight)
+                    if log_alpha[t, i] + suffix[t + 1] < floor:
+                        log_alpha[t, i] = _NEG_INF
     return log_alpha, log_alpha_in
+
+
+@numba.njit(cache=True)
+def _suffix_bound(log_emission, log_duration):
+    """suffix[t] >= log p(xi_t..T-1 | a segment starts at t), for any state; suffix[T] = 0.
+
+    Every step's emission is at most the best state's, a segment's duration weights add
+    up to at most S = max_i sum_d p_i(d) (about 1) and a transition row to at most 1, so
+    the sum over the rest's paths is at most e^(sum of the best emissions) S^(steps left).
+    """
+    n_steps, n_states = log_emission.shape
+    per_step = 0.0  # log S if above 0, for at most one segment per step
+    for i in range(n_states):
+        mass = 0.0
+        for d in range(log_duration.shape[1]):
+            if log_duration[i, d] > _NEG_INF:
+                mass += np.exp(log_duration[i, d])
+        per_step = max(per_step, np.log(mass) if mass > 0.0 else 0.0)
+    suffix = np.zeros(n_steps + 1)
+    for t in range(n_steps - 1, -1, -1):
+        suffix[t] = suffix[t + 1] + log_emission[t].max() + per_step
+    return suffix
 
 
 @numba.njit(cache=True)
@@ -352,87 +394,6 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
     return log_beta, log_beta_in, transition_counts, duration_counts, starts, ends
 
 
-@numba.njit(cache=True)
-def viterbi(log_emission, log_startprob, log_transmat, log_duration):
-    """Segmental Viterbi: the most likely segmentation of one sequence.
-
-    The max-product version of :func:`forward` (a complete segment ends the sequence).
-
-    Parameters
-    ----------
-    log_emission, log_startprob, log_transmat, log_duration : arrays
-        As for :func:`forward`.
-
-    Returns
-    -------
-    log_probability : float
-        log p(xi, best segmentation); -inf if no segmentation is possible.
-    states : array of int, shape (T,)
-        The state active at each step (all -1 if impossible).
-    """
-    n_steps, n_states = log_emission.shape
-    first, last = _support(log_duration)
-    total = _cumulative(log_emission)
-    best = np.empty((n_steps, n_states))  # a segment of i ends at t
-    best_in = np.empty((n_states, n_steps))  # a segment of i starts at t, state-major
-    previous = np.full((n_steps, n_states), -1, dtype=np.int64)  # state before that segment
-    length = np.zeros((n_steps, n_states), dtype=np.int64)  # its duration
-    for t in range(n_steps):
-        for i in range(n_states):
-            if t == 0:
-                best_in[i, t] = log_startprob[i]
-                continue
-            top = _NEG_INF
-            for j in range(n_states):
-                value = best[t - 1, j] + log_transmat[j, i]
-                if value > top:
-                    top = value
-                    previous[t, i] = j
-            best_in[i, t] = top
-        for i in range(n_states):
-            top = _NEG_INF
-            end = total[i, t + 1]
-            for d in range(first[i] + 1, min(last[i] + 1, t + 1) + 1):
-                begin = t - d + 1
-                value = best_in[i, begin] + log_duration[i, d - 1] + end - total[i, begin]
-                if value > top:
-                    top = value
-                    length[t, i] = d
-            best[t, i] = top
-    states = np.full(n_steps, -1, dtype=np.int64)
-    state = np.argmax(best[n_steps - 1])
-    log_probability = best[n_steps - 1, state]
-    if log_probability == _NEG_INF:
-        return log_probability, states
-    t = n_steps - 1
-    while t >= 0:
-        begin = t - length[t, state] + 1
-        states[begin : t + 1] = state
-        state_before = previous[begin, state]
-        t = begin - 1
-        state = state_before
-    return log_probability, states
-
-
-@numba.njit(cache=True)
-def occupancy(starts, ends):
-    """p(state i active at t | all), shape (T, N), from the segment start and end posteriors.
-
-    Segments of i started at or before t minus those ended before t, clipped to [0, 1]
-    against round-off.
-    """
-    n_steps, n_states = starts.shape
-    gamma = np.empty((n_steps, n_states))
-    for i in range(n_states):
-        active = 0.0
-        for t in range(n_steps):
-            active += starts[t, i]
-            if t > 0:
-                active -= ends[t - 1, i]
-            gamma[t, i] = min(max(active, 0.0), 1.0)
-    return gamma
-
-
 _LOG_2 = np.log(2.0)
 
 
@@ -450,9 +411,20 @@ def _logaddexp(x, y):
 
 
 @numba.njit(cache=True)
-def expectation(log_emission, bounds, log_startprob, log_transmat, log_duration):
-    """The E-step over all sequences in one call: :func:`forward`, :func:`backward` and
-    :func:`occupancy` of each, their counts added up in the sequences' order.
+def expectation(log_emission, bounds, log_startprob, log_transmat, log_duration, guesses):
+    """The E-step over all sequences in one call: :func:`forward` and :func:`backward` of
+    each, their counts added up in the sequences' order.
+
+    Segment starts and ends whose paths carry less than e^-_UNDERFLOW of a sequence's
+    likelihood (certified by :func:`_suffix_bound`) are left out, so that the results are
+    those of every path: such a start or end's posterior underflows to 0, so it adds nothing
+    to any count when kept, and all of them together (at most 2 T N) change the
+    likelihood and the other posteriors by under e^-700 relative. With ``guesses[c]`` a
+    guess of sequence c's log-likelihood (the previous EM iteration's), the forward pass
+    drops those below ``guesses[c] - _UNDERFLOW - log(2 T N)``; if it then finds less than
+    the guess minus 1 nat, it runs again with the floor from what it found (a pass that drops
+    less finds at least as much). The backward pass skips what the forward left out.
+    ``guesses[c]`` -inf keeps every path.
 
     Parameters
     ----------
@@ -462,39 +434,51 @@ def expectation(log_emission, bounds, log_startprob, log_transmat, log_duration)
         Sequence c is rows bounds[c] : bounds[c + 1].
     log_startprob, log_transmat, log_duration : arrays
         As for :func:`forward`.
+    guesses : array, shape (C,)
 
     Returns
     -------
     log_likelihood : float
         sum_c log p(sequence c); not finite as soon as one sequence cannot be produced
         (the later ones are then not computed, and the other outputs are incomplete).
-    gamma : array, shape (T, N)
-        p(state i active at t | its sequence).
-    starts : array, shape (N,)
-        sum over sequences of p(their first segment is of state i).
+    sequences : array, shape (C,)
+        log p(sequence c).
+    starts, ends : arrays, shape (T, N)
+        p(a segment of state i starts at t | its sequence), p(one ends at t | it).
     transitions : array, shape (N, N)
     durations : array, shape (N, n_durations)
     """
     n_states = log_emission.shape[1]
     log_likelihood = 0.0
-    gamma = np.zeros(log_emission.shape)
-    starts = np.zeros(n_states)
+    sequences = np.full(len(bounds) - 1, _NEG_INF)
+    starts = np.zeros(log_emission.shape)
+    ends = np.zeros(log_emission.shape)
     transitions = np.zeros((n_states, n_states))
     durations = np.zeros(log_duration.shape)
     for c in range(len(bounds) - 1):
         emission = log_emission[bounds[c] : bounds[c + 1]]
-        log_alpha, log_alpha_in = forward(emission, log_startprob, log_transmat, log_duration)
-        sequence = _NEG_INF  # logaddexp.reduce(log_alpha[-1])
-        for i in range(n_states):
-            sequence = _logaddexp(sequence, log_alpha[-1, i])
+        suffix = _suffix_bound(emission, log_duration)
+        margin = _UNDERFLOW + np.log(2.0 * emission.size)
+        floor = guesses[c] - margin if guesses[c] > _NEG_INF else _NEG_INF
+        for _ in range(2):
+            log_alpha, log_alpha_in = _forward(
+                emission, log_startprob, log_transmat, log_duration, floor, suffix
+            )
+            sequence = _NEG_INF  # logaddexp.reduce(log_alpha[-1])
+            for i in range(n_states):
+                sequence = _logaddexp(sequence, log_alpha[-1, i])
+            if floor == _NEG_INF or sequence >= guesses[c] - 1.0:
+                break
+            floor = sequence - margin if sequence > _NEG_INF else _NEG_INF
+        sequences[c] = sequence
         log_likelihood += sequence
         if not np.isfinite(sequence):
             break
-        _, _, counts, duration_counts, segment_starts, ends = backward(
+        _, _, counts, duration_counts, segment_starts, segment_ends = backward(
             emission, log_transmat, log_duration, log_alpha, log_alpha_in, sequence
         )
-        gamma[bounds[c] : bounds[c + 1]] = occupancy(segment_starts, ends)
-        starts += segment_starts[0]
+        starts[bounds[c] : bounds[c + 1]] = segment_starts
+        ends[bounds[c] : bounds[c + 1]] = segment_ends
         transitions += counts
         durations += duration_counts
-    return log_likelihood, gamma, starts, transitions, durations
+    return log_likelihood, sequences, starts, ends, transitions, durations

@@ -7,7 +7,7 @@ np.logaddexp, so a chunk skipped wrongly (or a term lost far below the best) sho
 import numpy as np
 import pytest
 
-from hemg_drake.learning import _kernels
+from hemg_drake.learning import _kernels, _segment_kernels
 
 
 def logsumexp(values, axis=None):
@@ -66,7 +66,8 @@ def kernels(log_emission, log_startprob, log_transmat, log_duration):
     *_, transitions, durations, starts, ends = _kernels.backward(
         log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, log_likelihood
     )
-    return log_likelihood, _kernels.occupancy(starts, ends), transitions, durations
+    gamma = _segment_kernels.occupancy(starts, ends, np.array([0, len(starts)]))
+    return log_likelihood, gamma, transitions, durations
 
 
 def steep_case(left_to_right, wide, seed):
@@ -139,9 +140,12 @@ def test_expectation_over_concatenated_sequences_equals_each_summed():
     log_startprob = np.log(rng.dirichlet(np.ones(n_states)))
     emissions = [rng.normal(0.0, 30.0, (n_steps, n_states)) for n_steps in (50, 120, 81)]
     bounds = np.array([0, 50, 170, 251])
-    log_likelihood, gamma, starts, transitions, durations = _kernels.expectation(
-        np.concatenate(emissions), bounds, log_startprob, log_transmat, log_duration
+    log_likelihood, sequences, starts, ends, transitions, durations = _kernels.expectation(
+        np.concatenate(emissions), bounds, log_startprob, log_transmat, log_duration,
+        np.full(3, -np.inf),
     )
+    gamma = _segment_kernels.occupancy(starts, ends, bounds)
+    starts = starts[bounds[:-1]].sum(axis=0)
     expected = [reference(e, log_startprob, log_transmat, log_duration) for e in emissions]
     assert log_likelihood == pytest.approx(sum(r[0] for r in expected), rel=1e-12)
     np.testing.assert_allclose(gamma, np.concatenate([r[1] for r in expected]), atol=1e-10)
@@ -158,7 +162,8 @@ def test_expectation_stops_at_an_impossible_sequence():
     log_startprob = np.log(np.full(2, 0.5))
     # 6 steps then 4: the second cannot end with a complete segment.
     log_likelihood, *_ = _kernels.expectation(
-        np.zeros((10, 2)), np.array([0, 6, 10]), log_startprob, log_transmat, log_duration
+        np.zeros((10, 2)), np.array([0, 6, 10]), log_startprob, log_transmat, log_duration,
+        np.full(2, -np.inf),
     )
     assert log_likelihood == -np.inf
 
