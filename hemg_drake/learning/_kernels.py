@@ -234,19 +234,21 @@ def forward(log_emission, log_startprob, log_transmat, log_duration):
     log_alpha_in : array, shape (T, N)
         log p(xi_0..t-1, a segment of state i starts at t).
     """
-    n_steps = log_emission.shape[0]
+    none = np.zeros((0, 0))
     return _forward(log_emission, log_startprob, log_transmat, log_duration, _NEG_INF,
-                    np.zeros(n_steps + 1))  # fmt: skip
+                    (none, none))  # fmt: skip
 
 
 @numba.njit(cache=True)
 def _forward(log_emission, log_startprob, log_transmat, log_duration, floor, suffix):
     """:func:`forward` with the segment starts and ends that cannot matter left out.
 
-    A segment start (end) at t whose forward value plus ``suffix[t]`` (``suffix[t + 1]``),
-    an upper bound on the rest's log-likelihood (:func:`_suffix_bound`), is below ``floor``
-    is set to -inf: the paths through it carry at most e^floor. ``floor`` -inf keeps all.
+    A segment start (end) of i at t whose forward value plus ``suffix[0][t, i]``
+    (``suffix[1][t, i]``), upper bounds on the rest's log-likelihood
+    (:func:`_suffix_bound`), is below ``floor`` is set to -inf: the paths through it carry
+    at most e^floor. ``floor`` -inf keeps all (``suffix`` is then not read).
     """
+    suffix_starts, suffix_ends = suffix
     n_steps, n_states = log_emission.shape
     n_durations = log_duration.shape[1]
     # boundary[i, b] = log alpha_in - the emissions before b: a segment's term is
@@ -260,6 +262,7 @@ def _forward(log_emission, log_startprob, log_transmat, log_duration, floor, suf
     start, predecessors = _finite_entries(log_transmat_T)
     log_alpha = np.empty((n_steps, n_states))
     log_alpha_in = np.empty((n_steps, n_states))
+    newest = np.full(n_states, -1)  # the last step at which a segment of i can start
     for t in range(n_steps):
         for i in range(n_states):
             if t == 0:
@@ -268,45 +271,60 @@ def _forward(log_emission, log_startprob, log_transmat, log_duration, floor, suf
                 top, weight = _log_row(log_transmat_T[i], log_alpha[t - 1], predecessors,
                                        start[i], start[i + 1], weights)  # fmt: skip
                 log_alpha_in[t, i] = top + np.log(weight) if weight > 0.0 else _NEG_INF
-            if log_alpha_in[t, i] + suffix[t] < floor:
+            if floor > _NEG_INF and log_alpha_in[t, i] + suffix_starts[t, i] < floor:
                 log_alpha_in[t, i] = _NEG_INF
             boundary[i, t] = log_alpha_in[t, i] - total[i, t]
             _push(chunk_top, i, t, boundary[i, t])
+            if log_alpha_in[t, i] > _NEG_INF:
+                newest[i] = t
         for i in range(n_states):
             # Durations d = first + 1 .. min(last + 1, t + 1): segment xi_{b..t}, b = t - d + 1.
             low, high = max(0, t - last[i]), t - first[i]
             log_alpha[t, i] = _NEG_INF
-            if high >= low:
+            if high >= low and newest[i] >= low:  # (else no segment of i can end at t)
                 top, weight, _ = _window(boundary[i], chunk_top[i], reversed_duration[i],
                                          n_durations - 1 - t, low, high, bound[i], True, kept,
                                          where)  # fmt: skip
                 if weight > 0.0:
                     log_alpha[t, i] = total[i, t + 1] + top + np.log(weight)
-                    if log_alpha[t, i] + suffix[t + 1] < floor:
+                    if floor > _NEG_INF and log_alpha[t, i] + suffix_ends[t, i] < floor:
                         log_alpha[t, i] = _NEG_INF
     return log_alpha, log_alpha_in
 
 
 @numba.njit(cache=True)
-def _suffix_bound(log_emission, log_duration):
-    """suffix[t] >= log p(xi_t..T-1 | a segment starts at t), for any state; suffix[T] = 0.
+def _suffix_bound(log_emission, log_transmat, log_duration):
+    """Upper bounds on what the rest of a sequence can add: ``starts[t, i]`` on
+    log p(xi_t..T-1 | a segment of i starts at t), ``ends[t, i]`` on
+    log p(xi_t+1..T-1 | one ends at t).
 
-    Every step's emission is at most the best state's, a segment's duration weights add
-    up to at most S = max_i sum_d p_i(d) (about 1) and a transition row to at most 1, so
-    the sum over the rest's paths is at most e^(sum of the best emissions) S^(steps left).
+    The best state sequence allowed by A's zeros, at any durations: a segment's
+    duration weights add up to at most S = max_i sum_d p_i(d) (about 1; counted once per
+    step if above 1) and a row of A to at most 1, so the sum over paths is at most the best
+    path's emissions times that. O(T (N + nonzeros of A)), no exp.
     """
     n_steps, n_states = log_emission.shape
-    per_step = 0.0  # log S if above 0, for at most one segment per step
+    per_step = 0.0
     for i in range(n_states):
         mass = 0.0
         for d in range(log_duration.shape[1]):
             if log_duration[i, d] > _NEG_INF:
                 mass += np.exp(log_duration[i, d])
         per_step = max(per_step, np.log(mass) if mass > 0.0 else 0.0)
-    suffix = np.zeros(n_steps + 1)
+    start, successors = _finite_entries(log_transmat)
+    starts = np.empty((n_steps, n_states))
+    ends = np.empty((n_steps, n_states))
+    ends[n_steps - 1] = 0.0  # the last segment ends with the sequence
     for t in range(n_steps - 1, -1, -1):
-        suffix[t] = suffix[t + 1] + log_emission[t].max() + per_step
-    return suffix
+        for i in range(n_states):
+            if t < n_steps - 1:
+                best = _NEG_INF  # leave i after t
+                for k in range(start[i], start[i + 1]):
+                    best = max(best, starts[t + 1, successors[k]])
+                ends[t, i] = best
+            stay = starts[t + 1, i] if t < n_steps - 1 else _NEG_INF
+            starts[t, i] = log_emission[t, i] + per_step + max(stay, ends[t, i])
+    return starts, ends
 
 
 @numba.njit(cache=True)
@@ -457,7 +475,7 @@ def expectation(log_emission, bounds, log_startprob, log_transmat, log_duration,
     durations = np.zeros(log_duration.shape)
     for c in range(len(bounds) - 1):
         emission = log_emission[bounds[c] : bounds[c + 1]]
-        suffix = _suffix_bound(emission, log_duration)
+        suffix = _suffix_bound(emission, log_transmat, log_duration)
         margin = _UNDERFLOW + np.log(2.0 * emission.size)
         floor = guesses[c] - margin if guesses[c] > _NEG_INF else _NEG_INF
         for _ in range(2):
