@@ -1,23 +1,14 @@
 """Time recursions of the explicit-duration HSMM in log space, compiled by numba.
 
-The recursions over time cannot be vectorised (step t needs step t - 1), and a
-numpy expression per time step costs more in call overhead than the work
-itself, so these loops are JIT-compiled (``cache=True``: compiled once per
-machine). Indices: t time, i and j states, d duration in steps (1 ..
-n_durations, stored at column d - 1).
-
-Their cost is the duration sums: per (time, state), a log-sum-exp over the w durations of
-the state's support, of which only a few terms (1-7 on the benchmark data) are within
-_NEGLIGIBLE nats of the largest, since the segments' emission products fall by hundreds of
-nats per step. So these sums look at chunks of segment boundaries: a chunk whose largest
-log value cannot reach the best term so far is skipped without looking at its terms, and
-the two ends of the window, where the largest term is on such steep stretches, are looked
-at first (:func:`_window`). Everything stays in log space: a state e^-1000 below the
-others keeps its exact log value.
-
-The kernels outside these recursions (the emissions' Mahalanobis distances, the normalised
-residual-duration step of the reproduction) are in :mod:`hemg_drake.learning._step_kernels`;
-they are importable from here too.
+Step t needs step t - 1, so the loops are JIT-compiled (``cache=True``). Indices: t time,
+i and j states, d duration in steps (1 .. n_durations, at column d - 1). The cost is the
+duration sums: per (time, state) a log-sum-exp over the state's support, of which only a few
+terms are within _NEGLIGIBLE nats of the largest (the segments' emission products fall by
+hundreds of nats per step); so the sums skip chunks of segment boundaries whose largest
+value cannot reach the best term so far, looking at the window's two ends first
+(:func:`_window`). Everything stays in log space. Viterbi and the state posteriors are in
+:mod:`._segment_kernels`, the E-step's bounds in :mod:`._bound_kernels`, the emissions'
+distances and the reproduction's step in :mod:`._step_kernels` (importable from here).
 """
 
 import numba
@@ -26,10 +17,8 @@ import numpy as np
 from hemg_drake.learning._step_kernels import mahalanobis, residual_step  # noqa: F401
 
 _NEG_INF = -np.inf
-# Terms more than this many nats below the largest are skipped in a log-sum-exp:
-# together (at most n_durations of them) they change it by less than 1e-19
-# relative, below double precision, and skipping them saves most of the time,
-# since durations far from a state's mean are that unlikely.
+# Terms more than this many nats below the largest are skipped in a log-sum-exp: together
+# (at most n_durations of them) they change it by less than 1e-19 relative.
 _NEGLIGIBLE = 50.0
 # A posterior below e^-745 is 0 in double precision (the smallest subnormal is 4.9e-324):
 # the E-step leaves out segments whose paths carry less than e^-_UNDERFLOW of the likelihood.
@@ -66,11 +55,9 @@ def cumulative(log_emission):
     return total
 
 
-# exp() on (-_NEGLIGIBLE, 0], the range of every term a log-sum-exp keeps: a table of
-# e^(-k/64) times a degree-6 Taylor polynomial of the rest (|r| <= 1/128, truncation below
-# 1e-18), inlined. Within 2 ulp of np.exp (tests/learning/test_hsmm_kernels.py) at about
-# half its cost in these loops, where the kept terms' exp() took 40 % of the duration
-# sums' time.
+# exp() on (-_NEGLIGIBLE, 0], where every kept term is: e^(-k/64) from a table times a
+# degree-6 Taylor polynomial of the rest (|r| <= 1/128), within 2 ulp of np.exp (tested) at
+# half its cost here, where it took 40 % of the duration sums' time.
 _EXP_STEPS = 64
 _EXP_TABLE = np.exp(-np.arange(int(_NEGLIGIBLE) * _EXP_STEPS + 2) / _EXP_STEPS)
 
@@ -90,14 +77,8 @@ def _exp_kept(x):
 
 @numba.njit(cache=True)
 def _finite_entries(log_matrix):
-    """The finite entries' columns of each row of ``log_matrix`` (N, N), compressed by row.
-
-    Returns
-    -------
-    start : array of int, shape (N + 1,)
-        Row i's entries are columns[start[i] : start[i + 1]], in increasing order.
-    columns : array of int
-    """
+    """(start, columns): row i of ``log_matrix`` (N, N) is finite at columns[start[i] :
+    start[i + 1]] (increasing) only."""
     n_rows, n_columns = log_matrix.shape
     start = np.zeros(n_rows + 1, dtype=np.int64)
     columns = np.empty(n_rows * n_columns, dtype=np.int64)
@@ -114,11 +95,8 @@ def _finite_entries(log_matrix):
 @numba.njit(cache=True, inline="always")
 def _log_row(log_row, log_values, columns, low, high, weights):
     """log sum_j exp(log_row[j] + log_values[j]) over j = columns[low:high] (the row's
-    finite entries: the others add exactly 0), as top and sum / e^top (0 if all -inf).
-
-    Terms more than _NEGLIGIBLE below the largest are left out; weights[k - low] is left
-    exp(term - top) of the k-th (0 for those).
-    """
+    finite entries) as top and sum / e^top (0 if all -inf); terms over _NEGLIGIBLE below the
+    largest left out. weights[k - low] is left the k-th's exp(term - top) (0 if left out)."""
     top = _NEG_INF
     for k in range(low, high):
         j = columns[k]
@@ -149,21 +127,12 @@ def _push(chunk_top, row, position, value):
 def _window(values, chunk_top, weights, offset, low, high, bound, descending, kept, where):
     """sum_{p = low .. high} exp(values[p] + weights[offset + p]) as top and sum / e^top.
 
-    Terms more than _NEGLIGIBLE below the largest are left out (as in :func:`_log_row`);
-    a chunk of positions whose ``chunk_top`` plus ``bound`` (the largest weight) is that
-    far below the best term so far is not looked at. The chunks at the window's two ends
-    are visited first (on steep stretches, which are most, the largest term is at one of
-    them), then the others from the newest on (``descending``: the newest is the highest
-    position). exp(term - top) of the terms kept is left in ``kept[:n]``, their positions in
-    ``where[:n]``.
-
-    Returns
-    -------
-    top : float
-        The largest term (-inf if there is none; then total and n are 0).
-    total : float
-        sum of exp(term - top), in [1, n].
-    n : int
+    Terms more than _NEGLIGIBLE below the largest are left out; a chunk whose
+    ``chunk_top`` plus ``bound`` (the largest weight) is that far below the best term so far
+    is not looked at. The window's end chunks go first (on steep stretches the largest term
+    is at one of them), then the others from the newest (``descending``: the highest
+    position). Returns top (-inf if no term), the sum of exp(term - top) and n: the kept
+    terms' exp(term - top) are left in ``kept[:n]``, their positions in ``where[:n]``.
     """
     n = 0
     top = _NEG_INF
@@ -220,19 +189,16 @@ def forward(log_emission, log_startprob, log_transmat, log_duration):
     ----------
     log_emission : array, shape (T, N)
         log N(xi_t | mu_i, Sigma_i) (all zeros for "no observation").
-    log_startprob : array, shape (N,)
-    log_transmat : array, shape (N, N)
-        log a_ji at [j, i].
+    log_startprob, log_transmat : arrays, shape (N,), (N, N)
+        log pi_i; log a_ji at [j, i] (-inf entries are skipped).
     log_duration : array, shape (N, n_durations)
         log p_i(d) at [i, d - 1]; -inf outside a state's support, which the loops skip
         (so the cost is O(T N w) for supports of w durations, not O(T N n_durations)).
 
     Returns
     -------
-    log_alpha : array, shape (T, N)
-        log p(xi_0..t, a segment of state i ends at t).
-    log_alpha_in : array, shape (T, N)
-        log p(xi_0..t-1, a segment of state i starts at t).
+    log_alpha, log_alpha_in : arrays, shape (T, N)
+        log p(xi_0..t, a segment of i ends at t), log p(xi_0..t-1, one starts at t).
     """
     none = np.zeros((0, 0))
     return _forward(log_emission, log_startprob, log_transmat, log_duration, _NEG_INF,
@@ -244,9 +210,9 @@ def _forward(log_emission, log_startprob, log_transmat, log_duration, floor, suf
     """:func:`forward` with the segment starts and ends that cannot matter left out.
 
     A segment start (end) of i at t whose forward value plus ``suffix[0][t, i]``
-    (``suffix[1][t, i]``), upper bounds on the rest's log-likelihood
-    (:func:`_suffix_bound`), is below ``floor`` is set to -inf: the paths through it carry
-    at most e^floor. ``floor`` -inf keeps all (``suffix`` is then not read).
+    (``suffix[1][t, i]``), bounds on the rest's log-likelihood
+    (:func:`._bound_kernels.suffix_bound`), is below ``floor`` is set to -inf: the paths
+    through it carry at most e^floor. ``floor`` -inf keeps all (``suffix`` not read).
     """
     suffix_starts, suffix_ends = suffix
     n_steps, n_states = log_emission.shape
@@ -293,41 +259,6 @@ def _forward(log_emission, log_startprob, log_transmat, log_duration, floor, suf
 
 
 @numba.njit(cache=True)
-def _suffix_bound(log_emission, log_transmat, log_duration):
-    """Upper bounds on what the rest of a sequence can add: ``starts[t, i]`` on
-    log p(xi_t..T-1 | a segment of i starts at t), ``ends[t, i]`` on
-    log p(xi_t+1..T-1 | one ends at t).
-
-    The best state sequence allowed by A's zeros, at any durations: a segment's
-    duration weights add up to at most S = max_i sum_d p_i(d) (about 1; counted once per
-    step if above 1) and a row of A to at most 1, so the sum over paths is at most the best
-    path's emissions times that. O(T (N + nonzeros of A)), no exp.
-    """
-    n_steps, n_states = log_emission.shape
-    per_step = 0.0
-    for i in range(n_states):
-        mass = 0.0
-        for d in range(log_duration.shape[1]):
-            if log_duration[i, d] > _NEG_INF:
-                mass += np.exp(log_duration[i, d])
-        per_step = max(per_step, np.log(mass) if mass > 0.0 else 0.0)
-    start, successors = _finite_entries(log_transmat)
-    starts = np.empty((n_steps, n_states))
-    ends = np.empty((n_steps, n_states))
-    ends[n_steps - 1] = 0.0  # the last segment ends with the sequence
-    for t in range(n_steps - 1, -1, -1):
-        for i in range(n_states):
-            if t < n_steps - 1:
-                best = _NEG_INF  # leave i after t
-                for k in range(start[i], start[i + 1]):
-                    best = max(best, starts[t + 1, successors[k]])
-                ends[t, i] = best
-            stay = starts[t + 1, i] if t < n_steps - 1 else _NEG_INF
-            starts[t, i] = log_emission[t, i] + per_step + max(stay, ends[t, i])
-    return starts, ends
-
-
-@numba.njit(cache=True)
 def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, log_likelihood):
     """Backward variables and the expected counts of one sequence.
 
@@ -342,18 +273,12 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
 
     Returns
     -------
-    log_beta : array, shape (T, N)
-        log p(xi_t+1..T-1 | a segment of state i ends at t), where log_alpha is finite;
-        -inf where it is -inf: no path gets there, so no posterior needs it, and leaving
-        it out is exact for the others (a path through a state's segment reaches both its
-        ends), which saves most of the work on a converged model.
-    log_beta_in : array, shape (T, N)
-        log p(xi_t..T-1 | a segment of state i starts at t), where log_alpha_in is
-        finite (-inf elsewhere, likewise).
-    transition_counts : array, shape (N, N)
-        Posterior expected number of transitions i -> j at [i, j].
-    duration_counts : array, shape (N, n_durations)
-        Posterior expected number of segments of state i lasting d steps.
+    log_beta, log_beta_in : arrays, shape (T, N)
+        log p(xi_t+1..T-1 | a segment of i ends at t), log p(xi_t..T-1 | one starts at t),
+        where log_alpha (log_alpha_in) is finite; -inf elsewhere: no path gets there, and
+        leaving it out is exact for the others (a segment's paths reach both its ends).
+    transition_counts, duration_counts : arrays, shape (N, N), (N, n_durations)
+        Expected numbers of transitions i -> j at [i, j], of segments of i lasting d.
     starts, ends : arrays, shape (T, N)
         p(a segment of state i starts at t | all), p(one ends at t | all).
     """
@@ -429,20 +354,19 @@ def _logaddexp(x, y):
 
 
 @numba.njit(cache=True)
-def expectation(log_emission, bounds, log_startprob, log_transmat, log_duration, guesses):
+def expectation(log_emission, bounds, log_startprob, log_transmat, log_duration, guesses,
+                suffix_starts, suffix_ends):
     """The E-step over all sequences in one call: :func:`forward` and :func:`backward` of
     each, their counts added up in the sequences' order.
 
-    Segment starts and ends whose paths carry less than e^-_UNDERFLOW of a sequence's
-    likelihood (certified by :func:`_suffix_bound`) are left out, so that the results are
-    those of every path: such a start or end's posterior underflows to 0, so it adds nothing
-    to any count when kept, and all of them together (at most 2 T N) change the
-    likelihood and the other posteriors by under e^-700 relative. With ``guesses[c]`` a
-    guess of sequence c's log-likelihood (the previous EM iteration's), the forward pass
-    drops those below ``guesses[c] - _UNDERFLOW - log(2 T N)``; if it then finds less than
-    the guess minus 1 nat, it runs again with the floor from what it found (a pass that drops
-    less finds at least as much). The backward pass skips what the forward left out.
-    ``guesses[c]`` -inf keeps every path.
+    Segment starts and ends whose paths carry under e^-_UNDERFLOW of a sequence's likelihood
+    (bounded by ``suffix_*``) are left out, with the results of every path: their posteriors
+    underflow to 0 when kept, and together (at most 2 T N) they move the others by under
+    e^-700 relative. The forward pass drops those below ``guesses[c] - _UNDERFLOW -
+    log(2 T N)``, ``guesses[c]`` a guess of sequence c's log-likelihood (the previous EM
+    iteration's; -inf keeps all); if it then finds less than the guess minus 1 nat, it runs
+    again with the floor from what it found (dropping less finds at least as much). The
+    backward pass skips what the forward left out.
 
     Parameters
     ----------
@@ -453,6 +377,8 @@ def expectation(log_emission, bounds, log_startprob, log_transmat, log_duration,
     log_startprob, log_transmat, log_duration : arrays
         As for :func:`forward`.
     guesses : array, shape (C,)
+    suffix_starts, suffix_ends : arrays, shape (T, N)
+        :func:`._bound_kernels.suffix_bound` of the sequences (not read if no guess).
 
     Returns
     -------
@@ -461,10 +387,8 @@ def expectation(log_emission, bounds, log_startprob, log_transmat, log_duration,
         (the later ones are then not computed, and the other outputs are incomplete).
     sequences : array, shape (C,)
         log p(sequence c).
-    starts, ends : arrays, shape (T, N)
-        p(a segment of state i starts at t | its sequence), p(one ends at t | it).
-    transitions : array, shape (N, N)
-    durations : array, shape (N, n_durations)
+    starts, ends, transitions, durations : arrays
+        :func:`backward`'s, the first two of each sequence in its rows, the others summed.
     """
     n_states = log_emission.shape[1]
     log_likelihood = 0.0
@@ -475,7 +399,7 @@ def expectation(log_emission, bounds, log_startprob, log_transmat, log_duration,
     durations = np.zeros(log_duration.shape)
     for c in range(len(bounds) - 1):
         emission = log_emission[bounds[c] : bounds[c + 1]]
-        suffix = _suffix_bound(emission, log_transmat, log_duration)
+        suffix = (suffix_starts[bounds[c] : bounds[c + 1]], suffix_ends[bounds[c] : bounds[c + 1]])
         margin = _UNDERFLOW + np.log(2.0 * emission.size)
         floor = guesses[c] - margin if guesses[c] > _NEG_INF else _NEG_INF
         for _ in range(2):

@@ -7,7 +7,7 @@ parameters that the recursions (:mod:`hemg_drake.learning._kernels`) take.
 
 import numpy as np
 
-from hemg_drake.learning import _kernels, _segment_kernels
+from hemg_drake.learning import _bound_kernels, _kernels, _segment_kernels
 from hemg_drake.learning.gmr import gaussian_log_pdf
 
 
@@ -91,10 +91,14 @@ def expectation(model, demos, outer=None, guesses=None):
     samples = demos[0] if len(demos) == 1 else np.concatenate(demos)
     bounds = np.concatenate([[0], np.cumsum([len(d) for d in demos])])
     log_emission = gaussian_log_pdf(samples, model.means_, model.covariances_)
+    parameters = log_parameters(model)
     if guesses is None:
         guesses = np.full(len(demos), -np.inf)
+        suffix = (np.zeros((0, 0)), np.zeros((0, 0)))  # not read
+    else:
+        suffix = _bound_kernels.suffix_bound(log_emission, bounds, *parameters[1:])
     log_likelihood, sequences, starts, ends, transitions, durations = _kernels.expectation(
-        log_emission, bounds, *log_parameters(model), guesses
+        log_emission, bounds, *parameters, guesses, *suffix
     )
     stats = {
         "log_likelihood": log_likelihood,
