@@ -247,7 +247,10 @@ def compile_times():
         "la = np.log(np.array([[1e-300, 1], [1, 1e-300]]));"
         "ld = np.zeros((2, 3)); a, ai = k.forward(e, lp, la, ld);"
         "k.backward(e, la, ld, a, ai, np.logaddexp.reduce(a[-1]));"
-        "k.expectation(e, np.array([0, 5]), lp, la, ld, np.full(1, -np.inf)); print(time.perf_counter() - t)"
+        "from hemg_drake.learning import _bound_kernels as b, _segment_kernels as s;"
+        "z = np.array([0, 5]); k.expectation(e, z, lp, la, ld, np.zeros(1), *b.suffix_bound("
+        "e, z, la, ld)); s.viterbi(e, lp, la, ld); s.occupancy(e, e, z);"
+        "print(time.perf_counter() - t)"
     )
     with tempfile.TemporaryDirectory() as cache:
         env = {**os.environ, "NUMBA_CACHE_DIR": cache}
