@@ -1,5 +1,5 @@
 """Decoding kernels of the explicit-duration HSMM, compiled by numba: segmental Viterbi and
-the state posteriors from the segment posteriors of :func:`hemg_drake.learning._kernels.expectation`.
+the state posteriors from the segment posteriors of :func:`._kernels.expectation`.
 
 They take what they need of :mod:`hemg_drake.learning._kernels` (a state's duration
 support, the emissions' running sums) as arguments, from Python: numba's on-disk cache
