@@ -318,10 +318,10 @@ def main():
             print(f"  reproduction {weighting!r}: {1e6 * seconds / N_STEPS:.0f} us per step "
                   f"(target < 100 us), position RMSE {100 * rmse / extent:.1f} % of the extent")
 
-    log_parameters = log_parameters(model)
+    parameters = log_parameters(model)
     log_emission = gaussian_log_pdf(demos[0], model.means_, model.covariances_)
-    numba_s, fast = timed(lambda: _kernels.forward(log_emission, *log_parameters)[0], repeat=3)
-    numpy_s, slow = timed(lambda: numpy_forward(log_emission, *log_parameters), repeat=1)
+    numba_s, fast = timed(lambda: _kernels.forward(log_emission, *parameters)[0], repeat=3)
+    numpy_s, slow = timed(lambda: numpy_forward(log_emission, *parameters), repeat=1)
     assert np.allclose(fast, slow, rtol=1e-9, atol=1e-6)  # same recursion, log-space round-off
     print(f"forward recursion of one demo (T={N_STEPS}): numba {1e3 * numba_s:.1f} ms, "
           f"numpy per time step {1e3 * numpy_s:.1f} ms ({numpy_s / numba_s:.0f}x)")
