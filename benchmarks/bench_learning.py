@@ -7,10 +7,23 @@ one run (best of ``--repeat`` runs each): handwriting-sized sets (each LASA shap
 demonstrations resampled to 200 samples at two phases: 14 x 200, D = 4, N = 10), the
 drawing's size (N = 18, C = 3, T = 1,000, D = 7) and T = 10,000 samples (one demonstration,
 and ten of 1,000). Reproduction: one step of each weighting, N = 18, D = 7.
+With ``--peers``: the HSMM beside gaussian-hsmm and liblrhsmm-rs (``benchmarks/peers.py``)
+on held-out data, and on synthetic data with known durations.
 Run: ``.venv/bin/python benchmarks/bench_learning.py`` (``--quick``: 3 LASA shapes).
+
+The machine may set ``OPENBLAS_CORETYPE`` and ``OPENBLAS_L2_SIZE``, which choose numpy's
+BLAS kernel: unless ``--blas inherited``, the script runs itself again without them (only
+this command's environment changes) and prints the kernel threadpoolctl reports.
 """
 
 import os
+import sys
+
+BLAS_VARIABLES = ("OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE")
+if "--blas" not in sys.argv or sys.argv[sys.argv.index("--blas") + 1] != "inherited":
+    if any(name in os.environ for name in BLAS_VARIABLES):
+        environment = {k: v for k, v in os.environ.items() if k not in BLAS_VARIABLES}
+        os.execve(sys.executable, [sys.executable, *sys.argv], environment)
 
 # One BLAS thread for both estimators: on 2 shared cores, threaded BLAS on small matrices
 # only adds contention (hmmlearn's iterations measured 25 ms quiet, 146 ms under load).
@@ -21,7 +34,6 @@ import argparse  # noqa: E402
 import contextlib  # noqa: E402
 import io  # noqa: E402
 import subprocess  # noqa: E402
-import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 
@@ -127,6 +139,96 @@ def hmmlearn_table(repeat, quick):
           f"{max(ratios):.2f}x (goal: at most 0.1x on every set)")
 
 
+def blas_kernel():
+    """The BLAS numpy runs (threadpoolctl) and the two variables that choose its kernel."""
+    from threadpoolctl import threadpool_info
+
+    blas = [f"{i['internal_api']} {i['version']} {i['architecture']} kernel, "
+            f"{i['num_threads']} thread(s)" for i in threadpool_info() if i["user_api"] == "blas"]
+    set_ = {name: os.environ.get(name, "unset") for name in BLAS_VARIABLES}
+    return f"BLAS: {'; '.join(blas)} ({', '.join(f'{k}={v}' for k, v in set_.items())})"
+
+
+def peers_table(quick):
+    """The HSMM, gaussian-hsmm and liblrhsmm-rs side by side: CPU s of the whole fit,
+    held-out nats per sample, and the HSMM's CPU s to the peer's held-out score."""
+    import peers
+
+    print("versions:", peers.versions())
+    HSMM(3).fit(drawing_demos(1, n_steps=100))  # load the compiled kernels
+    sets = []
+    for name in ("Angle",) if quick else ("Angle", "CShape", "WShape"):
+        demos = lasa_demos(name)  # hold out demonstration 7 at both phases
+        sets.append((f"LASA {name}", [d for k, d in enumerate(demos) if k not in (6, 13)],
+                     [demos[6], demos[13]], 10))  # fmt: skip
+    drawing = drawing_demos(4)
+    sets.append(("drawing-like 3 x 1,000", drawing[:3], drawing[3:], 18))
+    train, _, centres = peers.synthetic(10, seed=0)
+    test, test_starts, _ = peers.synthetic(5, seed=1)
+    sets.append(("synthetic, known durations, 10 x ~200", train, test, 5))
+    print("| data | method (regime) | CPU s (iterations) | held-out nats/sample | "
+          "peer / HSMM CPU | HSMM CPU s to the peer's held-out score (iterations) |")
+    print("|---|---|---|---|---|---|")
+    for label, train, test, n in sets:
+        rows = {}
+        for init, regime in (("time", "left-to-right"), ("kmeans", "ergodic")):
+            rows[init] = peers.fit_hsmm(train, test, n, init)
+            r = rows[init]
+            print(f"| {label} | HSMM init={init} ({regime}) | {r['seconds']:.3f} "
+                  f"({r['iterations']}) | {r['held_out']:.3f} | | |")
+        others = [("liblrhsmm-rs (left-to-right)", "time", lambda: peers.fit_liblrhsmm(
+            train, test, n))]
+        if label.startswith(("LASA Angle", "synthetic")):  # pure numpy: minutes per set
+            others.append(("gaussian-hsmm (ergodic)", "kmeans", lambda: peers.fit_gaussian_hsmm(
+                train, test, n, rows["kmeans"]["model"].max_duration_)))
+        others.append(("hmmlearn GaussianHMM (ergodic HMM)", "kmeans",
+                       lambda: peers.fit_hmmlearn(train, test, n)))  # fmt: skip
+        for name, init, fit in others:
+            r = fit()
+            if r is None:
+                print(f"| {label} | {name} | not installed | | | |")
+                continue
+            ours = rows[init]
+            seconds, iterations = peers.hsmm_time_to(train, test, n, init, r["held_out"])
+            to = "never" if iterations is None else f"{seconds:.3f} ({iterations})"
+            print(f"| {label} | {name} | {r['seconds']:.3f} ({r['iterations']}) | "
+                  f"{r['held_out']:.3f} | {r['seconds'] / ours['seconds']:.1f}x | {to} |")
+            rows[name] = r
+        if label.startswith("synthetic"):
+            synthetic_quality(rows, test, test_starts, centres)
+
+
+def synthetic_quality(rows, test, test_starts, centres):
+    """Duration-parameter errors and segmentation F1 (held-out, +-3 steps) against the truth."""
+    import peers
+
+    print("\n| method (regime) | duration mean error | duration spread error | "
+          "segment-start F1 (held-out) |\n|---|---|---|---|")
+    for init in ("time", "kmeans"):
+        model = rows[init]["model"]
+        order = peers.state_order(model.means_, centres)
+        mean_error, std_error = peers.duration_errors(model.duration_means_,
+                                                      model.duration_stds_, order)  # fmt: skip
+        f1 = np.mean([peers.boundary_f1(s, model.decode(x)[1]) for s, x in zip(test_starts, test)])
+        print(f"| HSMM init={init} | {mean_error:.1f} % | {std_error:.1f} % | {f1:.3f} |")
+    lrh = rows.get("liblrhsmm-rs (left-to-right)")
+    if lrh is not None:  # states in the true order; duration values are (mean, variance)
+        order = np.arange(len(centres))
+        mean_error, std_error = peers.duration_errors(lrh["durations"][:, 0],
+                                                      np.sqrt(lrh["durations"][:, 1]), order)
+        print(f"| liblrhsmm-rs | {mean_error:.1f} % | {std_error:.1f} % | (not decoded) |")
+    ghsmm = rows.get("gaussian-hsmm (ergodic)")
+    if ghsmm is not None:  # shifted Poisson: spread sqrt(mean - 1)
+        model, standard = ghsmm["model"], ghsmm["standard"]
+        order = peers.state_order(model.means_ * standard.scale + standard.mean, centres)
+        means = model.duration_means_
+        mean_error, std_error = peers.duration_errors(means, np.sqrt(np.maximum(means - 1, 0)),
+                                                      order)  # fmt: skip
+        f1 = np.mean([peers.boundary_f1(s, model.predict(standard([x])[0])) for s, x in
+                      zip(test_starts, test)])  # fmt: skip
+        print(f"| gaussian-hsmm | {mean_error:.1f} % | {std_error:.1f} % | {f1:.3f} |")
+
+
 def timed(function, repeat=1):
     best = np.inf
     for _ in range(repeat):
@@ -145,7 +247,10 @@ def compile_times():
         "la = np.log(np.array([[1e-300, 1], [1, 1e-300]]));"
         "ld = np.zeros((2, 3)); a, ai = k.forward(e, lp, la, ld);"
         "k.backward(e, la, ld, a, ai, np.logaddexp.reduce(a[-1]));"
-        "k.expectation(e, np.array([0, 5]), lp, la, ld); print(time.perf_counter() - t)"
+        "from hemg_drake.learning import _bound_kernels as b, _segment_kernels as s;"
+        "z = np.array([0, 5]); k.expectation(e, z, lp, la, ld, np.zeros(1), *b.suffix_bound("
+        "e, z, la, ld)); s.viterbi(e, lp, la, ld); s.occupancy(e, e, z);"
+        "print(time.perf_counter() - t)"
     )
     with tempfile.TemporaryDirectory() as cache:
         env = {**os.environ, "NUMBA_CACHE_DIR": cache}
@@ -179,8 +284,16 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeat", type=int, default=2, help="fits per method and set (best)")
     parser.add_argument("--quick", action="store_true", help="3 LASA shapes instead of 8")
+    parser.add_argument("--peers", action="store_true",
+                        help="only the table against gaussian-hsmm and liblrhsmm-rs")  # fmt: skip
+    parser.add_argument("--blas", choices=("default", "inherited"), default="default",
+                        help="inherited: keep OPENBLAS_CORETYPE / OPENBLAS_L2_SIZE")  # fmt: skip
     args = parser.parse_args()
+    print(blas_kernel())
     demos = drawing_demos()
+    if args.peers:
+        peers_table(args.quick)
+        return
 
     cold, cached = compile_times()
     print(f"numba kernels, first call: {cold:.2f} s with an empty cache (compile), "
@@ -205,10 +318,10 @@ def main():
             print(f"  reproduction {weighting!r}: {1e6 * seconds / N_STEPS:.0f} us per step "
                   f"(target < 100 us), position RMSE {100 * rmse / extent:.1f} % of the extent")
 
-    log_parameters = log_parameters(model)
+    parameters = log_parameters(model)
     log_emission = gaussian_log_pdf(demos[0], model.means_, model.covariances_)
-    numba_s, fast = timed(lambda: _kernels.forward(log_emission, *log_parameters)[0], repeat=3)
-    numpy_s, slow = timed(lambda: numpy_forward(log_emission, *log_parameters), repeat=1)
+    numba_s, fast = timed(lambda: _kernels.forward(log_emission, *parameters)[0], repeat=3)
+    numpy_s, slow = timed(lambda: numpy_forward(log_emission, *parameters), repeat=1)
     assert np.allclose(fast, slow, rtol=1e-9, atol=1e-6)  # same recursion, log-space round-off
     print(f"forward recursion of one demo (T={N_STEPS}): numba {1e3 * numba_s:.1f} ms, "
           f"numpy per time step {1e3 * numpy_s:.1f} ms ({numpy_s / numba_s:.0f}x)")

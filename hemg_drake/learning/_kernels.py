@@ -1,23 +1,14 @@
 """Time recursions of the explicit-duration HSMM in log space, compiled by numba.
 
-The recursions over time cannot be vectorised (step t needs step t - 1), and a
-numpy expression per time step costs more in call overhead than the work
-itself, so these loops are JIT-compiled (``cache=True``: compiled once per
-machine). Indices: t time, i and j states, d duration in steps (1 ..
-n_durations, stored at column d - 1).
-
-Their cost is the duration sums: per (time, state), a log-sum-exp over the w durations of
-the state's support, of which only a few terms (1-7 on the benchmark data) are within
-_NEGLIGIBLE nats of the largest, since the segments' emission products fall by hundreds of
-nats per step. So these sums look at chunks of segment boundaries: a chunk whose largest
-log value cannot reach the best term so far is skipped without looking at its terms, and
-the two ends of the window, where the largest term is on such steep stretches, are looked
-at first (:func:`_window`). Everything stays in log space: a state e^-1000 below the
-others keeps its exact log value.
-
-The kernels outside these recursions (the emissions' Mahalanobis distances, the normalised
-residual-duration step of the reproduction) are in :mod:`hemg_drake.learning._step_kernels`;
-they are importable from here too.
+Step t needs step t - 1, so the loops are JIT-compiled (``cache=True``). Indices: t time,
+i and j states, d duration in steps (1 .. n_durations, at column d - 1). The cost is the
+duration sums: per (time, state) a log-sum-exp over the state's support, of which only a few
+terms are within _NEGLIGIBLE nats of the largest (the segments' emission products fall by
+hundreds of nats per step); so the sums skip chunks of segment boundaries whose largest
+value cannot reach the best term so far, looking at the window's two ends first
+(:func:`_window`). Everything stays in log space. Viterbi and the state posteriors are in
+:mod:`._segment_kernels`, the E-step's bounds in :mod:`._bound_kernels`, the emissions'
+distances and the reproduction's step in :mod:`._step_kernels` (importable from here).
 """
 
 import numba
@@ -26,15 +17,16 @@ import numpy as np
 from hemg_drake.learning._step_kernels import mahalanobis, residual_step  # noqa: F401
 
 _NEG_INF = -np.inf
-# Terms more than this many nats below the largest are skipped in a log-sum-exp:
-# together (at most n_durations of them) they change it by less than 1e-19
-# relative, below double precision, and skipping them saves most of the time,
-# since durations far from a state's mean are that unlikely.
+# Terms more than this many nats below the largest are skipped in a log-sum-exp: together
+# (at most n_durations of them) they change it by less than 1e-19 relative.
 _NEGLIGIBLE = 50.0
+# A posterior below e^-745 is 0 in double precision (the smallest subnormal is 4.9e-324):
+# the E-step leaves out segments whose paths carry less than e^-_UNDERFLOW of the likelihood.
+_UNDERFLOW = 750.0
 
 
 @numba.njit(cache=True)
-def _support(log_duration):
+def support(log_duration):
     """First and last duration index (0-based, inclusive) of each state with p_i(d) > 0."""
     n_states, n_durations = log_duration.shape
     first = np.zeros(n_states, dtype=np.int64)
@@ -49,7 +41,7 @@ def _support(log_duration):
 
 
 @numba.njit(cache=True)
-def _cumulative(log_emission):
+def cumulative(log_emission):
     """Per-state running sums, shape (N, T + 1): a segment's log-likelihood is a difference.
 
     State-major, like the other arrays the duration loops read, so that they read
@@ -63,11 +55,9 @@ def _cumulative(log_emission):
     return total
 
 
-# exp() on (-_NEGLIGIBLE, 0], the range of every term a log-sum-exp keeps: a table of
-# e^(-k/64) times a degree-6 Taylor polynomial of the rest (|r| <= 1/128, truncation below
-# 1e-18), inlined. Within 2 ulp of np.exp (tests/learning/test_hsmm_kernels.py) at about
-# half its cost in these loops, where the kept terms' exp() took 40 % of the duration
-# sums' time.
+# exp() on (-_NEGLIGIBLE, 0], where every kept term is: e^(-k/64) from a table times a
+# degree-6 Taylor polynomial of the rest (|r| <= 1/128), within 2 ulp of np.exp (tested) at
+# half its cost here, where it took 40 % of the duration sums' time.
 _EXP_STEPS = 64
 _EXP_TABLE = np.exp(-np.arange(int(_NEGLIGIBLE) * _EXP_STEPS + 2) / _EXP_STEPS)
 
@@ -85,22 +75,38 @@ def _exp_kept(x):
     return _EXP_TABLE[k] * (1.0 + r * polynomial)
 
 
-@numba.njit(cache=True, inline="always")
-def _log_row(log_row, log_values, weights):
-    """log sum_j exp(log_row[j] + log_values[j]) as top and sum / e^top (0 if all -inf).
+@numba.njit(cache=True)
+def _finite_entries(log_matrix):
+    """(start, columns): row i of ``log_matrix`` (N, N) is finite at columns[start[i] :
+    start[i + 1]] (increasing) only."""
+    n_rows, n_columns = log_matrix.shape
+    start = np.zeros(n_rows + 1, dtype=np.int64)
+    columns = np.empty(n_rows * n_columns, dtype=np.int64)
+    k = 0
+    for i in range(n_rows):
+        for j in range(n_columns):
+            if log_matrix[i, j] > _NEG_INF:
+                columns[k] = j
+                k += 1
+        start[i + 1] = k
+    return start, columns[:k]
 
-    Terms more than _NEGLIGIBLE below the largest are left out; weights[j] is left
-    exp(term_j - top) (0 for those).
-    """
+
+@numba.njit(cache=True, inline="always")
+def _log_row(log_row, log_values, columns, low, high, weights):
+    """log sum_j exp(log_row[j] + log_values[j]) over j = columns[low:high] (the row's
+    finite entries) as top and sum / e^top (0 if all -inf); terms over _NEGLIGIBLE below the
+    largest left out. weights[k - low] is left the k-th's exp(term - top) (0 if left out)."""
     top = _NEG_INF
-    for j in range(len(log_values)):
-        weights[j] = log_row[j] + log_values[j]
-        if weights[j] > top:
-            top = weights[j]
+    for k in range(low, high):
+        j = columns[k]
+        weights[k - low] = log_row[j] + log_values[j]
+        if weights[k - low] > top:
+            top = weights[k - low]
     total = 0.0
-    for j in range(len(log_values)):
-        weights[j] = _exp_kept(weights[j] - top) if weights[j] > top - _NEGLIGIBLE else 0.0
-        total += weights[j]
+    for k in range(high - low):
+        weights[k] = _exp_kept(weights[k] - top) if weights[k] > top - _NEGLIGIBLE else 0.0
+        total += weights[k]
     return top, total
 
 
@@ -121,21 +127,12 @@ def _push(chunk_top, row, position, value):
 def _window(values, chunk_top, weights, offset, low, high, bound, descending, kept, where):
     """sum_{p = low .. high} exp(values[p] + weights[offset + p]) as top and sum / e^top.
 
-    Terms more than _NEGLIGIBLE below the largest are left out (as in :func:`_log_row`);
-    a chunk of positions whose ``chunk_top`` plus ``bound`` (the largest weight) is that
-    far below the best term so far is not looked at. The chunks at the window's two ends
-    are visited first (on steep stretches, which are most, the largest term is at one of
-    them), then the others from the newest on (``descending``: the newest is the highest
-    position). exp(term - top) of the terms kept is left in ``kept[:n]``, their positions in
-    ``where[:n]``.
-
-    Returns
-    -------
-    top : float
-        The largest term (-inf if there is none; then total and n are 0).
-    total : float
-        sum of exp(term - top), in [1, n].
-    n : int
+    Terms more than _NEGLIGIBLE below the largest are left out; a chunk whose
+    ``chunk_top`` plus ``bound`` (the largest weight) is that far below the best term so far
+    is not looked at. The window's end chunks go first (on steep stretches the largest term
+    is at one of them), then the others from the newest (``descending``: the highest
+    position). Returns top (-inf if no term), the sum of exp(term - top) and n: the kept
+    terms' exp(term - top) are left in ``kept[:n]``, their positions in ``where[:n]``.
     """
     n = 0
     top = _NEG_INF
@@ -165,12 +162,12 @@ def _window(values, chunk_top, weights, offset, low, high, bound, descending, ke
 @numba.njit(cache=True)
 def _workspace(log_emission, log_duration):
     """What both passes need: each state's support and largest log p_i(d), the running
-    sums of the emissions (:func:`_cumulative`), empty chunk maxima (:func:`_push`) with
+    sums of the emissions (:func:`cumulative`), empty chunk maxima (:func:`_push`) with
     the state-major array of the duration sums' values they bound, and scratch for
     :func:`_log_row` and :func:`_window`."""
     n_steps, n_states = log_emission.shape
     n_durations = log_duration.shape[1]
-    first, last = _support(log_duration)
+    first, last = support(log_duration)
     bound = np.full(n_states, _NEG_INF)
     for i in range(n_states):
         if last[i] >= first[i]:
@@ -180,32 +177,44 @@ def _workspace(log_emission, log_duration):
     weights = np.empty(n_states)
     kept = np.empty(n_durations)
     where = np.empty(n_durations, dtype=np.int64)
-    return (first, last, bound, _cumulative(log_emission), chunk_top, values, weights, kept,
+    return (first, last, bound, cumulative(log_emission), chunk_top, values, weights, kept,
             where)  # fmt: skip
 
 
 @numba.njit(cache=True)
 def forward(log_emission, log_startprob, log_transmat, log_duration):
-    """Segment forward variables (eq. 11) of one sequence.
+    """Segment forward variables (eq. 11) of one sequence, every path kept.
 
     Parameters
     ----------
     log_emission : array, shape (T, N)
         log N(xi_t | mu_i, Sigma_i) (all zeros for "no observation").
-    log_startprob : array, shape (N,)
-    log_transmat : array, shape (N, N)
-        log a_ji at [j, i].
+    log_startprob, log_transmat : arrays, shape (N,), (N, N)
+        log pi_i; log a_ji at [j, i] (-inf entries are skipped).
     log_duration : array, shape (N, n_durations)
         log p_i(d) at [i, d - 1]; -inf outside a state's support, which the loops skip
         (so the cost is O(T N w) for supports of w durations, not O(T N n_durations)).
 
     Returns
     -------
-    log_alpha : array, shape (T, N)
-        log p(xi_0..t, a segment of state i ends at t).
-    log_alpha_in : array, shape (T, N)
-        log p(xi_0..t-1, a segment of state i starts at t).
+    log_alpha, log_alpha_in : arrays, shape (T, N)
+        log p(xi_0..t, a segment of i ends at t), log p(xi_0..t-1, one starts at t).
     """
+    none = np.zeros((0, 0))
+    return _forward(log_emission, log_startprob, log_transmat, log_duration, _NEG_INF,
+                    (none, none))  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _forward(log_emission, log_startprob, log_transmat, log_duration, floor, suffix):
+    """:func:`forward` with the segment starts and ends that cannot matter left out.
+
+    A segment start (end) of i at t whose forward value plus ``suffix[0][t, i]``
+    (``suffix[1][t, i]``), bounds on the rest's log-likelihood
+    (:func:`._bound_kernels.suffix_bound`), is below ``floor`` is set to -inf: the paths
+    through it carry at most e^floor. ``floor`` -inf keeps all (``suffix`` not read).
+    """
+    suffix_starts, suffix_ends = suffix
     n_steps, n_states = log_emission.shape
     n_durations = log_duration.shape[1]
     # boundary[i, b] = log alpha_in - the emissions before b: a segment's term is
@@ -215,27 +224,37 @@ def forward(log_emission, log_startprob, log_transmat, log_duration):
     )
     reversed_duration = np.ascontiguousarray(log_duration[:, ::-1])  # [i, n_durations - d]
     log_transmat_T = np.ascontiguousarray(log_transmat.T)
+    # The transitions into each state that can happen (a left-to-right model has one).
+    start, predecessors = _finite_entries(log_transmat_T)
     log_alpha = np.empty((n_steps, n_states))
     log_alpha_in = np.empty((n_steps, n_states))
+    newest = np.full(n_states, -1)  # the last step at which a segment of i can start
     for t in range(n_steps):
         for i in range(n_states):
             if t == 0:
                 log_alpha_in[0, i] = log_startprob[i]
             else:
-                top, weight = _log_row(log_transmat_T[i], log_alpha[t - 1], weights)
+                top, weight = _log_row(log_transmat_T[i], log_alpha[t - 1], predecessors,
+                                       start[i], start[i + 1], weights)  # fmt: skip
                 log_alpha_in[t, i] = top + np.log(weight) if weight > 0.0 else _NEG_INF
+            if floor > _NEG_INF and log_alpha_in[t, i] + suffix_starts[t, i] < floor:
+                log_alpha_in[t, i] = _NEG_INF
             boundary[i, t] = log_alpha_in[t, i] - total[i, t]
             _push(chunk_top, i, t, boundary[i, t])
+            if log_alpha_in[t, i] > _NEG_INF:
+                newest[i] = t
         for i in range(n_states):
             # Durations d = first + 1 .. min(last + 1, t + 1): segment xi_{b..t}, b = t - d + 1.
             low, high = max(0, t - last[i]), t - first[i]
             log_alpha[t, i] = _NEG_INF
-            if high >= low:
+            if high >= low and newest[i] >= low:  # (else no segment of i can end at t)
                 top, weight, _ = _window(boundary[i], chunk_top[i], reversed_duration[i],
                                          n_durations - 1 - t, low, high, bound[i], True, kept,
                                          where)  # fmt: skip
                 if weight > 0.0:
                     log_alpha[t, i] = total[i, t + 1] + top + np.log(weight)
+                    if floor > _NEG_INF and log_alpha[t, i] + suffix_ends[t, i] < floor:
+                        log_alpha[t, i] = _NEG_INF
     return log_alpha, log_alpha_in
 
 
@@ -254,18 +273,12 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
 
     Returns
     -------
-    log_beta : array, shape (T, N)
-        log p(xi_t+1..T-1 | a segment of state i ends at t), where log_alpha is finite;
-        -inf where it is -inf: no path gets there, so no posterior needs it, and leaving
-        it out is exact for the others (a path through a state's segment reaches both its
-        ends), which saves most of the work on a converged model.
-    log_beta_in : array, shape (T, N)
-        log p(xi_t..T-1 | a segment of state i starts at t), where log_alpha_in is
-        finite (-inf elsewhere, likewise).
-    transition_counts : array, shape (N, N)
-        Posterior expected number of transitions i -> j at [i, j].
-    duration_counts : array, shape (N, n_durations)
-        Posterior expected number of segments of state i lasting d steps.
+    log_beta, log_beta_in : arrays, shape (T, N)
+        log p(xi_t+1..T-1 | a segment of i ends at t), log p(xi_t..T-1 | one starts at t),
+        where log_alpha (log_alpha_in) is finite; -inf elsewhere: no path gets there, and
+        leaving it out is exact for the others (a segment's paths reach both its ends).
+    transition_counts, duration_counts : arrays, shape (N, N), (N, n_durations)
+        Expected numbers of transitions i -> j at [i, j], of segments of i lasting d.
     starts, ends : arrays, shape (T, N)
         p(a segment of state i starts at t | all), p(one ends at t | all).
     """
@@ -276,6 +289,7 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
     first, last, bound, total, chunk_top, end, weights, kept, where = _workspace(
         log_emission, log_duration
     )
+    start, successors = _finite_entries(log_transmat)  # the transitions out of each state
     log_beta = np.empty((n_steps, n_states))
     log_beta_in = np.empty((n_steps, n_states))
     starts = np.zeros((n_steps, n_states))
@@ -291,15 +305,16 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
             elif log_alpha[s, i] == _NEG_INF:
                 log_beta[s, i] = _NEG_INF  # not reached: left out (see Returns)
             else:
-                top, weight = _log_row(log_transmat[i], log_beta_in[s + 1], weights)
+                top, weight = _log_row(log_transmat[i], log_beta_in[s + 1], successors,
+                                       start[i], start[i + 1], weights)  # fmt: skip
                 log_beta[s, i] = top + np.log(weight) if weight > 0.0 else _NEG_INF
                 if weight > 0.0:
                     # p(segment of i ends at s | all), and the transitions i -> j it makes.
                     scale = np.exp(top + log_alpha[s, i] - log_likelihood)
                     ends[s, i] = weight * scale
                     if scale > 0.0:  # (most states' posterior underflows: adding 0 is a no-op)
-                        for j in range(n_states):
-                            transition_counts[i, j] += weights[j] * scale
+                        for k in range(start[i], start[i + 1]):
+                            transition_counts[i, successors[k]] += weights[k - start[i]] * scale
             end[i, s] = total[i, s + 1] + log_beta[s, i]
             _push(chunk_top, i, s, end[i, s])
         for i in range(n_states):
@@ -322,87 +337,6 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
     return log_beta, log_beta_in, transition_counts, duration_counts, starts, ends
 
 
-@numba.njit(cache=True)
-def viterbi(log_emission, log_startprob, log_transmat, log_duration):
-    """Segmental Viterbi: the most likely segmentation of one sequence.
-
-    The max-product version of :func:`forward` (a complete segment ends the sequence).
-
-    Parameters
-    ----------
-    log_emission, log_startprob, log_transmat, log_duration : arrays
-        As for :func:`forward`.
-
-    Returns
-    -------
-    log_probability : float
-        log p(xi, best segmentation); -inf if no segmentation is possible.
-    states : array of int, shape (T,)
-        The state active at each step (all -1 if impossible).
-    """
-    n_steps, n_states = log_emission.shape
-    first, last = _support(log_duration)
-    total = _cumulative(log_emission)
-    best = np.empty((n_steps, n_states))  # a segment of i ends at t
-    best_in = np.empty((n_states, n_steps))  # a segment of i starts at t, state-major
-    previous = np.full((n_steps, n_states), -1, dtype=np.int64)  # state before that segment
-    length = np.zeros((n_steps, n_states), dtype=np.int64)  # its duration
-    for t in range(n_steps):
-        for i in range(n_states):
-            if t == 0:
-                best_in[i, t] = log_startprob[i]
-                continue
-            top = _NEG_INF
-            for j in range(n_states):
-                value = best[t - 1, j] + log_transmat[j, i]
-                if value > top:
-                    top = value
-                    previous[t, i] = j
-            best_in[i, t] = top
-        for i in range(n_states):
-            top = _NEG_INF
-            end = total[i, t + 1]
-            for d in range(first[i] + 1, min(last[i] + 1, t + 1) + 1):
-                begin = t - d + 1
-                value = best_in[i, begin] + log_duration[i, d - 1] + end - total[i, begin]
-                if value > top:
-                    top = value
-                    length[t, i] = d
-            best[t, i] = top
-    states = np.full(n_steps, -1, dtype=np.int64)
-    state = np.argmax(best[n_steps - 1])
-    log_probability = best[n_steps - 1, state]
-    if log_probability == _NEG_INF:
-        return log_probability, states
-    t = n_steps - 1
-    while t >= 0:
-        begin = t - length[t, state] + 1
-        states[begin : t + 1] = state
-        state_before = previous[begin, state]
-        t = begin - 1
-        state = state_before
-    return log_probability, states
-
-
-@numba.njit(cache=True)
-def occupancy(starts, ends):
-    """p(state i active at t | all), shape (T, N), from the segment start and end posteriors.
-
-    Segments of i started at or before t minus those ended before t, clipped to [0, 1]
-    against round-off.
-    """
-    n_steps, n_states = starts.shape
-    gamma = np.empty((n_steps, n_states))
-    for i in range(n_states):
-        active = 0.0
-        for t in range(n_steps):
-            active += starts[t, i]
-            if t > 0:
-                active -= ends[t - 1, i]
-            gamma[t, i] = min(max(active, 0.0), 1.0)
-    return gamma
-
-
 _LOG_2 = np.log(2.0)
 
 
@@ -420,9 +354,19 @@ def _logaddexp(x, y):
 
 
 @numba.njit(cache=True)
-def expectation(log_emission, bounds, log_startprob, log_transmat, log_duration):
-    """The E-step over all sequences in one call: :func:`forward`, :func:`backward` and
-    :func:`occupancy` of each, their counts added up in the sequences' order.
+def expectation(log_emission, bounds, log_startprob, log_transmat, log_duration, guesses,
+                suffix_starts, suffix_ends):
+    """The E-step over all sequences in one call: :func:`forward` and :func:`backward` of
+    each, their counts added up in the sequences' order.
+
+    Segment starts and ends whose paths carry under e^-_UNDERFLOW of a sequence's likelihood
+    (bounded by ``suffix_*``) are left out, with the results of every path: their posteriors
+    underflow to 0 when kept, and together (at most 2 T N) they move the others by under
+    e^-700 relative. The forward pass drops those below ``guesses[c] - _UNDERFLOW -
+    log(2 T N)``, ``guesses[c]`` a guess of sequence c's log-likelihood (the previous EM
+    iteration's; -inf keeps all); if it then finds less than the guess minus 1 nat, it runs
+    again with the floor from what it found (dropping less finds at least as much). The
+    backward pass skips what the forward left out.
 
     Parameters
     ----------
@@ -432,39 +376,51 @@ def expectation(log_emission, bounds, log_startprob, log_transmat, log_duration)
         Sequence c is rows bounds[c] : bounds[c + 1].
     log_startprob, log_transmat, log_duration : arrays
         As for :func:`forward`.
+    guesses : array, shape (C,)
+    suffix_starts, suffix_ends : arrays, shape (T, N)
+        :func:`._bound_kernels.suffix_bound` of the sequences (not read if no guess).
 
     Returns
     -------
     log_likelihood : float
         sum_c log p(sequence c); not finite as soon as one sequence cannot be produced
         (the later ones are then not computed, and the other outputs are incomplete).
-    gamma : array, shape (T, N)
-        p(state i active at t | its sequence).
-    starts : array, shape (N,)
-        sum over sequences of p(their first segment is of state i).
-    transitions : array, shape (N, N)
-    durations : array, shape (N, n_durations)
+    sequences : array, shape (C,)
+        log p(sequence c).
+    starts, ends, transitions, durations : arrays
+        :func:`backward`'s, the first two of each sequence in its rows, the others summed.
     """
     n_states = log_emission.shape[1]
     log_likelihood = 0.0
-    gamma = np.zeros(log_emission.shape)
-    starts = np.zeros(n_states)
+    sequences = np.full(len(bounds) - 1, _NEG_INF)
+    starts = np.zeros(log_emission.shape)
+    ends = np.zeros(log_emission.shape)
     transitions = np.zeros((n_states, n_states))
     durations = np.zeros(log_duration.shape)
     for c in range(len(bounds) - 1):
         emission = log_emission[bounds[c] : bounds[c + 1]]
-        log_alpha, log_alpha_in = forward(emission, log_startprob, log_transmat, log_duration)
-        sequence = _NEG_INF  # logaddexp.reduce(log_alpha[-1])
-        for i in range(n_states):
-            sequence = _logaddexp(sequence, log_alpha[-1, i])
+        suffix = (suffix_starts[bounds[c] : bounds[c + 1]], suffix_ends[bounds[c] : bounds[c + 1]])
+        margin = _UNDERFLOW + np.log(2.0 * emission.size)
+        floor = guesses[c] - margin if guesses[c] > _NEG_INF else _NEG_INF
+        for _ in range(2):
+            log_alpha, log_alpha_in = _forward(
+                emission, log_startprob, log_transmat, log_duration, floor, suffix
+            )
+            sequence = _NEG_INF  # logaddexp.reduce(log_alpha[-1])
+            for i in range(n_states):
+                sequence = _logaddexp(sequence, log_alpha[-1, i])
+            if floor == _NEG_INF or sequence >= guesses[c] - 1.0:
+                break
+            floor = sequence - margin if sequence > _NEG_INF else _NEG_INF
+        sequences[c] = sequence
         log_likelihood += sequence
         if not np.isfinite(sequence):
             break
-        _, _, counts, duration_counts, segment_starts, ends = backward(
+        _, _, counts, duration_counts, segment_starts, segment_ends = backward(
             emission, log_transmat, log_duration, log_alpha, log_alpha_in, sequence
         )
-        gamma[bounds[c] : bounds[c + 1]] = occupancy(segment_starts, ends)
-        starts += segment_starts[0]
+        starts[bounds[c] : bounds[c + 1]] = segment_starts
+        ends[bounds[c] : bounds[c + 1]] = segment_ends
         transitions += counts
         durations += duration_counts
-    return log_likelihood, gamma, starts, transitions, durations
+    return log_likelihood, sequences, starts, ends, transitions, durations

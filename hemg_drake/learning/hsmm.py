@@ -226,8 +226,10 @@ class HSMM(InferenceMixin, CriteriaMixin, PersistenceMixin, BaseEstimator):
         self.converged_ = False
         n_samples = len(samples)
         outer = (samples[:, :, None] * samples[:, None, :]).reshape(n_samples, -1)
+        guesses = None  # each demonstration's log-likelihood at the previous iteration
         for self.n_iter_ in range(1, self.n_iter + 1):
-            stats = hsmm_em.expectation(self, demos, outer)
+            stats = hsmm_em.expectation(self, demos, outer, guesses)
+            guesses = stats["sequences"]
             if not np.isfinite(stats["log_likelihood"]):
                 raise ValueError(
                     "the demos cannot be segmented into at most "

@@ -7,7 +7,7 @@ parameters that the recursions (:mod:`hemg_drake.learning._kernels`) take.
 
 import numpy as np
 
-from hemg_drake.learning import _kernels
+from hemg_drake.learning import _bound_kernels, _kernels, _segment_kernels
 from hemg_drake.learning.gmr import gaussian_log_pdf
 
 
@@ -70,35 +70,46 @@ def posteriors(log_emission, log_parameters):
         log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, log_likelihood
     )
     return log_likelihood, {
-        "gamma": _kernels.occupancy(starts, ends),
+        "gamma": _segment_kernels.occupancy(starts, ends, np.array([0, len(starts)])),
         "starts": starts[0],
         "transitions": transitions,
         "durations": duration_counts,
     }
 
 
-def expectation(model, demos, outer=None):
+def expectation(model, demos, outer=None, guesses=None):
     """E-step over all demos; ``outer``: their samples' x x^T as rows (T, D^2), if known.
 
     One compiled call runs every demonstration's forward-backward pass
     (:func:`_kernels.expectation`): per demonstration in Python, the calls and their
-    bookkeeping cost about as much as the emissions on LASA-sized sets.
+    bookkeeping cost about as much as the emissions on LASA-sized sets. ``guesses``: each
+    demonstration's log-likelihood under the previous parameters (the previous E-step's
+    ``stats["sequences"]``), with which the passes leave out the segments whose paths carry
+    less than e^-50 of it; None keeps every path.
     """
     n = model.n_states
     samples = demos[0] if len(demos) == 1 else np.concatenate(demos)
     bounds = np.concatenate([[0], np.cumsum([len(d) for d in demos])])
     log_emission = gaussian_log_pdf(samples, model.means_, model.covariances_)
-    log_likelihood, gamma, starts, transitions, durations = _kernels.expectation(
-        log_emission, bounds, *log_parameters(model)
+    parameters = log_parameters(model)
+    if guesses is None:
+        guesses = np.full(len(demos), -np.inf)
+        suffix = (np.zeros((0, 0)), np.zeros((0, 0)))  # not read
+    else:
+        suffix = _bound_kernels.suffix_bound(log_emission, bounds, *parameters[1:])
+    log_likelihood, sequences, starts, ends, transitions, durations = _kernels.expectation(
+        log_emission, bounds, *parameters, guesses, *suffix
     )
     stats = {
         "log_likelihood": log_likelihood,
-        "starts": starts,
+        "sequences": sequences,
+        "starts": starts[bounds[:-1]].sum(axis=0),
         "transitions": transitions,
         "durations": durations,
     }
     if not np.isfinite(log_likelihood):
         return stats
+    gamma = _segment_kernels.occupancy(starts, ends, bounds)
     n_dims = samples.shape[1]
     if outer is None:
         outer = (samples[:, :, None] * samples[:, None, :]).reshape(len(samples), -1)

@@ -9,7 +9,7 @@ import warnings
 
 import numpy as np
 
-from hemg_drake.learning import _kernels
+from hemg_drake.learning import _kernels, _segment_kernels
 from hemg_drake.learning.forward import ResidualForward
 from hemg_drake.learning.gmr import gaussian_log_pdf
 from hemg_drake.learning.hsmm_em import log_parameters
@@ -49,7 +49,7 @@ class InferenceMixin:
         total, states = 0.0, []
         for c, demo in enumerate(fitted_sequences(self, X, lengths)):
             log_emission = gaussian_log_pdf(demo, self.means_, self.covariances_)
-            log_probability, path = _kernels.viterbi(log_emission, *log_parameters_)
+            log_probability, path = _segment_kernels.viterbi(log_emission, *log_parameters_)
             if not np.isfinite(log_probability):
                 raise ValueError(f"the model cannot produce sequence {c} (probability 0)")
             total += log_probability

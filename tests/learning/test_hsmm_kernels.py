@@ -7,7 +7,7 @@ np.logaddexp, so a chunk skipped wrongly (or a term lost far below the best) sho
 import numpy as np
 import pytest
 
-from hemg_drake.learning import _kernels
+from hemg_drake.learning import _bound_kernels, _kernels, _segment_kernels
 
 
 def logsumexp(values, axis=None):
@@ -66,7 +66,8 @@ def kernels(log_emission, log_startprob, log_transmat, log_duration):
     *_, transitions, durations, starts, ends = _kernels.backward(
         log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, log_likelihood
     )
-    return log_likelihood, _kernels.occupancy(starts, ends), transitions, durations
+    gamma = _segment_kernels.occupancy(starts, ends, np.array([0, len(starts)]))
+    return log_likelihood, gamma, transitions, durations
 
 
 def steep_case(left_to_right, wide, seed):
@@ -139,9 +140,13 @@ def test_expectation_over_concatenated_sequences_equals_each_summed():
     log_startprob = np.log(rng.dirichlet(np.ones(n_states)))
     emissions = [rng.normal(0.0, 30.0, (n_steps, n_states)) for n_steps in (50, 120, 81)]
     bounds = np.array([0, 50, 170, 251])
-    log_likelihood, gamma, starts, transitions, durations = _kernels.expectation(
-        np.concatenate(emissions), bounds, log_startprob, log_transmat, log_duration
+    log_likelihood, sequences, starts, ends, transitions, durations = _kernels.expectation(
+        np.concatenate(emissions), bounds, log_startprob, log_transmat, log_duration,
+        np.full(3, -np.inf), *_bound_kernels.suffix_bound(
+            np.concatenate(emissions), bounds, log_transmat, log_duration),
     )
+    gamma = _segment_kernels.occupancy(starts, ends, bounds)
+    starts = starts[bounds[:-1]].sum(axis=0)
     expected = [reference(e, log_startprob, log_transmat, log_duration) for e in emissions]
     assert log_likelihood == pytest.approx(sum(r[0] for r in expected), rel=1e-12)
     np.testing.assert_allclose(gamma, np.concatenate([r[1] for r in expected]), atol=1e-10)
@@ -158,7 +163,9 @@ def test_expectation_stops_at_an_impossible_sequence():
     log_startprob = np.log(np.full(2, 0.5))
     # 6 steps then 4: the second cannot end with a complete segment.
     log_likelihood, *_ = _kernels.expectation(
-        np.zeros((10, 2)), np.array([0, 6, 10]), log_startprob, log_transmat, log_duration
+        np.zeros((10, 2)), np.array([0, 6, 10]), log_startprob, log_transmat, log_duration,
+        np.full(2, 5.0), *_bound_kernels.suffix_bound(
+            np.zeros((10, 2)), np.array([0, 6, 10]), log_transmat, log_duration),
     )
     assert log_likelihood == -np.inf
 
@@ -181,3 +188,109 @@ def test_kept_terms_exp_within_two_ulp_of_numpy():
     got, truth = evaluate(x), np.exp(x)
     assert np.max(np.abs(got - truth) / np.spacing(truth)) <= 2.0
     assert got[-5] == 1.0  # the largest term's weight is exactly 1
+
+
+def brute_force(log_emission, log_startprob, log_transmat, log_duration):
+    """log-likelihood, occupancy, first-segment, transition and duration posteriors of a
+    small model by listing every segmentation (state, duration)* of the sequence."""
+    n_steps, n_states = log_emission.shape
+    n_durations = log_duration.shape[1]
+    paths = []  # (log joint, [(state, start, duration), ...])
+
+    def extend(segments, score, t):
+        if t == n_steps:
+            paths.append((score, segments))
+            return
+        for i in range(n_states):
+            enter = log_startprob[i] if t == 0 else log_transmat[segments[-1][0], i]
+            for d in range(1, min(n_durations, n_steps - t) + 1):
+                value = score + enter + log_duration[i, d - 1] + log_emission[t : t + d, i].sum()
+                if value > -np.inf:
+                    extend(segments + [(i, t, d)], value, t + d)
+
+    extend([], 0.0, 0)
+    scores = np.array([score for score, _ in paths])
+    log_likelihood = logsumexp(scores)
+    gamma = np.zeros((n_steps, n_states))
+    starts = np.zeros(n_states)
+    transitions = np.zeros((n_states, n_states))
+    durations = np.zeros((n_states, n_durations))
+    for score, segments in paths:
+        weight = np.exp(score - log_likelihood)
+        starts[segments[0][0]] += weight
+        for (i, t, d), following in zip(segments, segments[1:] + [None]):
+            gamma[t : t + d, i] += weight
+            durations[i, d - 1] += weight
+            if following is not None:
+                transitions[i, following[0]] += weight
+    return log_likelihood, gamma, starts, transitions, durations
+
+
+@pytest.mark.parametrize("steep", [False, True])
+def test_pruned_expectation_equals_every_segmentation_listed(steep):
+    # Left-to-right with a skip (zeros in A, which the sums leave out), narrow duration
+    # windows (-inf outside), and, when steep, states hundreds of nats apart per step, so
+    # that the E-step given its own log-likelihood as the guess leaves out segment starts
+    # and ends (checked on the forward pass): it must still equal the full listing.
+    rng = np.random.default_rng(int(steep))
+    n_states, n_steps = 3, 9
+    phase = np.minimum(np.arange(n_steps) * n_states // n_steps, n_states - 1)
+    spread = 400.0 if steep else 1.0
+    log_emission = -spread * np.abs(np.arange(n_states)[None, :] - phase[:, None]) + rng.normal(
+        0.0, 1.0, (n_steps, n_states))
+    transmat = np.array([[0.0, 0.7, 0.3], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]])
+    log_duration = np.full((n_states, 6), -np.inf)
+    log_duration[0, 1:5] = np.log([0.1, 0.4, 0.4, 0.1])
+    log_duration[1, 1:4] = np.log([0.3, 0.4, 0.3])
+    log_duration[2, 0:6] = np.log([0.05, 0.15, 0.3, 0.3, 0.15, 0.05])
+    with np.errstate(divide="ignore"):
+        case = (log_emission, np.log([0.8, 0.2, 0.0]), np.log(transmat), log_duration)
+    expected = brute_force(*case)
+    bounds = np.array([0, n_steps])
+    for guesses in (np.full(1, -np.inf), np.full(1, expected[0]), np.full(1, expected[0] + 5.0)):
+        log_likelihood, sequences, starts, ends, transitions, durations = _kernels.expectation(
+            *case[:1], bounds, *case[1:], guesses,
+            *_bound_kernels.suffix_bound(case[0], bounds, *case[2:]),
+        )
+        assert log_likelihood == pytest.approx(expected[0], rel=1e-12)
+        assert sequences[0] == log_likelihood
+        gamma = _segment_kernels.occupancy(starts, ends, bounds)
+        np.testing.assert_allclose(gamma, expected[1], atol=1e-12)
+        np.testing.assert_allclose(starts[0], expected[2], atol=1e-12)
+        np.testing.assert_allclose(transitions, expected[3], atol=1e-12)
+        np.testing.assert_allclose(durations, expected[4], atol=1e-12)
+    if steep:  # the bound leaves some out at the likelihood's own floor
+        floor = expected[0] - _kernels._UNDERFLOW - np.log(2.0 * log_emission.size)
+        full = _kernels.forward(*case)
+        suffix = _bound_kernels.suffix_bound(case[0], bounds, *case[2:])
+        pruned = _kernels._forward(*case, floor, suffix)
+        assert np.sum(np.isfinite(pruned[1])) < np.sum(np.isfinite(full[1]))
+
+
+def test_suffix_bound_is_above_every_backward_value():
+    # The pruning is exact only if the bound is one: on random models (sparse A, duration
+    # weights summing to more than 1 for narrow spreads) it must be at least log beta_in
+    # and log beta of the full passes everywhere, and reached where only one path is left.
+    rng = np.random.default_rng(7)
+    for trial in range(6):
+        n_states, n_steps = 4, 40
+        log_emission = rng.normal(0.0, 20.0, (n_steps, n_states))
+        transmat = rng.uniform(0.0, 1.0, (n_states, n_states)) * (rng.random((4, 4)) < 0.6)
+        np.fill_diagonal(transmat, 0.0)
+        transmat[np.arange(n_states), (np.arange(n_states) + 1) % n_states] += 0.1
+        transmat /= transmat.sum(axis=1, keepdims=True)
+        stds = rng.uniform(0.3, 4.0, n_states) if trial % 2 else np.full(n_states, 0.3)
+        log_duration = log_durations(rng.uniform(2.0, 10.0, n_states), stds, 20)
+        with np.errstate(divide="ignore"):
+            case = (log_emission, np.log(np.full(n_states, 0.25)), np.log(transmat), log_duration)
+        log_alpha, log_alpha_in = _kernels.forward(*case)
+        log_likelihood = logsumexp(log_alpha[-1])
+        log_beta, log_beta_in, *_ = _kernels.backward(
+            log_emission, case[2], log_duration, log_alpha, log_alpha_in, log_likelihood
+        )
+        starts, ends = _bound_kernels.suffix_bound(
+            log_emission, np.array([0, n_steps]), case[2], log_duration)
+        assert np.all(log_beta_in <= starts + 1e-9)
+        assert np.all(log_beta <= ends + 1e-9)
+        # The last step: a segment of one step ending the sequence, weighted p_i(1) <= S.
+        assert np.all(ends[-1] == 0.0)
