@@ -264,7 +264,7 @@ def run_trial(task):
         text = json.dumps(record, indent=2, default=_json_default) + "\n"
         write_text_atomic(tmp / TRIAL_FILE, text)
         if final.exists():  # a failed trial run again: swap, then drop the old one
-            from hemg_drake.run_folder import exchange
+            from hemg_drake.folder_versions import exchange
 
             exchange(tmp, final)
             shutil.rmtree(tmp, ignore_errors=True)
@@ -274,7 +274,10 @@ def run_trial(task):
         shutil.rmtree(tmp, ignore_errors=True)
         if error.errno in DISK_ERRORS:
             where = _shown(error.filename or final)
-            raise OSError(error.errno, error.strerror or os.strerror(error.errno), where) from None
+            # The reason alone: a stage's "nothing in <its temporary folder> was changed"
+            # names a folder the person never sees.
+            reason = (error.strerror or os.strerror(error.errno)).split("; nothing in ")[0]
+            raise OSError(error.errno, reason, where) from None
         raise
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
