@@ -179,12 +179,11 @@ def test_killed_at_seeded_moments_resume_ends_with_the_same_table(sweep_file, tm
 @pytest.fixture
 def small_disk(tmp_path):
     """A 300 kB tmpfs (root only; skipped where mount is not allowed)."""
+    from tooling.faults import mount_tmpfs
+
     disk = tmp_path / "disk"
     disk.mkdir()
-    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=300k", "tmpfs", str(disk)],
-                             capture_output=True)  # fmt: skip
-    if mounted.returncode != 0:
-        pytest.skip("cannot mount a tmpfs here (needs root)")
+    mount_tmpfs(disk, "size=300k")
     try:
         yield disk
     finally:

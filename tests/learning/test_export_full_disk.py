@@ -17,12 +17,11 @@ pytest.importorskip("pyarrow")
 @pytest.fixture
 def full_disk(tmp_path):
     """A 200 kB tmpfs, mounted for the test (skipped where mount is not allowed)."""
+    from tooling.faults import mount_tmpfs
+
     mount_point = tmp_path / "small"
     mount_point.mkdir()
-    result = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=200k", "tmpfs", str(mount_point)],
-                            capture_output=True)  # fmt: skip
-    if result.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here: {result.stderr.decode().strip()[:80]}")
+    mount_tmpfs(mount_point, "size=200k")
     try:
         yield mount_point
     finally:
