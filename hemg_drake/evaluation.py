@@ -18,6 +18,7 @@ maths is in :mod:`hemg_drake.tasks.metrics`):
 import numpy as np
 
 from hemg_drake.analysis.contact import checked_trace, contact_runs, in_contact
+from hemg_drake.analysis.interaction import demonstrated_path, interaction_metrics, push_response
 from hemg_drake.learning.demos import observations
 from hemg_drake.tasks import metrics
 
@@ -217,7 +218,11 @@ def task_metrics(task, demos, result):
     ``velocity_rmse_m_per_s`` (time-normalised) with ``spatial_position_rmse_m`` and
     ``timing_error_s`` beside them, ``stiffness_correlation``, ``tracking_force_peak_n``,
     ``tracking_force_mean_n``, ``peak_force_n``, ``success`` with ``success_checks`` and
-    ``success_limits``, and the task's own entries.
+    ``success_limits``, ``interaction`` (forces on the environment, impulse, energy, joint
+    torque, tracking: :func:`~hemg_drake.analysis.interaction.interaction_metrics`),
+    ``safe`` (every force on the environment within ``success_limits.peak_force_n``),
+    ``push`` (the return after ``reproduction.push``, None without one), and the task's
+    own entries.
     """
     log = result.log
     dt = float(np.mean(np.diff(log.time)))
@@ -239,6 +244,7 @@ def task_metrics(task, demos, result):
     }
     checks = {"force within limit": record["peak_force_n"] <= force_limit}
     limits = {"peak_force_n": force_limit}
+    record.update(_interaction(demos, log, force_limit))
     if task == "cotter_pin":
         start_z = float(log.p_WE[0, 2])
         peak_z = max(float(d.p_WE[:, 2].max()) for d in demos)
@@ -281,6 +287,25 @@ def task_metrics(task, demos, result):
         success_checks={name: bool(ok) for name, ok in checks.items()},
         success_limits=limits,
     )
+    return record
+
+
+def _interaction(demos, log, force_limit):
+    """The forces, energy, torque and tracking of the run (``analysis.interaction``), the
+    response to a push if it had one, and ``safe``: every force on the environment (the
+    tool's, an extra block's) within ``force_limit``, the task's own bound."""
+    record = {
+        "interaction": interaction_metrics(
+            log.time, log.p_WE, log.v_WE, log.f_WE, log.x_star, tau=log.tau,
+            f_block=log.f_block,
+        ),
+        "push": None,
+    }  # fmt: skip
+    record["safe"] = record["interaction"]["environment_force_peak_n"] <= force_limit
+    if log.f_push is not None:
+        path_time, path = demonstrated_path(demos, float(log.time[-1] - log.time[0]))
+        record["push"] = push_response(log.time - log.time[0], log.p_WE, log.f_push,
+                                       path_time, path)  # fmt: skip
     return record
 
 
