@@ -327,8 +327,13 @@ def _demonstrated_strokes(demo_strokes):
 def _drawing_metrics(demos, log):
     """Strokes, matched to the demonstrated ones by position; their shape and placement
     errors (seen from above, per demonstrated stroke, None where none was drawn); the
-    breaks inside them; the stiffness on and off the paper."""
-    runs, breaks = stroke_runs(log.time, log.f_WE)
+    breaks inside them; the stiffness on and off the paper.
+
+    Ink is the sheet's contact: with an extra block (``scene.block``) the pen's force
+    f_WE holds the block's push too, so the sheet's is f_WE + f_block (exact while only the
+    hand, which carries the pen, touches the block)."""
+    f_sheet = log.f_WE if log.f_block is None else log.f_WE + log.f_block
+    runs, breaks = stroke_runs(log.time, f_sheet)
     drawn = [log.p_WE[a:b, :2] for a, b in runs]
     demo_strokes = [strokes(d.time, d.p_WE, d.f_WE) for d in demos]
     same = _demonstrated_strokes(demo_strokes)
@@ -337,7 +342,7 @@ def _drawing_metrics(demos, log):
         None if i is None else metrics.stroke_errors(drawn[i], group)
         for i, group in zip(order, same, strict=True)
     ]
-    touching = in_contact(log.f_WE)
+    touching = in_contact(f_sheet)
     on_paper = float(log.k_star[touching].mean()) if touching.any() else None
     in_air = float(log.k_star[~touching].mean()) if (~touching).any() else None
     return {
