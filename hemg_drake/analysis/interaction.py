@@ -74,15 +74,16 @@ def interaction_metrics(time, p_WE, v_WE, f_WE, x_star, tau=None, f_block=None):
     return record
 
 
-def demonstrated_path(demos, duration, samples=400):
+def demonstrated_path(demos, duration, period=0.005):
     """The demonstrations' mean tool path on a common clock: each demonstration's p_WE
-    resampled at the same fractions of its length, averaged, on times [0, duration].
+    resampled at the same fractions of its length, averaged, on times [0, duration] every
+    ``period`` (s; at the tasks' speeds, under 0.3 mm between points).
 
     Returns
     -------
-    (times (samples,), points (samples, 3))
+    (times (n,), points (n, 3))
     """
-    fractions = np.linspace(0.0, 1.0, samples)
+    fractions = np.linspace(0.0, 1.0, int(round(duration / period)) + 1)
     paths = []
     for demo in demos:
         t = (demo.time - demo.time[0]) / (demo.time[-1] - demo.time[0])
