@@ -40,10 +40,6 @@ def _number(text):
     return None if text in ("", "None", None) else float(text)
 
 
-def _order(values, preferred):
-    return [v for v in preferred if v in values] + sorted(set(values) - set(preferred))
-
-
 def table(rows):
     """{(world, policy): dict(good, unsafe, force, back, n)} over the seeds."""
     cells = {}
@@ -59,13 +55,19 @@ def table(rows):
     return cells
 
 
-def draw(axis, rows, title, policies):
+def _planned(folder):
+    """The worlds and policies the sweep file in ``folder`` names, in its order."""
+    from hemg_drake.sweep.spec import parse_sweep
+
+    spec = parse_sweep((Path(folder) / "sweep.yaml").read_text(encoding="utf-8"))
+    axes = {axis.name: list(axis.cases) for axis in spec.axes}
+    return axes["world"], axes["policy"]
+
+
+def draw(axis, rows, title, worlds, policies):
     import matplotlib.colors as mcolors
 
     cells = table(rows)
-    worlds = list(dict.fromkeys(row["world"] for row in rows))
-    worlds = _order(worlds, ["as_shown"])
-    policies = _order({p for _, p in cells}, policies)
     image = np.full((len(worlds), len(policies)), np.nan)
     for (world, policy), cell in cells.items():
         i, j = worlds.index(world), policies.index(policy)
@@ -95,16 +97,18 @@ def main():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    policies = ["learnt", "k_min", "k_mid", "k_max", "demonstrated", "spd", "learnt_lqr",
-                "learnt_gmr"]  # fmt: skip
-    figure, axes = plt.subplots(1, len(args.folders), figsize=(5.2 * len(args.folders), 5.2))
+    figure, axes = plt.subplots(1, len(args.folders), figsize=(5.6 * len(args.folders), 5.4))
     for axis, folder in zip(np.atleast_1d(axes), args.folders, strict=True):
         rows = _rows(folder)
         task = Path(folder).name
         seeds = sorted({row["seed"] for row in rows})
-        draw(axis, rows, f"{task}: seeds {', '.join(seeds)}", policies)
-    figure.suptitle("green: task done, forces within bound; orange: within bound, task "
-                    "failed; red: bound passed; grey: not run", fontsize=8)  # fmt: skip
+        worlds, policies = _planned(folder)
+        done = len(rows)
+        draw(axis, rows, f"{task}: seeds {', '.join(seeds)} ({done} of "
+             f"{len(worlds) * len(policies) * len(seeds)} trials)", worlds, policies)  # fmt: skip
+    figure.suptitle("green: task done, forces within bound; orange: within bound, task failed;\n"
+                    "red: bound passed; grey: not run. Text: peak force on the environment (N); "
+                    "push worlds: return within 5 mm after the release (s)", fontsize=8)  # fmt: skip
     figure.tight_layout()
     figure.savefig(args.output, dpi=110)
     print(f"wrote {args.output}")
