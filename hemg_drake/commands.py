@@ -17,7 +17,7 @@ READS = {
     "learn": ("learning", "seed"),
     "reproduce": (
         "reproduction", "scene.position", "scene.yaw_deg", "scene.cotter_pin", "scene.drawing",
-        "plant", "simulator", "visualization", "clik", "pd", "emg.k_min", "emg.k_max",
+        "scene.block", "plant", "simulator", "visualization", "clik", "pd", "emg.k_min", "emg.k_max",
     ),
 }  # fmt: skip
 

@@ -18,6 +18,7 @@ maths is in :mod:`hemg_drake.tasks.metrics`):
 import numpy as np
 
 from hemg_drake.analysis.contact import checked_trace, contact_runs, in_contact
+from hemg_drake.analysis.interaction import demonstrated_path, interaction_metrics, push_response
 from hemg_drake.learning.demos import observations
 from hemg_drake.tasks import metrics
 
@@ -217,7 +218,11 @@ def task_metrics(task, demos, result):
     ``velocity_rmse_m_per_s`` (time-normalised) with ``spatial_position_rmse_m`` and
     ``timing_error_s`` beside them, ``stiffness_correlation``, ``tracking_force_peak_n``,
     ``tracking_force_mean_n``, ``peak_force_n``, ``success`` with ``success_checks`` and
-    ``success_limits``, and the task's own entries.
+    ``success_limits``, ``interaction`` (forces on the environment, impulse, energy, joint
+    torque, tracking: :func:`~hemg_drake.analysis.interaction.interaction_metrics`),
+    ``safe`` (every force on the environment within ``success_limits.peak_force_n``),
+    ``push`` (the return after ``reproduction.push``, None without one), and the task's
+    own entries.
     """
     log = result.log
     dt = float(np.mean(np.diff(log.time)))
@@ -239,6 +244,7 @@ def task_metrics(task, demos, result):
     }
     checks = {"force within limit": record["peak_force_n"] <= force_limit}
     limits = {"peak_force_n": force_limit}
+    record.update(_interaction(demos, log, force_limit))
     if task == "cotter_pin":
         # A start above the ring draws the pin part-way out; returning to the ring is not
         # pushing into the fixture: the dip counts from the lower of the two.
@@ -286,6 +292,25 @@ def task_metrics(task, demos, result):
     return record
 
 
+def _interaction(demos, log, force_limit):
+    """The forces, energy, torque and tracking of the run (``analysis.interaction``), the
+    response to a push if it had one, and ``safe``: every force on the environment (the
+    tool's, an extra block's) within ``force_limit``, the task's own bound."""
+    record = {
+        "interaction": interaction_metrics(
+            log.time, log.p_WE, log.v_WE, log.f_WE, log.x_star, tau=log.tau,
+            f_block=log.f_block,
+        ),
+        "push": None,
+    }  # fmt: skip
+    record["safe"] = record["interaction"]["environment_force_peak_n"] <= force_limit
+    if log.f_push is not None:
+        path_time, path = demonstrated_path(demos, float(log.time[-1] - log.time[0]))
+        record["push"] = push_response(log.time - log.time[0], log.p_WE, log.f_push,
+                                       path_time, path)  # fmt: skip
+    return record
+
+
 def _demonstrated_strokes(demo_strokes):
     """Stroke k as each demonstration drew it (xy, from above): the demonstrations with the
     most common number of strokes, each matched to the first of them by position."""
@@ -304,8 +329,13 @@ def _demonstrated_strokes(demo_strokes):
 def _drawing_metrics(demos, log):
     """Strokes, matched to the demonstrated ones by position; their shape and placement
     errors (seen from above, per demonstrated stroke, None where none was drawn); the
-    breaks inside them; the stiffness on and off the paper."""
-    runs, breaks = stroke_runs(log.time, log.f_WE)
+    breaks inside them; the stiffness on and off the paper.
+
+    Ink is the sheet's contact: with an extra block (``scene.block``) the pen's force
+    f_WE holds the block's push too, so the sheet's is f_WE + f_block (exact while only the
+    hand, which carries the pen, touches the block)."""
+    f_sheet = log.f_WE if log.f_block is None else log.f_WE + log.f_block
+    runs, breaks = stroke_runs(log.time, f_sheet)
     drawn = [log.p_WE[a:b, :2] for a, b in runs]
     demo_strokes = [strokes(d.time, d.p_WE, d.f_WE) for d in demos]
     same = _demonstrated_strokes(demo_strokes)
@@ -314,7 +344,7 @@ def _drawing_metrics(demos, log):
         None if i is None else metrics.stroke_errors(drawn[i], group)
         for i, group in zip(order, same, strict=True)
     ]
-    touching = in_contact(log.f_WE)
+    touching = in_contact(f_sheet)
     on_paper = float(log.k_star[touching].mean()) if touching.any() else None
     in_air = float(log.k_star[~touching].mean()) if (~touching).any() else None
     return {

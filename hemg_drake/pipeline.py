@@ -366,16 +366,18 @@ def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progr
     from hemg_drake.viz.run_figures import write_reproduction_figures
 
     duration = float(np.mean([demo.time[-1] for demo in demos]))
+    settings = scenario.reproduction
     began = time.perf_counter()
     title = f"{scenario.task.replace('_', ' ')}: reproduction from {out.final.name}"
     visualization = Visualization() if replay else None
-    built = build_reproduction_diagram(scenario, model, start=start, visualization=visualization)
+    gain = demonstrated_gain(demos, duration) if settings.gain_source == "demonstrated" else None
+    built = build_reproduction_diagram(scenario, model, start=start, visualization=visualization,
+                                       demonstrated_gain=gain)  # fmt: skip
     for note in notes:  # the diagram is built: the scene is reachable, the run will go
         warnings.warn(note, stacklevel=2)
     replay_path = out / "reproduction.html" if replay else None
     run = functools.partial(run_reproduction, duration=duration)
     result = record_run(built, run, replay_path, title=title) if replay else run(built)
-    settings = scenario.reproduction
     progress(
         f"reproduce: {scenario.task}, {settings.tracker} tracker, {settings.weighting} "
         f"weighting, start offset "
@@ -386,6 +388,7 @@ def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progr
     metrics.update(
         tracker=settings.tracker,
         weighting=settings.weighting,
+        gain_source=settings.gain_source,
         # The attractor is eqs. 15-18's; the LQR returns to the path by re-planning.
         restoring_gain=settings.restoring_gain if settings.tracker == "gmr" else None,
         start=start.tolist(),
@@ -403,6 +406,18 @@ def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progr
     progress(format_metrics({scenario.task: metrics}))
     progress(f"wrote {out.final}/: " + ", ".join(p.name for p in written))
     return metrics
+
+
+def demonstrated_gain(demos, duration, samples=400):
+    """The demonstrations' own gain K replayed in time (``reproduction.gain_source:
+    demonstrated``): each demonstration's K at the same fractions of its length, averaged,
+    on times [0, ``duration``]. Returns (times, K), arrays of shape (samples,)."""
+    fractions = np.linspace(0.0, 1.0, samples)
+    gains = [
+        np.interp(fractions, (d.time - d.time[0]) / (d.time[-1] - d.time[0]), d.gain)
+        for d in demos
+    ]
+    return fractions * duration, np.mean(gains, axis=0)
 
 
 def write_diagrams(scenario, model, run_dir, *, progress=print):

@@ -124,6 +124,18 @@ def test_trials_of_a_grid_and_one_at_a_time():
     assert len(single) == 8
 
 
+def test_a_reproduce_only_axis_changes_the_reproduction_not_the_demonstrations():
+    text = ("scenario: cotter_pin\naxes:\n  - {name: a, values: [1, 2]}\n"
+            "  - {name: world, reproduce_only: true, cases: {plain: [], moved: [w=1]}}\n")  # fmt: skip
+    trials = sweep.trials(sweep.parse_sweep(text))
+    assert [(t.labels["world"], t.overrides, t.reproduce_overrides) for t in trials[:2]] == [
+        ("plain", ["a=1", "seed=0"], []), ("moved", ["a=1", "seed=0"], ["w=1"])]  # fmt: skip
+    assert len({t.id for t in trials}) == 4
+    # Without reproduce-only overrides a trial keeps the id it had before the option.
+    plain = sweep.trials(sweep.parse_sweep("scenario: cotter_pin\naxes:\n  - {name: a, values: [1, 2]}\n"))
+    assert trials[0].id.split("-")[-1] == plain[0].id.split("-")[-1]
+
+
 @pytest.mark.parametrize(
     "text, message",
     [

@@ -39,12 +39,16 @@ import dataclasses as dc
 import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource, Saturation
+from pydrake.systems.primitives import ConstantVectorSource, Saturation, TrajectorySource
+from pydrake.trajectories import PiecewisePolynomial
 
 from hemg_drake._validate import as_vector
+from hemg_drake.control.clik import velocity_columns
+from hemg_drake.control.push import ToolPointForce, push_trajectory
 from hemg_drake.diagrams.built import StationDiagram, make_simulator
 from hemg_drake.diagrams.log import add_logger, split_log
 from hemg_drake.diagrams.station import make_slave_station
+from hemg_drake.robots.baxter import make_arm_controller_plant
 from hemg_drake.learning.systems import (
     HsmmGmrReproducer,
     HsmmLqrReproducer,
@@ -74,6 +78,11 @@ class ReproductionLog:
     stiffness_shape : array, shape (T, 9), or None
         ``reproduction.stiffness: spd``: the Cartesian stiffness' shape S_hat fed to the
         station (row-major 3 x 3, unit determinant); None in the scalar case.
+    tau : array, shape (T, 7), or None, the PD's joint torques (N m).
+    f_block : array, shape (T, 3), or None
+        The contact force on ``scene.block`` (N, W); None without a block.
+    f_push : array, shape (T, 3), or None
+        The push at the tool point (``reproduction.push``, N, W); None without one.
     """
 
     time: np.ndarray
@@ -86,6 +95,9 @@ class ReproductionLog:
     f_WE: np.ndarray
     F_tr: np.ndarray
     stiffness_shape: np.ndarray = None
+    tau: np.ndarray = None
+    f_block: np.ndarray = None
+    f_push: np.ndarray = None
 
     def observations(self):
         """[x, xdot, k] of the *actual* slave, shape (T, 7): what Table II compares."""
@@ -123,19 +135,24 @@ class ReproductionDiagram(StationDiagram):
     def log(self, context):
         """The :class:`ReproductionLog` recorded so far in the diagram's ``context``."""
         log = self.logger.FindLog(context)
-        spd = self.scenario.reproduction.stiffness == "spd"
-        fields = split_log(log, _log_widths(self.model.n_states, spd))
+        widths = _log_widths(self.model.n_states, self.scenario, self.scene is not None)
+        fields = split_log(log, widths)
         fields["k_star"] = fields["k_star"][:, 0]
         return ReproductionLog(time=log.sample_times(), **fields)
 
 
-def _log_widths(n_states, spd=False):
+def _log_widths(n_states, scenario, scene=True):
     widths = {
         "x_star": 3, "xdot_star": 3, "k_star": 1, "h": n_states,
         "p_WE": 3, "v_WE": 3, "f_WE": 3, "F_tr": 3,
     }  # fmt: skip
-    if spd:
+    if scenario.reproduction.stiffness == "spd":
         widths["stiffness_shape"] = 9
+    widths["tau"] = 7
+    if scene and scenario.scene.block.size:
+        widths["f_block"] = 3
+    if scenario.reproduction.push.force:
+        widths["f_push"] = 3
     return widths
 
 
@@ -205,13 +222,60 @@ def settled_plant_state(built):
     context = diagram.CreateDefaultContext()
     reproducer = diagram.GetSubsystemByName("reproducer")
     set_holding(reproducer, reproducer.GetMyMutableContextFromRoot(context), True)
+    if diagram.HasSubsystemNamed("push"):  # the settling is not pushed
+        push = diagram.GetSubsystemByName("push")
+        push.set_enabled(push.GetMyMutableContextFromRoot(context), False)
     simulator = Simulator(diagram, context)
     simulator.AdvanceTo(built.scenario.reproduction.settle_time)
     return station.plant.GetPositionsAndVelocities(station.plant_context(context))
 
 
+def _gain_source(builder, scenario, reproducer, demonstrated_gain):
+    """The output port of the gain K before its limits: k* (``reproduction.gain_source``
+    "learnt"), a ``ConstantVectorSource`` ("constant") or a ``TrajectorySource`` of the
+    demonstrations' K ("demonstrated": (times, K), first-order hold, held at the ends)."""
+    settings = scenario.reproduction
+    if settings.gain_source == "learnt":
+        return reproducer.GetOutputPort("k_star")
+    if settings.gain_source == "constant":
+        source = ConstantVectorSource([settings.constant_gain])
+    else:
+        if demonstrated_gain is None:
+            raise ValueError(
+                "reproduction.gain_source 'demonstrated' needs the demonstrations' gain "
+                "(build_reproduction_diagram(..., demonstrated_gain=(times, K)))"
+            )
+        times, gain = (np.asarray(a, dtype=float) for a in demonstrated_gain)
+        source = TrajectorySource(PiecewisePolynomial.FirstOrderHold(times, gain[None, :]))
+    return builder.AddNamedSystem("gain_source", source).get_output_port()
+
+
+def _add_push(builder, scenario, station, slave):
+    """``reproduction.push``: its force (in T, turned into W) over time from a
+    ``TrajectorySource``, at the tool point through :class:`~hemg_drake.control.push.
+    ToolPointForce` into the station's ``applied_generalized_force``. Returns the force's
+    output port (for the log)."""
+    push = scenario.reproduction.push
+    f_W = scenario.X_WT().rotation().matrix() @ np.asarray(push.force, dtype=float)
+    force = builder.AddNamedSystem(
+        "push_force", TrajectorySource(push_trajectory(f_W, push.start, push.duration))
+    )
+    controller_plant, controller_arm = make_arm_controller_plant()
+    system = builder.AddNamedSystem("push", ToolPointForce(
+        controller_plant=controller_plant, arm=controller_arm,
+        columns=velocity_columns(station.plant, station.arm.model_instance),
+        num_velocities=station.plant.num_velocities(),
+    ))  # fmt: skip
+    builder.Connect(slave.GetOutputPort("arm_state"), system.arm_state_input)
+    builder.Connect(force.get_output_port(), system.f_W_input)
+    builder.Connect(
+        system.generalized_force_output, slave.GetInputPort("applied_generalized_force")
+    )
+    return force.get_output_port()
+
+
 def build_reproduction_diagram(
-    scenario, model, *, start=None, visualization=None, scene=True
+    scenario, model, *, start=None, visualization=None, scene=True, demonstrated_gain=None
 ):
     """Build the reproduction diagram of a learnt task (it only builds; see
     :func:`run_reproduction`).
@@ -233,6 +297,9 @@ def build_reproduction_diagram(
         Show the station in its (loopback) Meshcat with ``scenario.visualization``.
     scene : bool
         False leaves out the task's scene (free space, no force).
+    demonstrated_gain : (array (n,), array (n,)), optional
+        Times (s) and the demonstrations' gain K there: needed by
+        ``reproduction.gain_source: demonstrated``.
 
     Returns
     -------
@@ -270,7 +337,8 @@ def build_reproduction_diagram(
     observed = slave.GetOutputPort("p_WE") if measured else reproducer.GetOutputPort("x_star")
     connect(observed, reproducer.GetInputPort("p_WE"))
     connect(reproducer.GetOutputPort("x_star"), slave.GetInputPort("p_WE_desired"))
-    connect(reproducer.GetOutputPort("k_star"), limits.get_input_port())
+    connect(_gain_source(builder, scenario, reproducer, demonstrated_gain),
+            limits.get_input_port())  # fmt: skip
     spd = settings.stiffness == "spd"
     if spd:
         connect(reproducer.GetOutputPort("stiffness_shape"), slave.GetInputPort("stiffness_shape"))
@@ -289,8 +357,13 @@ def build_reproduction_diagram(
         "f_WE": slave.GetOutputPort("f_WE"),
         "F_tr": tracking.GetOutputPort("F_tr"),
         "stiffness_shape": reproducer.GetOutputPort("stiffness_shape"),
+        "tau": slave.GetOutputPort("tau"),
     }
-    widths = _log_widths(model.n_states, spd)
+    if settings.push.force:
+        sources["f_push"] = _add_push(builder, scenario, station, slave)
+    if slave.HasOutputPort("f_block"):
+        sources["f_block"] = slave.GetOutputPort("f_block")
+    widths = _log_widths(model.n_states, scenario, scene)
     logger = add_logger(builder, {name: sources[name] for name in widths}, scenario.log_period)
     diagram = builder.Build()
     diagram.set_name("reproduction")

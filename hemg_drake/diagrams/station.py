@@ -37,6 +37,7 @@ from hemg_drake.control.impedance import add_cartesian_impedance_pd
 from hemg_drake.control.pd import add_variable_gain_pd
 from hemg_drake.diagrams.visualization import apply_visualization
 from hemg_drake.robots.baxter import add_baxter_arm, make_arm_controller_plant
+from hemg_drake.tasks.block import add_block
 from hemg_drake.tasks.cotter_pin import add_cotter_pin_scene
 from hemg_drake.tasks.drawing import add_drawing_scene
 
@@ -154,9 +155,10 @@ class SlaveStation:
         Cartesian stiffness' shape, :class:`~hemg_drake.control.impedance.
         CartesianImpedancePd`; the identity when unconnected). Output ports: ``p_WE``, ``v_WE`` (3, m and m/s, W), ``f_WE``
         (3, N: the scene's force on the tool point, zero in free space), ``arm_state``
-        (14: [q; v]), ``q_desired`` (7, the CLIK's joint reference; absent with joint
-        references), ``R_WE`` (9: the tool frame's rotation in W, row after row),
-        ``contact_results``, ``query_object``. Subsystems: ``plant``,
+        (14: [q; v]), ``tau`` (7, N m: the PD's joint torques), ``f_block`` (3, N: the
+        contact force on ``scene.block``, only when there is one), ``q_desired`` (7, the
+        CLIK's joint reference; absent with joint references), ``R_WE`` (9: the tool frame's
+        rotation in W, row after row), ``contact_results``, ``query_object``. Subsystems: ``plant``,
         ``scene_graph``, ``clik``, ``pd``, ``pd_gravity`` (gravity compensation), ``tool_point``
         and the scene's own. The controllers use a plant of the arm alone.
     plant : MultibodyPlant
@@ -248,11 +250,12 @@ def make_slave_station(
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(scenario.plant, builder)
     arm = add_baxter_arm(plant)
-    task_scene = None
+    task_scene = block = None
     if scene:
         task_scene = SCENE_BUILDERS[scenario.task](
             plant, arm, params=scenario.scene_params(), X_WT=scenario.X_WT()
         )
+        block = add_block(plant, scenario.scene.block, scenario.X_WT())
     plant.Finalize()
     if q0 is None:
         if start is None:
@@ -320,6 +323,9 @@ def make_slave_station(
     builder.ExportOutput(tool_point.R_WE_output, "R_WE")
     builder.ExportOutput(f_WE, "f_WE")
     builder.ExportOutput(arm_state, "arm_state")
+    builder.ExportOutput(pd.torque_output, "tau")
+    if block is not None:
+        builder.ExportOutput(block.force_output_port(builder), "f_block")
     if reference == "tool_point":
         builder.ExportOutput(clik.GetOutputPort("q_desired"), "q_desired")
     builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")

@@ -25,6 +25,8 @@ MAX_HORIZON = 1000
 MAX_SETTLE_TIME = 60.0
 # The stiffness the reproduction applies (docs/reproduction.md, "A full stiffness matrix").
 STIFFNESS_MODES = ("scalar", "spd")
+# Where the reproduction's gain K comes from (the stiffness study, docs/studies.md).
+GAIN_SOURCES = ("learnt", "constant", "demonstrated")
 
 
 @dc.dataclass
@@ -52,6 +54,20 @@ class LearningConfig:
     # base frame pulls the drawing's strokes 8 mm towards where the sheet was on average
     # (its Gaussians are no wider than the covariance floor), the scene frame alone 0.5 mm.
     task_frames: str = checked("scene", choices=("scene", "base_and_scene"))
+
+
+@dc.dataclass
+class PushConfig:
+    """An external push on the arm during a reproduction (``reproduction.push``): a force at
+    the tool point, held for ``duration`` from ``start`` (control/push.py: tau = J^T F on the
+    station's ``applied_generalized_force``). Default: none."""
+
+    # The force (N, in the scene frame T); empty: no push.
+    force: list[float] = checked([], signed=True, size=(0, 3))
+    # When it starts (s after the reproduction starts; the settling before is not pushed).
+    start: float = checked(0.0)
+    # How long it lasts (s).
+    duration: float = checked(0.3, positive=True)
 
 
 @dc.dataclass
@@ -92,6 +108,14 @@ class ReproductionConfig:
     # stiffness at the tool) or with its smallest eigenvalue 1 ("softest": the learnt
     # shape only stiffens).
     stiffness_normalisation: str = checked("softest", choices=("determinant", "softest"))
+    # Where the gain K comes from: "learnt" (the reproducer's k*, eq. 17: the paper's),
+    # "constant" (constant_gain throughout), "demonstrated" (the demonstrations' own K, their
+    # time-normalised mean, replayed in time). Clipped to [emg.k_min, emg.k_max] as k* is.
+    gain_source: str = checked("learnt", choices=GAIN_SOURCES)
+    # "constant": the gain K (> 0).
+    constant_gain: float = checked(0.0)
+    # An external push on the arm (default: none).
+    push: PushConfig = dc.field(default_factory=PushConfig)
     # Simulated time to let the arm come to rest in the scene, holding x*_0, before the
     # reproduction starts (s).
     settle_time: float = checked(1.0, maximum=MAX_SETTLE_TIME)
@@ -107,6 +131,11 @@ class ReproductionConfig:
                 f"key '{key_path(key, 'weighting')}' = 'spatial' does not go with "
                 f"'{key_path(key, 'tracker')}' = 'lqr' (it tracks a state sequence: 'temporal' "
                 "or 'forward')"
+            )
+        if self.gain_source == "constant" and not self.constant_gain > 0:
+            raise ValueError(
+                f"key '{key_path(key, 'constant_gain')}' must be > 0 with "
+                f"'{key_path(key, 'gain_source')}' = 'constant', got {self.constant_gain}"
             )
         if self.stiffness_ratio < 1:
             raise ValueError(

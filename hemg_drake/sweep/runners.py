@@ -75,7 +75,7 @@ def _duration(seconds):
 def _task(trial, spec, text, source, out):
     return dict(
         id=trial.id, labels=trial.labels, seed=trial.seed, overrides=trial.overrides,
-        base_overrides=[*spec.set, f"seed={trial.seed}"], steps=list(spec.steps),
+        reproduce_overrides=trial.reproduce_overrides, base_overrides=[*spec.set, f"seed={trial.seed}"], steps=list(spec.steps),
         heldout=spec.heldout, scenario_text=text, scenario_source=source,
         dir=str(out / "trials" / trial.id), cache=str(out / "cache"),
     )  # fmt: skip

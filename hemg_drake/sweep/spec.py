@@ -34,6 +34,10 @@ class Axis:
     values: list[str] = dc.field(default_factory=list)
     # Instead of values: named cases, each a list of overrides ``key=value``.
     cases: dict[str, list[str]] = dc.field(default_factory=dict)
+    # True: the overrides apply to the reproduction only (step reproduce), not to the
+    # demonstrations nor the learning: the world changed after the demonstrations (a moved
+    # sheet, a block, a push). The trials of its values share their demonstrations.
+    reproduce_only: bool = False
 
 
 @dc.dataclass
@@ -218,6 +222,8 @@ class Trial:
     labels: dict
     seed: int
     overrides: list
+    # Overrides of the reproduction only (axes with ``reproduce_only``).
+    reproduce_overrides: list = dc.field(default_factory=list)
 
 
 def axis_points(axis):
@@ -239,23 +245,28 @@ def trials(spec):
         points = [axis_points(axis) for axis in spec.axes]
         for choice in itertools.product(*points):
             labels = {axis.name: label for axis, (label, _) in zip(spec.axes, choice, strict=True)}
-            overrides = [o for _, group in choice for o in group]
-            combos.append((labels, overrides))
+            pairs = list(zip(spec.axes, choice, strict=True))
+            overrides = [o for axis, (_, group) in pairs if not axis.reproduce_only for o in group]
+            later = [o for axis, (_, group) in pairs if axis.reproduce_only for o in group]
+            combos.append((labels, overrides, later))
     else:
         for axis in spec.axes:
             for label, overrides in axis_points(axis):
-                combos.append(({axis.name: label}, overrides))
+                later = overrides if axis.reproduce_only else []
+                combos.append(({axis.name: label}, [] if later else overrides, later))
     if not combos:
-        combos = [({}, [])]
+        combos = [({}, [], [])]
     result, seen = [], set()
     for seed in spec.seeds:
-        for labels, overrides in combos:
+        for labels, overrides, later in combos:
             full = [*spec.set, *overrides, f"seed={seed}"]
-            digest = hashlib.sha1("\n".join(full).encode()).hexdigest()[:8]
+            # A trial without reproduce-only overrides keeps the digest it always had.
+            text = "\n".join(full + ([">reproduce", *later] if later else []))
+            digest = hashlib.sha1(text.encode()).hexdigest()[:8]
             if digest in seen:
                 continue
             seen.add(digest)
             name = ",".join(f"{k}={v}" for k, v in labels.items())
             trial_id = _slug(f"{name},seed={seed}" if name else f"seed={seed}") + f"-{digest}"
-            result.append(Trial(trial_id, labels, seed, full))
+            result.append(Trial(trial_id, labels, seed, full, list(later)))
     return result

@@ -205,7 +205,8 @@ def _trial_metrics(task, run):
         result["learn.n_iter"] = int(model.n_iter_)
         result["learn.converged"] = bool(model.converged_)
     if "reproduce" in steps:
-        reproduced = pipeline.reproduce(run, overrides=overrides, replay=False, progress=_quiet)
+        later = [*overrides, *task.get("reproduce_overrides", [])]
+        reproduced = pipeline.reproduce(run, overrides=later, replay=False, progress=_quiet)
         reproduced = {k: v for k, v in reproduced.items() if k not in ("start", "start_offset")}
         result.update(flatten("reproduction", reproduced))
     if "heldout" in steps:
@@ -252,6 +253,8 @@ def run_trial(task):
         tmp.mkdir(parents=True)
         record = dict(id=task["id"], labels=task["labels"], seed=task["seed"],
                       overrides=task["overrides"], status="done", error="", metrics={})  # fmt: skip
+        if task.get("reproduce_overrides"):
+            record["reproduce_overrides"] = task["reproduce_overrides"]
         try:
             record["metrics"] = _trial_metrics(task, tmp / "run")
         except OSError as error:

@@ -9,7 +9,7 @@ import dataclasses as dc
 
 import numpy as np
 
-from hemg_drake._validate import as_scalar
+from hemg_drake._validate import as_scalar, as_vector
 from hemg_drake.config_fields import checked, key_path
 from hemg_drake.tasks.plan import TaskPlan
 
@@ -41,6 +41,11 @@ class CotterPinParams:
     # Grasp bushing, translational stiffness (N/m) and damping (N s/m) on each axis.
     grasp_stiffness: float = 5000.0
     grasp_damping: float = 40.0
+    # Where the fixture (and the pin in it) actually stands, relative to where the plan and
+    # the operator expect it: an offset (m, in the scene frame T) of the physical fixture
+    # only; the scene frame, the plan and the map stay put. A world that differs from the
+    # demonstrations' (the stiffness study, docs/studies.md): the grasp starts stretched.
+    fixture_offset: list[float] = checked([0.0, 0.0, 0.0], signed=True, size=3)
 
     def __post_init__(self):
         self.check()
@@ -52,6 +57,7 @@ class CotterPinParams:
             as_scalar(_field_name(self, key, field), getattr(self, field))
         for field in ("sliding_damping", "grasp_damping"):
             as_scalar(_field_name(self, key, field), getattr(self, field), strict=False)
+        as_vector(_field_name(self, key, "fixture_offset"), self.fixture_offset, 3)
         return self
 
 
@@ -76,6 +82,10 @@ class DrawingParams:
     # pen lifts above it (m).
     press_depth: float = 0.003
     hover_height: float = 0.03
+    # How much higher (m, along T's z; negative: lower) the sheet actually stands than the
+    # plan and the operator expect it: the physical sheet only moves. A world that differs
+    # from the demonstrations' (the stiffness study, docs/studies.md).
+    sheet_offset: float = checked(0.0, signed=True)
 
     def __post_init__(self):
         self.check()
@@ -87,6 +97,8 @@ class DrawingParams:
             as_scalar(_field_name(self, key, field), getattr(self, field))
         for field in ("pen_dissipation", "pen_friction"):
             as_scalar(_field_name(self, key, field), getattr(self, field), strict=False)
+        as_scalar(_field_name(self, key, "sheet_offset"), self.sheet_offset, minimum=-np.inf,
+                  strict=False)  # fmt: skip
         if self.press_depth >= self.hover_height:
             raise ValueError(
                 f"{_field_name(self, key, 'press_depth')} ({self.press_depth}) must be less "
@@ -123,6 +135,23 @@ class PlacementsConfig:
 
 
 @dc.dataclass
+class BlockConfig:
+    """An unexpected rigid box in the scene (``scene.block``): welded to the world, it
+    collides with every collision geometry of the arm (the pen's tip, the links), and the
+    force the arm puts on it is measured (``tasks.block``). Not in the plan, nor known to
+    the operator: a world that differs from the demonstrations' (docs/studies.md)."""
+
+    # Edge lengths (m) along the scene frame T's axes; empty: no block.
+    size: list[float] = checked([], positive=True, size=(0, 3))
+    # Centre of the box (m, in T).
+    position: list[float] = checked([0.0, 0.0, 0.0], signed=True, size=3)
+    # Point-contact stiffness (N/m) and Hunt-Crossley dissipation (s/m) of its surface:
+    # nearly rigid, as the drawing's sheet.
+    stiffness: float = checked(1.0e6, positive=True)
+    dissipation: float = checked(10.0)
+
+
+@dc.dataclass
 class SceneConfig:
     """Where the task's object stands, and its physics (the scene frame T)."""
 
@@ -140,6 +169,8 @@ class SceneConfig:
     drawing: DrawingParams = dc.field(default_factory=DrawingParams)
     # Demonstrations at many placements: ranges each demonstration's seed draws its pose from.
     placements: PlacementsConfig = dc.field(default_factory=PlacementsConfig)
+    # An extra rigid box, not in the plan (default: none).
+    block: BlockConfig = dc.field(default_factory=BlockConfig)
 
 
 @dc.dataclass

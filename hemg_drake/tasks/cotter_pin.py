@@ -273,11 +273,12 @@ def add_cotter_pin_scene(plant, arm, *, params=None, X_WT=None):
             f"(omega dt)^2 + 2 c dt / m = {stability:.2f} > {_STABILITY_MARGIN}"
         )
     # The ring's offset above the fixture frame (the hole's mouth) is the model's.
+    # fixture_offset moves the physical fixture (and the pin) off the scene frame.
     p_FR = pin_geometry()[1]
     plant.WeldFrames(
         plant.world_frame(),
         plant.GetFrameByName("fixture", model),
-        X_WT @ RigidTransform(-p_FR),
+        X_WT @ RigidTransform(np.asarray(params.fixture_offset, dtype=float) - p_FR),
     )
     bushing = plant.AddForceElement(
         LinearBushingRollPitchYaw(

@@ -82,8 +82,9 @@ class DrawingScene:
 
     @property
     def paper_center(self):
-        """Centre of the sheet's top surface in W (m), shape (3,): the origin of T."""
-        return self.X_WT.translation().copy()
+        """Centre of the sheet's top surface in W (m), shape (3,): the origin of T, raised by
+        ``params.sheet_offset``."""
+        return self.X_WT.translation() + [0.0, 0.0, self.params.sheet_offset]
 
     @property
     def paper_height(self):
@@ -147,10 +148,11 @@ def add_drawing_scene(plant, arm, *, params=None, X_WT=None):
     if not plant.geometry_source_is_registered():
         raise ValueError("the drawing scene needs a plant registered with a SceneGraph")
     (model,) = make_parser(plant).AddModels(str(DRAWING_MODEL))
+    # sheet_offset moves the physical sheet along T's z, off where the plan expects it.
     plant.WeldFrames(
         plant.world_frame(),
         plant.GetFrameByName("table", model),
-        X_WT,
+        X_WT @ RigidTransform([0.0, 0.0, params.sheet_offset]),
     )
     _add_pen(plant, arm, params)
     return DrawingScene(

@@ -83,9 +83,9 @@ def test_ports_names_and_sizes(pin_scenario):
         "p_WE_desired": 3, "gain": 1, "applied_generalized_force": 8,
     }  # fmt: skip
     assert ports(diagram, diagram.num_output_ports(), diagram.get_output_port) == {
-        "p_WE": 3, "v_WE": 3, "R_WE": 9, "f_WE": 3, "arm_state": 14, "q_desired": 7,
+        "p_WE": 3, "v_WE": 3, "R_WE": 9, "f_WE": 3, "arm_state": 14, "tau": 7, "q_desired": 7,
         "contact_results": "abstract", "query_object": "abstract",
-    }  # fmt: skip
+    }  # fmt: skip  (f_block only with a scene.block)
     for name in ("plant", "scene_graph", "clik", "pd", "tool_point", "cotter_pin_detent"):
         assert diagram.HasSubsystemNamed(name), name
     assert diagram.get_name() == "station"
