@@ -42,11 +42,13 @@ def main():
     parser.add_argument("--kills", type=int, default=50, help="kills per command")
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--commands", nargs="+", choices=sorted(COMMANDS), default=sorted(COMMANDS),
+                        help="the commands to kill (default: all)")
     args = parser.parse_args()
     began = time.perf_counter()
     with tempfile.TemporaryDirectory() as work:
         base = make_base(Path(work) / "base")
-        names = sorted(COMMANDS)
+        names = args.commands
         with ProcessPoolExecutor(args.workers) as pool:
             futures = [
                 pool.submit(_kills, name, base, Path(work) / name, args.seed, args.kills)

@@ -181,13 +181,8 @@ def small_disk(tmp_path):
     """A 300 kB tmpfs (root only; skipped where mount is not allowed)."""
     from tooling.faults import mount_tmpfs
 
-    disk = tmp_path / "disk"
-    disk.mkdir()
-    mount_tmpfs(disk, "size=300k")
-    try:
+    with mount_tmpfs(tmp_path / "disk", "size=300k") as disk:
         yield disk
-    finally:
-        subprocess.run(["umount", str(disk)], check=False)
 
 
 @pytest.mark.slow

@@ -10,7 +10,6 @@ Mounting needs root: skipped elsewhere; ``.ci/run`` (root) requires them to run.
 import os
 import re
 import shutil
-import subprocess
 from pathlib import Path
 
 import pytest
@@ -53,13 +52,8 @@ class SmallDisk:
 @pytest.fixture
 def disk(tmp_path):
     """A 32 MB tmpfs with 3000 inodes, mounted for the test (skipped where mount is refused)."""
-    mount = tmp_path / "disk"
-    mount.mkdir()
-    mount_tmpfs(mount, "size=32m,nr_inodes=3000")
-    try:
+    with mount_tmpfs(tmp_path / "disk", "size=32m,nr_inodes=3000") as mount:
         yield SmallDisk(mount)
-    finally:
-        subprocess.run(["umount", str(mount)], check=True)
 
 
 _CASES = {}

@@ -3,6 +3,7 @@ with its exit status, and leaves what the person had untouched."""
 
 import json
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -55,8 +56,10 @@ def test_a_persons_takes_are_never_replaced_by_a_simulated_run(base, tmp_path):
 
 def test_two_writers_on_one_folder_one_is_refused_naming_the_other(base, tmp_path):
     root = copy(base, tmp_path)
+    before = snapshot(root / "run")
+    # A first writer that is surely still at work while the others try (then stopped).
     command = [sys.executable, "-m", "hemg_drake.cli", "demonstrate", "cotter_pin", "--out",
-               "run", *SMALL]  # fmt: skip
+               "run", "--set", "num_demonstrations=4", "--set", "duration=30"]  # fmt: skip
     first = subprocess.Popen(command, cwd=root, env=_env({}), stdout=subprocess.DEVNULL,
                              stderr=subprocess.PIPE, text=True)  # fmt: skip
     deadline = time.monotonic() + 120
@@ -68,8 +71,11 @@ def test_two_writers_on_one_folder_one_is_refused_naming_the_other(base, tmp_pat
         err = one_line(run(argv, cwd=root, check=False))
         assert f"PID {first.pid}" in err, err
     assert not (root / "elsewhere").exists()
+    assert first.poll() is None  # it was at work throughout
+    first.send_signal(signal.SIGINT)
     _, err = first.communicate(timeout=300)
-    assert first.returncode == 0, err
+    assert first.returncode == 130, err
+    assert snapshot(root / "run") == before
 
 
 def test_a_dataset_without_its_record_is_repaired_keeping_the_takes(base, tmp_path):

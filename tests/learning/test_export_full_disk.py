@@ -19,13 +19,8 @@ def full_disk(tmp_path):
     """A 200 kB tmpfs, mounted for the test (skipped where mount is not allowed)."""
     from tooling.faults import mount_tmpfs
 
-    mount_point = tmp_path / "small"
-    mount_point.mkdir()
-    mount_tmpfs(mount_point, "size=200k")
-    try:
+    with mount_tmpfs(tmp_path / "small", "size=200k") as mount_point:
         yield mount_point
-    finally:
-        subprocess.run(["umount", str(mount_point)], check=True)
 
 
 @pytest.fixture

@@ -11,6 +11,7 @@ Used by ``tests/faults`` (a few kills per command) and ``benchmarks/bench_faults
 full count).
 """
 
+import contextlib
 import os
 import random
 import shutil
@@ -44,12 +45,14 @@ def leftovers(folder):
     return sorted(p.name for p in folder.parent.glob(f".{folder.name}.hemg-drake-*"))
 
 
+@contextlib.contextmanager
 def mount_tmpfs(folder, options):
-    """Mount a tmpfs with ``options`` (e.g. "size=32m") at the folder ``folder``: needs root.
-    Where mount is refused the test skips; under ``.ci/run`` as root (HEMG_DRAKE_MOUNT_TESTS=1)
-    it fails instead. The caller unmounts (``subprocess.run(["umount", folder])``)."""
+    """Mount a tmpfs with ``options`` (e.g. "size=32m") at the folder ``folder`` (made) for
+    the block, then unmount it: needs root. Where mount is refused the test skips; under
+    ``.ci/run`` as root (HEMG_DRAKE_MOUNT_TESTS=1) it fails instead."""
     import pytest
 
+    Path(folder).mkdir(parents=True, exist_ok=True)
     done = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(folder)],
                           capture_output=True, text=True)  # fmt: skip
     if done.returncode != 0:
@@ -57,6 +60,10 @@ def mount_tmpfs(folder, options):
         if os.environ.get("HEMG_DRAKE_MOUNT_TESTS") == "1":
             pytest.fail(reason + " (HEMG_DRAKE_MOUNT_TESTS=1: .ci/run runs these as root)")
         pytest.skip(reason)
+    try:
+        yield Path(folder)
+    finally:
+        subprocess.run(["umount", str(folder)], check=True)
 
 
 def run(argv, *, cwd, env=None, check=True):
