@@ -41,30 +41,36 @@ def quiet(_line):
     pass
 
 
-def run_scenario(task, seed, fresh, overrides=(), kind="evaluation"):
-    """The shipped scenario for one (training, fresh) pair, its seeds checked as ``kind``."""
+def run_scenario(task, seed, fresh, overrides=(), kind="evaluation", count=NUM_FRESH):
+    """The shipped scenario for one (training, fresh) pair, its seeds checked as ``kind``;
+    ``count`` fresh demonstrations."""
     scenario = load_scenario(shipped_scenario(task), overrides=[
         *overrides, f"seed={seed}", f"reproduction.heldout_seed={fresh}",
-        f"reproduction.num_heldout={NUM_FRESH}",
+        f"reproduction.num_heldout={count}",
     ])  # fmt: skip
-    check_seeds(scenario.seeds() + run_seeds(fresh, NUM_FRESH), kind,
+    check_seeds(scenario.seeds() + run_seeds(fresh, count), kind,
                 what=f"{task} run ({seed}, {fresh})")  # fmt: skip
     return scenario
 
 
-def evaluate(scenario, folder, trackers=None):
-    """Metrics of each tracker (default: the scenario's) for one run: dict tracker -> metrics."""
+def evaluate(scenario, folder, trackers=None, variants=("",)):
+    """Metrics of each variant and tracker (default: the scenario's) for one run: dict
+    "VARIANT TRACKER" -> metrics. A variant is comma-separated learning.* / reproduction.*
+    overrides, learnt and reproduced from the same demonstrations ("": as shipped)."""
     run = Path(folder) / f"{scenario.task}_{scenario.seed}"
     demonstrate(scenario, run, replays=False, progress=quiet)
     heldout = demonstrate_heldout(scenario, run, progress=quiet)
-    learn(run, progress=quiet)
-    return {
-        tracker: reproduce(
-            run, overrides=[f"reproduction.tracker={tracker}"], out_dir=run / tracker,
-            replay=False, heldout=heldout, progress=quiet,
-        )  # fmt: skip
-        for tracker in trackers or [scenario.reproduction.tracker]
-    }
+    results = {}
+    for v, variant in enumerate(variants):
+        overrides = [o for o in variant.split(",") if o]
+        learn(run, overrides=overrides, progress=quiet)
+        for tracker in trackers or [scenario.replaced(overrides).reproduction.tracker]:
+            name = f"{variant} {tracker}".strip()
+            results[name] = reproduce(
+                run, overrides=[*overrides, f"reproduction.tracker={tracker}"],
+                out_dir=run / f"{v}_{tracker}", replay=False, heldout=heldout, progress=quiet,
+            )  # fmt: skip
+    return results
 
 
 def goals(lead, floor):
@@ -134,12 +140,20 @@ def main(argv=None):
                         help="a run of your own: training seed S, fresh seed T (checked)")
     parser.add_argument("--trackers", nargs="+", choices=["gmr", "lqr"])
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    parser.add_argument("--variants", nargs="+", default=[""], metavar="K=V[,K=V]",
+                        help="learning/reproduction settings compared on the same "
+                        "demonstrations ('' for the shipped ones)")
+    parser.add_argument("--fresh", type=int, default=NUM_FRESH,
+                        help=f"fresh demonstrations per run (default {NUM_FRESH}; at least 2)")
     parser.add_argument("--json", help="also write every metric to this file")
     args = parser.parse_args(argv)
+    if args.fresh < 2:
+        parser.error("--fresh must be at least 2 (their own leave-one-out is the floor)")
     kind = "tuning" if args.tuning else "evaluation"
     plans = {task: args.seeds or pairs(task, kind, args.runs) for task in args.tasks}
     try:  # every run's seeds checked before anything is simulated
-        scenarios = {task: [run_scenario(task, s, t, args.set, kind) for s, t in runs]
+        scenarios = {task: [run_scenario(task, s, t, args.set, kind, args.fresh)
+                            for s, t in runs]
                      for task, runs in plans.items()}  # fmt: skip
     except ValueError as error:
         print(f"bench_heldout: {error}", file=sys.stderr)
@@ -150,22 +164,24 @@ def main(argv=None):
             print(f"\n{task}, {kind} seeds; {LEGEND}" + (f"; --set {args.set}" if args.set else ""))
             print(HEADERS[task])
             print("|" + "---|" * (HEADERS[task].count("|") - 1))
-            count = {"out": [0, 0], "in": [0, 0]}
+            count = {}
             for scenario in runs:
                 start = time.perf_counter()
                 fresh = scenario.reproduction.heldout_seed
-                results = evaluate(scenario, folder, args.trackers)
+                results = evaluate(scenario, folder, args.trackers, args.variants)
                 everything[f"{task} {scenario.seed}"] = results
                 for tracker, metrics in results.items():
                     line, met_out, met_in = row(scenario.seed, fresh, tracker, metrics)
+                    count.setdefault(tracker, {"out": [0, 0], "in": [0, 0]})
                     print(line, flush=True)
                     for key, met in (("out", met_out), ("in", met_in)):
-                        count[key][0] += all(met.values())
-                        count[key][1] += 1
+                        count[tracker][key][0] += all(met.values())
+                        count[tracker][key][1] += 1
                 print(f"<!-- {task} {scenario.seed}: {time.perf_counter() - start:.0f} s -->",
                       flush=True)  # fmt: skip
-            print(f"every goal met: out of sample {count['out'][0]}/{count['out'][1]}, "
-                  f"in sample {count['in'][0]}/{count['in'][1]}")
+            for name, c in count.items():
+                print(f"{name}: every goal met out of sample {c['out'][0]}/{c['out'][1]}, "
+                      f"in sample {c['in'][0]}/{c['in'][1]}")
     if args.json:
         Path(args.json).write_text(json.dumps(everything, indent=1))
     return 0
