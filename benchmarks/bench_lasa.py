@@ -275,9 +275,10 @@ def main():
     parser.add_argument("--full", action="store_true", help="all 30 shapes (default: 8)")
     parser.add_argument("--held-out", action="store_true", help="the reg_covar table instead")
     parser.add_argument("--markdown", action="store_true", help="print markdown tables")
+    parser.add_argument("--shapes", nargs="+", help="these shapes only")
     args = parser.parse_args()
     lasa()
-    names = shape_names() if args.full else list(QUICK)
+    names = args.shapes or (shape_names() if args.full else list(QUICK))
     if args.held_out:
         held_out_table(names)
         return

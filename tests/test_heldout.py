@@ -177,3 +177,24 @@ def test_lasa_leave_one_out_at_reduced_scale():
     assert "GMR on time (gmr)" in results and lasa.FLOOR in results
     assert any(method.startswith("hsmm") for method in results)
     assert all(np.isfinite(r["Angle"]["rmse"]) for r in results.values())
+
+
+def test_reproduce_scores_against_a_fresh_folder_and_refuses_shared_seeds(tmp_path, capsys):
+    from hemg_drake.cli import main
+
+    small = ["--demos", "2", "--duration", "1", "--no-replay", "--set", "learning.n_iter=5"]
+    run, fresh, shared = tmp_path / "run", tmp_path / "fresh", tmp_path / "shared"
+    assert main(["demonstrate", "cotter_pin", "--out", str(run), "--seed", "5001", *small]) == 0
+    assert main(["demonstrate", "cotter_pin", "--out", str(fresh), "--seed", "5051", *small]) == 0
+    assert main(["demonstrate", "cotter_pin", "--out", str(shared), "--seed", "5002", *small]) == 0
+    assert main(["learn", str(run)]) == 0
+    capsys.readouterr()
+    before = (run / "manifest.json").read_bytes()
+    assert main(["reproduce", str(run), "--no-replay", "--heldout", str(shared)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "(shared: [5002])" in err
+    assert (run / "manifest.json").read_bytes() == before  # nothing written
+    assert main(["reproduce", str(run), "--no-replay", "--heldout", str(fresh)]) == 0
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["out_of_sample"]["seeds"] == [5051, 5052]
+    assert metrics["scores"]["in_sample"]["position_rmse_m"] == metrics["position_rmse_m"]
