@@ -160,6 +160,19 @@ def _table_ii(demos, log, dt):
     }
 
 
+def table_ii_against(demos, log):
+    """Table II's four RMSEs of a logged reproduction against ``demos`` (e.g. fresh ones):
+    position and velocity, time-normalised and after DTW, against their mean."""
+    dt = float(np.mean(np.diff(log.time)))
+    table = _table_ii(demos, log, dt)[2]
+    return {
+        "position_rmse_m": table["time_normalised"]["position_rmse_m"],
+        "velocity_rmse_m_per_s": table["time_normalised"]["velocity_rmse_m_per_s"],
+        "spatial_position_rmse_m": table["spatial_after_dtw"]["position_rmse_m"],
+        "spatial_velocity_rmse_m_per_s": table["spatial_after_dtw"]["velocity_rmse_m_per_s"],
+    }
+
+
 def _first_time(time, rise, height):
     """First time ``rise`` reaches ``height``, or None."""
     above = np.flatnonzero(rise >= height)
