@@ -8,8 +8,8 @@ stiffness; positions in m). For each shape, in one run:
 - the project's HSMM (N = 10, library defaults otherwise), with init "kmeans" (the default)
   and "time", reproduced with every weighting and every tracker of ``reproduce`` ("gmr":
   eqs. 15-18; "lqr" where the installed ``reproduce`` has it), from the mean start;
-- baselines (every one learnt from the same demonstrations): GMR on time (the ``gmr`` package, N = 10 components over [t, x]) and, if
-  ``movement_primitives`` is installed, a ProMP (10 weights per dimension, all
+- baselines, learnt from the same demonstrations: GMR on time (the ``gmr`` package, N = 10
+  components over [t, x]) and, if ``movement_primitives`` is installed, a ProMP (10 weights per dimension, all
   demonstrations) and a DMP (fitted to the mean demonstration, started at its start).
 
 Scored first out of sample, by leave-one-demonstration-out: every method (the project's
@@ -17,8 +17,9 @@ and the baselines') learnt from 6 of the 7 demonstrations and scored against the
 mean over the 7 folds; the floor is the 6 demonstrations' own mean scored the same way.
 Then in sample: learnt from all 7 and scored against their mean demonstration. Errors
 (all resampled to 200 samples, in mm): the time-normalised position RMSE and the DTW
-position RMSE (``hemg_drake.tasks.metrics``), and the end-point error. ``--held-out`` instead measures the held-out log-likelihood by
-leave-one-demonstration-out for several ``reg_covar`` (issue 15, section 2).
+position RMSE (``hemg_drake.tasks.metrics``), and the end-point error. ``--held-out``
+instead measures the held-out log-likelihood by leave-one-demonstration-out for several
+``reg_covar`` (issue 15, section 2).
 
 Run: ``.venv/bin/python benchmarks/bench_lasa.py`` (8 shapes, about a minute on 2 cores),
 ``--full`` (all 30 shapes), ``--held-out`` (the reg_covar table), ``--markdown``.

@@ -355,7 +355,8 @@ def _fresh_demonstrations(folder, heldout):
     """(demos, scenario, dataset path) of the fresh demonstrations in run folder ``heldout``,
     refused unless of the same task as ``folder``'s and from seeds disjoint from its."""
     fresh = RunFolder(heldout)
-    fresh.check("demonstrate", fresh.dataset, run_hint=f"hemg-drake demonstrate ... --out {heldout}")
+    hint = f"hemg-drake demonstrate ... --out {heldout}"
+    fresh.check("demonstrate", fresh.dataset, run_hint=hint)
     demos, scenario = load_demonstrations(fresh.dataset)
     _, recorded = load_demonstrations(folder.dataset)
     shared = sorted(set(scenario.seeds()) & set(recorded.seeds()))
@@ -427,7 +428,9 @@ def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progr
     )
     metrics = task_metrics(scenario.task, demos, result, fresh and fresh["demos"])
     if fresh is not None:
-        metrics["out_of_sample"].update(seeds=fresh["seeds"], training_seeds=fresh["training_seeds"])
+        metrics["out_of_sample"].update(
+            seeds=fresh["seeds"], training_seeds=fresh["training_seeds"]
+        )
     metrics.update(
         tracker=settings.tracker,
         weighting=settings.weighting,
