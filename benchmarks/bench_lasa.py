@@ -10,7 +10,8 @@ stiffness; positions in m). For each shape, in one run:
   eqs. 15-18; "lqr" where the installed ``reproduce`` has it), from the mean start;
 - baselines, learnt from the same demonstrations: GMR on time (the ``gmr`` package, N = 10
   components over [t, x]) and, if ``movement_primitives`` is installed, a ProMP (10
-  weights per dimension, all demonstrations) and a DMP (fitted to the mean demonstration, started at its start).
+  weights per dimension, all demonstrations) and a DMP (fitted to the mean demonstration,
+  started at its start).
 
 Scored first out of sample, by leave-one-demonstration-out: every method (the project's
 and the baselines') learnt from 6 of the 7 demonstrations and scored against the 7th, the
