@@ -39,7 +39,8 @@ def pin_run(tmp_path_factory):
     save_figure = figures.save_figure
 
     def keep(figure, path, **kwargs):
-        if "heldout" not in path.parts:  # the training run's, not the fresh demonstrations'
+        # The training run's, not the fresh demonstrations' (heldout/, built beside it).
+        if not any("heldout" in part for part in path.parts):
             saved[path.name] = figure
         save_figure(figure, path, **kwargs)
 
