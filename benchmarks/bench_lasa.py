@@ -8,14 +8,19 @@ stiffness; positions in m). For each shape, in one run:
 - the project's HSMM (N = 10, library defaults otherwise), with init "kmeans" (the default)
   and "time", reproduced with every weighting and every tracker of ``reproduce`` ("gmr":
   eqs. 15-18; "lqr" where the installed ``reproduce`` has it), from the mean start;
-- baselines: GMR on time (the ``gmr`` package, N = 10 components over [t, x]) and, if
-  ``movement_primitives`` is installed, a ProMP (10 weights per dimension, all
-  demonstrations) and a DMP (fitted to the mean demonstration, started at its start).
+- baselines, learnt from the same demonstrations: GMR on time (the ``gmr`` package, N = 10
+  components over [t, x]) and, if ``movement_primitives`` is installed, a ProMP (10
+  weights per dimension, all demonstrations) and a DMP (fitted to the mean demonstration,
+  started at its start).
 
-Errors are against the mean demonstration (all resampled to 200 samples, in mm): the
-time-normalised position RMSE and the DTW position RMSE (``hemg_drake.tasks.metrics``),
-and the end-point error. ``--held-out`` instead measures the held-out log-likelihood by
-leave-one-demonstration-out for several ``reg_covar`` (issue 15, section 2).
+Scored first out of sample, by leave-one-demonstration-out: every method (the project's
+and the baselines') learnt from 6 of the 7 demonstrations and scored against the 7th, the
+mean over the 7 folds; the floor is the 6 demonstrations' own mean scored the same way.
+Then in sample: learnt from all 7 and scored against their mean demonstration. Errors
+(all resampled to 200 samples, in mm): the time-normalised position RMSE and the DTW
+position RMSE (``hemg_drake.tasks.metrics``), and the end-point error. ``--held-out``
+instead measures the held-out log-likelihood by leave-one-demonstration-out for several
+``reg_covar`` (issue 15, section 2).
 
 Run: ``.venv/bin/python benchmarks/bench_lasa.py`` (8 shapes, about a minute on 2 cores),
 ``--full`` (all 30 shapes), ``--held-out`` (the reg_covar table), ``--markdown``.
@@ -145,17 +150,55 @@ def movement_primitives_runs(demos, dt):
     yield "DMP (movement_primitives)", path[:n_steps], seconds
 
 
+def method_runs(demos, dt):
+    """Every method learnt from ``demos``: a list of (method, x (T, 2), fit s)."""
+    runs = list(hsmm_runs(demos, dt))
+    x, seconds = gmr_on_time(demos, dt)
+    runs.append(("GMR on time (gmr)", x, seconds))
+    runs += list(movement_primitives_runs(demos, dt))
+    return runs
+
+
 def benchmark(names):
-    """{method: {shape: errors + fit seconds}}."""
+    """In sample: {method: {shape: errors + fit seconds}} against the demonstrations learnt."""
     results = {}
     for name in names:
         demos, dt = load_shape(name)
-        runs = list(hsmm_runs(demos, dt))
-        x, seconds = gmr_on_time(demos, dt)
-        runs.append(("GMR on time (gmr)", x, seconds))
-        runs += list(movement_primitives_runs(demos, dt))
-        for method, x, seconds in runs:
+        for method, x, seconds in method_runs(demos, dt):
             results.setdefault(method, {})[name] = {**errors(x, demos, dt), "fit": seconds}
+    return results
+
+
+FLOOR = "the other demonstrations' mean (floor)"
+
+
+def floor_run(demos, dt):
+    """The demonstrations' own figure: the mean of the learnt ones, as a reproduction."""
+    return [(FLOOR, mean_demonstration(demos, POSITION)[:, POSITION], 0.0)]
+
+
+def leave_one_out_scores(demos, dt, runs_of=method_runs):
+    """Leave one demonstration out: each method learnt from the other C - 1 demonstrations
+    (``runs_of(train, dt)``: (method, x, fit s) from their mean start) and scored against
+    the one left out; ``FLOOR`` (the others' mean) beside them. {method: mean errors over
+    the C folds}."""
+    folds = {}
+    for c, left in enumerate(demos):
+        train = demos[:c] + demos[c + 1:]
+        for method, x, seconds in runs_of(train, dt) + floor_run(train, dt):
+            folds.setdefault(method, []).append({**errors(x, [left], dt), "fit": seconds})
+    return {method: {key: float(np.mean([f[key] for f in scores])) for key in scores[0]}
+            for method, scores in folds.items()}  # fmt: skip
+
+
+def leave_one_out_benchmark(names, n_demos=None):
+    """Out of sample: {method: {shape: mean errors over the folds}} (the first ``n_demos``
+    demonstrations of each shape; default all 7)."""
+    results = {}
+    for name in names:
+        demos, dt = load_shape(name)
+        for method, score in leave_one_out_scores(demos[:n_demos], dt).items():
+            results.setdefault(method, {})[name] = score
     return results
 
 
@@ -168,7 +211,8 @@ def print_table(results, names, markdown):
     else:
         print(f"{'method':38s} {'RMSE mm':>9s} {'DTW mm':>8s} {'end mm':>8s} {'fit s':>7s} "
               f"{'median':>7s} {'worst':>7s} {'won':>4s}")
-    best = {name: min(r[name]["rmse"] for r in results.values()) for name in names}
+    best = {name: min(r[name]["rmse"] for m, r in results.items() if m != FLOOR)
+            for name in names}  # fmt: skip
     for method, per_shape in sorted(results.items(), key=lambda m: np.mean(
             [v["rmse"] for v in m[1].values()])):  # fmt: skip
         mean = {c: np.mean([per_shape[n][c] for n in names]) for c in columns}
@@ -233,18 +277,25 @@ def main():
     parser.add_argument("--full", action="store_true", help="all 30 shapes (default: 8)")
     parser.add_argument("--held-out", action="store_true", help="the reg_covar table instead")
     parser.add_argument("--markdown", action="store_true", help="print markdown tables")
+    parser.add_argument("--shapes", nargs="+", help="these shapes only")
     args = parser.parse_args()
     lasa()
-    names = shape_names() if args.full else list(QUICK)
+    names = args.shapes or (shape_names() if args.full else list(QUICK))
     if args.held_out:
         held_out_table(names)
         return
     HSMM(2, n_iter=2).fit([np.random.default_rng(0).standard_normal((30, 4))])  # numba warm-up
     begin = time.perf_counter()
-    results = benchmark(names)
+    out = leave_one_out_benchmark(names)
     print(f"LASA, {len(names)} shapes x 7 demonstrations, {N_SAMPLES} samples, N = {N_STATES}; "
-          f"errors against the mean demonstration, mean over shapes "
-          f"({time.perf_counter() - begin:.0f} s)")
+          "OUT OF SAMPLE: leave one demonstration out (each method learnt from 6, from their "
+          "mean start, scored against the 7th; mean over the 7 folds, then over shapes; the "
+          f"floor: the 6 demonstrations' mean itself) ({time.perf_counter() - begin:.0f} s)")
+    print_table(out, names, args.markdown)
+    begin = time.perf_counter()
+    results = benchmark(names)
+    print(f"\nIn sample (all 7 learnt, errors against their mean demonstration), mean over "
+          f"shapes ({time.perf_counter() - begin:.0f} s)")
     print_table(results, names, args.markdown)
     ranked = sorted(results, key=lambda m: np.mean([v["rmse"] for v in results[m].values()]))
     print_per_shape(results, names, ranked[:4] + [m for m in ranked[4:] if "hsmm" not in m])

@@ -208,6 +208,11 @@ def build_parser():
         "measured tool point (default: the scenario's reproduction.tracker)",
     )  # fmt: skip
     reproduce.add_argument("--out", help="output folder (default: the run folder)")
+    reproduce.add_argument(
+        "--heldout", metavar="FOLDER",
+        help="a run folder of fresh demonstrations of the task (other seeds): the metrics "
+        "lead with the reproduction scored against them (out of sample)",
+    )  # fmt: skip
     reproduce.add_argument("--no-replay", action="store_true", help="write no HTML replay")
     add_set(reproduce, REPRODUCE_SET_HELP)
     reproduce.set_defaults(func=reproduce_command)

@@ -139,6 +139,7 @@ def reproduce_command(args):
         start_offset=args.start_offset,
         out_dir=args.out,
         replay=not args.no_replay,
+        heldout=args.heldout,
         progress=_print,
     )
 

@@ -12,6 +12,7 @@ from hemg_drake.fileio import write_text_atomic
 from hemg_drake.pipeline import (
     TASKS,
     demonstrate,
+    demonstrate_heldout,
     learn,
     load_demonstrations,
     reproduce,
@@ -53,7 +54,9 @@ def placement_demo(scenario, run_dir, *, replays=True, progress=print):
     learn(folder, progress=progress)
     values = ",".join(repr(float(v)) for v in position)
     new = [f"scene.position=[{values}]", f"scene.yaw_deg={float(yaw)!r}"]
-    metrics = reproduce(folder, overrides=new, replay=replays, progress=progress)
+    # Fresh demonstrations at the new pose: what a person would have shown there.
+    heldout = _heldout(scenario.replaced(new), folder, progress)
+    metrics = reproduce(folder, overrides=new, replay=replays, heldout=heldout, progress=progress)
     demos, recorded = load_demonstrations(folder / "dataset.npz")
     with np.load(folder / "reproduction.npz") as arrays:
         log = ReproductionLog(**{name: arrays[name] for name in arrays.files})
@@ -68,13 +71,27 @@ def placement_demo(scenario, run_dir, *, replays=True, progress=print):
     return {f"{scenario.task} (new placement)": metrics}
 
 
+def _heldout(scenario, run_dir, progress):
+    """The run's fresh demonstrations (``reproduction.num_heldout``; None without)."""
+    if not scenario.reproduction.num_heldout:
+        return None
+    began = time.perf_counter()
+    folder = demonstrate_heldout(scenario, run_dir, progress=progress)
+    progress(f"fresh demonstrations (seeds {scenario.reproduction.heldout_seed}-"
+             f"{scenario.reproduction.heldout_seed + scenario.reproduction.num_heldout - 1}) "
+             f"in {folder}/: {time.perf_counter() - began:.0f} s")  # fmt: skip
+    return folder
+
+
 def run_demo(
     out_dir="runs", *, tasks=TASKS, overrides=(), replays=True, placements=False, progress=print
 ):  # fmt: skip
     """The full demo: for each task, demonstrate, learn, reproduce (from the demonstrated
     start and from each of ``reproduction.start_offsets``), draw and measure.
 
-    Per task, ``out_dir/TASK/`` gets the demonstrate, learn and reproduce outputs, one more
+    Per task, ``out_dir/TASK/`` gets the demonstrate, learn and reproduce outputs, the
+    fresh demonstrations every reproduction is scored against (``heldout/``, the scenario's
+    ``reproduction.num_heldout`` from ``reproduction.heldout_seed``), one more
     reproduction per start offset in ``start_offset/`` (``start_offset_<i>/`` for more than
     one), and the diagrams. ``out_dir/metrics.json`` gathers the metrics; the table is
     printed.
@@ -148,15 +165,16 @@ def _run_demo(scenarios, out_dir, replays, placements, progress):
         )
         for path in demonstrate(scenario, run_dir, replays=replays, progress=progress):
             progress(f"wrote {path}")
+        heldout = _heldout(scenario, run_dir, progress)
         learn(run_dir, diagrams=True, progress=progress)
-        results[task] = reproduce(run_dir, replay=replays, progress=progress)
+        results[task] = reproduce(run_dir, replay=replays, heldout=heldout, progress=progress)
         offsets = scenario.reproduction.start_offsets
         for i, offset in enumerate(offsets):
             name = "start_offset" if len(offsets) == 1 else f"start_offset_{i + 1}"
             distance = 100 * float(np.linalg.norm(offset))
             results[f"{task} (start {distance:.0f} cm away)"] = reproduce(
                 run_dir, start_offset=offset, out_dir=run_dir / name, replay=False,
-                progress=progress,
+                heldout=heldout, progress=progress,
             )  # fmt: skip
         if placements:
             results.update(

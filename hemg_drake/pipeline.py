@@ -25,6 +25,8 @@ from hemg_drake.fileio import save_npz_atomic, write_text_atomic
 from hemg_drake.run_folder import DATASET, MODEL, RunFolder
 
 TASKS = ("cotter_pin", "drawing")
+# The sub-folder of a run that holds its fresh demonstrations (demonstrate_heldout).
+HELDOUT = "heldout"
 
 
 def _demonstrate_hint(folder):
@@ -198,6 +200,25 @@ def _demonstrate(scenario, folder, replays, progress, placed):
     return written
 
 
+def demonstrate_heldout(scenario, run_dir, *, progress=print):
+    """Record the scenario's fresh demonstrations (``reproduction.num_heldout`` of them from
+    seed ``reproduction.heldout_seed``, at the scenario's placement, no replays) into
+    ``run_dir/heldout/``, a run folder of its own; :func:`reproduce` scores against them.
+
+    Returns
+    -------
+    Path, the folder.
+    """
+    fresh = scenario.reproduction
+    if fresh.num_heldout < 1:
+        raise ValueError("key 'reproduction.num_heldout' is 0: no fresh demonstrations to record")
+    folder = Path(run_dir) / HELDOUT
+    overrides = [f"seed={fresh.heldout_seed}", f"num_demonstrations={fresh.num_heldout}",
+                 "reproduction.num_heldout=0"]  # fmt: skip
+    demonstrate(scenario.replaced(overrides), folder, replays=False, progress=progress)
+    return folder
+
+
 def learn(run_dir, *, overrides=(), n_iter=None, diagrams=False, progress=print):
     """Fit the HSMM of a run folder's dataset; write ``model.npz`` and Fig. 8 (c).
 
@@ -298,7 +319,7 @@ def _checked_model(folder, scenario, frames):
 
 def reproduce(
     run_dir, *, overrides=(), start_offset=(0.0, 0.0, 0.0), out_dir=None, replay=True,
-    progress=print,
+    heldout=None, progress=print,
 ):  # fmt: skip
     """Simulate the learnt task from a start; write the replay, the log, figures and metrics.
 
@@ -314,6 +335,10 @@ def reproduce(
         Where to write (created); default ``run_dir``.
     replay : bool
         Write ``reproduction.html``.
+    heldout : path-like, optional
+        A run folder of fresh demonstrations of the same task (:func:`demonstrate_heldout`;
+        seeds disjoint from the training ones): the metrics lead with the reproduction
+        scored against them (``evaluation.task_metrics``), and name their seeds.
     progress : callable taking one line of text.
 
     Returns
@@ -327,10 +352,29 @@ def reproduce(
     out = folder if same else RunFolder.output(out_dir)
     # The run is read throughout: no other command may replace it meanwhile.
     with folder_lock(folder.path, shared=out is not folder):
-        return _checked_reproduce(folder, out, overrides, start_offset, replay, progress)
+        fresh = None if heldout is None else _fresh_demonstrations(folder, heldout)
+        return _checked_reproduce(folder, out, overrides, start_offset, replay, progress, fresh)
 
 
-def _checked_reproduce(folder, out, overrides, start_offset, replay, progress):
+def _fresh_demonstrations(folder, heldout):
+    """(demos, scenario, dataset path) of the fresh demonstrations in run folder ``heldout``,
+    refused unless of the same task as ``folder``'s and from seeds disjoint from its."""
+    fresh = RunFolder(heldout)
+    hint = f"hemg-drake demonstrate ... --out {heldout}"
+    fresh.check("demonstrate", fresh.dataset, run_hint=hint)
+    demos, scenario = load_demonstrations(fresh.dataset)
+    _, recorded = load_demonstrations(folder.dataset)
+    shared = sorted(set(scenario.seeds()) & set(recorded.seeds()))
+    if scenario.task != recorded.task or shared:
+        raise ValueError(
+            f"{fresh.dataset}: fresh demonstrations must be of the same task ({recorded.task}) "
+            f"from other seeds than {folder.dataset}'s; got {scenario.task}, seeds "
+            f"{scenario.seeds()}" + (f" (shared: {shared})" if shared else "")
+        )
+    return demos, scenario, fresh.dataset
+
+
+def _checked_reproduce(folder, out, overrides, start_offset, replay, progress, fresh=None):
     from hemg_drake.placements import moved_demonstration, scene_frame, task_frames
 
     demos, recorded = load_demonstrations(folder.dataset)
@@ -342,10 +386,16 @@ def _checked_reproduce(folder, out, overrides, start_offset, replay, progress):
     # The demonstrations carried to the scene's placement (themselves where they were shown):
     # the start and what the metrics compare with.
     here = scene_frame(*task_frames(scenario))
-    demos = [
-        moved_demonstration(demo, scene_frame(*frames), here)
-        for demo, frames in zip(demos, demonstration_frames(demos, recorded), strict=True)
-    ]
+    def placed(demos, recorded):
+        return [
+            moved_demonstration(demo, scene_frame(*frames), here)
+            for demo, frames in zip(demos, demonstration_frames(demos, recorded), strict=True)
+        ]
+
+    demos = placed(demos, recorded)
+    if fresh is not None:
+        fresh = dict(demos=placed(*fresh[:2]), seeds=fresh[1].seeds(), dataset=fresh[2],
+                     training_seeds=recorded.seeds())  # fmt: skip
     offset_W = scenario.X_WT().rotation().matrix() @ offset
     start = np.mean([demo.p_WE[0] for demo in demos], axis=0) + offset_W
     if out is not folder and (out.dataset.exists() or out.model.exists()):
@@ -355,10 +405,11 @@ def _checked_reproduce(folder, out, overrides, start_offset, replay, progress):
         )
     with out.transaction("reproduce", progress=progress) as new:
         return _reproduce(scenario, model, demos, folder, new, start, offset, replay, progress,
-                          notes)  # fmt: skip
+                          fresh, notes)  # fmt: skip
 
 
-def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progress, notes=()):
+def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progress, fresh,
+               notes=()):  # fmt: skip
     from hemg_drake.diagrams.reproduction import build_reproduction_diagram, run_reproduction
     from hemg_drake.diagrams.visualization import Visualization
     from hemg_drake.evaluation import format_metrics, task_metrics
@@ -384,7 +435,11 @@ def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progr
         f"{np.round(offset, 4).tolist()} m: {duration:g} s simulated in "
         f"{time.perf_counter() - began:.1f} s"
     )
-    metrics = task_metrics(scenario.task, demos, result)
+    metrics = task_metrics(scenario.task, demos, result, fresh and fresh["demos"])
+    if fresh is not None:
+        metrics["out_of_sample"].update(
+            seeds=fresh["seeds"], training_seeds=fresh["training_seeds"]
+        )
     metrics.update(
         tracker=settings.tracker,
         weighting=settings.weighting,
@@ -402,7 +457,8 @@ def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progr
     write_text_atomic(written[1], json.dumps(metrics, indent=2) + "\n")
     if replay_path is not None:
         written.append(replay_path)
-    out.finish("reproduce", written, inputs=[folder.model, folder.dataset])
+    inputs = [folder.model, folder.dataset] + ([fresh["dataset"]] if fresh else [])
+    out.finish("reproduce", written, inputs=inputs)
     progress(format_metrics({scenario.task: metrics}))
     progress(f"wrote {out.final}/: " + ", ".join(p.name for p in written))
     return metrics

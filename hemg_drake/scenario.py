@@ -173,6 +173,16 @@ class Scenario:
                 f"{self.num_demonstrations} seeds up to {last_seed}; Drake's random generator "
                 f"takes seeds up to {MAX_SEED} (2**32 - 1)"
             )
+        fresh = self.reproduction
+        if fresh.num_heldout:
+            last = fresh.heldout_seed + fresh.num_heldout - 1
+            if fresh.heldout_seed <= self.seeds()[-1] and last >= self.seed or last > MAX_SEED:
+                raise ValueError(
+                    f"key 'reproduction.heldout_seed' = {fresh.heldout_seed} with "
+                    f"'reproduction.num_heldout' = {fresh.num_heldout} takes seeds up to {last}: "
+                    f"they must be disjoint from the training seeds {self.seed}-"
+                    f"{self.seeds()[-1]} and at most {MAX_SEED}"
+                )
         time_step = self.plant.time_step
         if not 0 < time_step <= MAX_TIME_STEP:
             raise ValueError(

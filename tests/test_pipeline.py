@@ -16,8 +16,9 @@ from hemg_drake.pipeline import demonstrate, learn, learning_data, reproduce
 from hemg_drake.run_folder import RunFolder, file_hash
 from hemg_drake.scenario import load_scenario, shipped_scenario
 
-# Two demonstrations of 1 s and five EM iterations: every stage runs, in seconds.
-SMALL = ["num_demonstrations=2", "duration=1.0", "learning.n_iter=5"]
+# Two demonstrations of 1 s (and two fresh ones to score against) and five EM iterations:
+# every stage runs, in seconds.
+SMALL = ["num_demonstrations=2", "duration=1.0", "learning.n_iter=5", "reproduction.num_heldout=2"]
 
 
 def quiet(line):
@@ -38,7 +39,9 @@ def pin_run(tmp_path_factory):
     save_figure = figures.save_figure
 
     def keep(figure, path, **kwargs):
-        saved[path.name] = figure
+        # The training run's, not the fresh demonstrations' (heldout/, built beside it).
+        if not any("heldout" in part for part in path.parts):
+            saved[path.name] = figure
         save_figure(figure, path, **kwargs)
 
     with pytest.MonkeyPatch.context() as patch:
@@ -64,7 +67,7 @@ def test_demo_writes_every_stage_and_the_metrics(pin_run):
         "dataset.npz", "demonstrations.png", "fig6_emg.png", "model.npz",
         "state_activations.png", "reproduction.npz", "fig8_reproduction.png", "metrics.json",
         "manifest.json", "start_offset/metrics.json", "start_offset/fig8_reproduction.png",
-        "start_offset/manifest.json",
+        "start_offset/manifest.json", "heldout/dataset.npz", "heldout/manifest.json",
     ):  # fmt: skip
         assert (run / name).is_file(), name
     # No replays asked for: none written.
@@ -79,6 +82,13 @@ def test_demo_writes_every_stage_and_the_metrics(pin_run):
     # The small-scale settings reached every stage.
     demos, metadata = load_dataset(run / "dataset.npz")
     assert len(demos) == 2 and metadata["seeds"] == [1, 2]
+    # Every reproduction scored out of sample against the fresh demonstrations first.
+    fresh, _ = load_dataset(run / "heldout" / "dataset.npz")
+    assert [demo.seed for demo in fresh] == [9001, 9002]
+    for name in saved:
+        assert list(saved[name])[:2] == ["scores", "out_of_sample"]
+        assert saved[name]["out_of_sample"]["seeds"] == [9001, 9002]
+        assert saved[name]["out_of_sample"]["training_seeds"] == [1, 2]
     assert all(abs(demo.time[-1] - 1.0) < 1e-9 for demo in demos)
     model = HSMM.load(run / "model.npz")
     assert model.n_states == 4 and model.n_iter_ <= 5
@@ -96,7 +106,10 @@ def test_manifest_chains_each_stage_to_what_it_was_made_from(pin_run):
     assert entries["demonstrate"]["files"]["dataset.npz"] == dataset
     assert entries["learn"]["inputs"] == {"dataset.npz": dataset}
     assert entries["learn"]["files"]["model.npz"] == model
-    assert entries["reproduce"]["inputs"] == {"dataset.npz": dataset, "model.npz": model}
+    fresh = file_hash(run / "heldout" / "dataset.npz")
+    assert entries["reproduce"]["inputs"] == {
+        "dataset.npz": dataset, "model.npz": model, "heldout/dataset.npz": fresh
+    }
     assert entries["reproduce"]["files"]["metrics.json"] == file_hash(run / "metrics.json")
 
 
@@ -213,7 +226,7 @@ def test_reproduce_without_replay_leaves_no_old_replay(pin_run, tmp_path, capsys
     assert not (run / "reproduction.html").exists()
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["weighting"] == "forward" and (run / "metrics.json").read_bytes() != old_metrics
-    assert "pos RMSE (mm)" in capsys.readouterr().out
+    assert "pos RMSE out / in / floor (mm)" in capsys.readouterr().out
     entries = json.loads((run / "manifest.json").read_text())
     assert "reproduction.html" not in entries["reproduce"]["files"]
 

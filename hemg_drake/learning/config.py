@@ -122,6 +122,13 @@ class ReproductionConfig:
     # Start offsets (m, in the scene frame T) of the extra reproductions that the full
     # demo runs, each from the demonstrations' mean start plus the offset.
     start_offsets: list[list[float]] = checked([], signed=True)
+    # Fresh demonstrations that every reproduction is scored against (out of sample):
+    # the full demo records num_heldout of them, seeds heldout_seed .. heldout_seed +
+    # num_heldout - 1 (disjoint from the training seeds), at the reproduction's placement
+    # (pipeline.demonstrate_heldout); 0: none. The shipped scenarios' seeds are evaluation
+    # seeds (hemg_drake/data/seeds.yaml).
+    heldout_seed: int = checked(0)
+    num_heldout: int = checked(0, maximum=100, why="as num_demonstrations")
 
     def check(self, key=""):
         """The rules between fields: the "lqr" tracker takes a state-sequence weighting, and

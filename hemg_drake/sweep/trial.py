@@ -166,26 +166,18 @@ def _record_heldout(scenario, count, path):
 
 def heldout_metrics(run):
     """The reproduction in ``run`` against the held-out demonstrations: position RMSE
-    time-normalised and after DTW, against their mean (as Table II, on unseen data)."""
+    time-normalised and after DTW, against their mean (as Table II, on unseen data;
+    :func:`hemg_drake.evaluation.table_ii_against`)."""
     import numpy as np
 
     from hemg_drake.diagrams.reproduction import ReproductionLog
-    from hemg_drake.learning.demos import load_dataset, observations
-    from hemg_drake.tasks import metrics
+    from hemg_drake.evaluation import table_ii_against
+    from hemg_drake.learning.demos import load_dataset
 
     demos, _ = load_dataset(run / "heldout.npz")
     with np.load(run / "reproduction.npz", allow_pickle=False) as archive:
         log = ReproductionLog(**{name: archive[name] for name in archive.files})
-    data = observations(demos)
-    reproduced = log.observations()
-    plain = metrics.time_normalised_rmse(reproduced, data)
-    aligned = metrics.aligned_rmse(reproduced, metrics.mean_demonstration(data))
-    return {
-        "position_rmse_m": plain["position_rmse"],
-        "velocity_rmse_m_per_s": plain["velocity_rmse"],
-        "spatial_position_rmse_m": aligned["position_rmse"],
-        "spatial_velocity_rmse_m_per_s": aligned["velocity_rmse"],
-    }
+    return table_ii_against(demos, log)
 
 
 def _trial_metrics(task, run):
