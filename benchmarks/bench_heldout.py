@@ -84,9 +84,9 @@ def goals(lead, floor):
 
 
 def in_sample_floor(m):
-    from hemg_drake.evaluation import _floor
+    from hemg_drake.evaluation import leave_one_out_floor
 
-    return _floor(m)
+    return leave_one_out_floor(m)
 
 
 def row(seed, fresh, tracker, m):

@@ -236,7 +236,7 @@ def _lead(record):
     }
 
 
-def _floor(record):
+def leave_one_out_floor(record):
     """The median of the demonstrations' own leave-one-out figures (None without)."""
     loo = record["table_ii"]["demonstrations_leave_one_out"]
     return {key: float(np.median(values)) if values else None for key, values in loo.items()}
@@ -278,7 +278,8 @@ def task_metrics(task, demos, result, heldout=None):
     if heldout is None:
         return record
     fresh = _task_record(task, heldout, result)
-    scores = {"out_of_sample": _lead(fresh), "in_sample": _lead(record), "floor": _floor(fresh)}
+    scores = {"out_of_sample": _lead(fresh), "in_sample": _lead(record),
+              "floor": leave_one_out_floor(fresh)}  # fmt: skip
     fresh = {key: value for key, value in fresh.items() if key not in LOG_ONLY}
     return {"scores": scores, "out_of_sample": fresh, **record}
 
@@ -432,7 +433,7 @@ def format_metrics(results):
         correlation = m["stiffness_correlation"]
         inside = _lead(m)
         scores = m.get("scores") or {"out_of_sample": None, "in_sample": inside,
-                                     "floor": _floor(m)}  # fmt: skip
+                                     "floor": leave_one_out_floor(m)}  # fmt: skip
         out, floor = scores["out_of_sample"] or {}, scores["floor"]
 
         def three(key, scale=1e3, digits=1, floor_too=True):
