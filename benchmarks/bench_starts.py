@@ -69,7 +69,7 @@ def prepare(task, seed, folder):
     folder = RunFolder(run)
     demos, recorded = load_demonstrations(folder.dataset)
     frames = demonstration_frames(demos, recorded)
-    model = _checked_model(folder, recorded, frames)
+    model, _ = _checked_model(folder, recorded, frames)
     here = scene_frame(*task_frames(recorded))
     demos = [moved_demonstration(d, scene_frame(*f), here) for d, f in zip(demos, frames)]
     return recorded, model, demos
