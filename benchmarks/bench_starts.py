@@ -147,7 +147,11 @@ def main():
                 print(line(-1, np.zeros(3), nominal), flush=True)
                 passed = 0
                 for i in chosen:
-                    m = reproduce_from(scenario, model, demos, offsets[i])
+                    try:
+                        m = reproduce_from(scenario, model, demos, offsets[i])
+                    except ValueError as error:  # e.g. a start out of reach: a failed start
+                        print(f"{i:2d}  {offsets[i] * 100} cm  FAIL  error: {error}", flush=True)
+                        continue
                     passed += m["success"]
                     print(line(i, offsets[i], m), flush=True)
                 print(f"-- {task}, seed {seed}: {passed} / {len(chosen)} starts succeed",
