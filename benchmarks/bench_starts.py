@@ -12,10 +12,11 @@ drawing's strokes, their worst shape and placement errors) and a count per task 
 
 Tuning seeds (the settings were chosen on them) and evaluation seeds are kept apart: the
 default runs the shipped seeds (pin 1, drawing 101: where GMR's support radius was chosen);
-``--seeds`` gives the first seed of other runs (e.g. 301 302 303 304 305, never tuned on).
+``--seeds`` gives the first seed of other runs: evaluation seeds are the runs of
+``hemg_drake/data/seeds.yaml`` (e.g. 5001 5101; every seed below 2000 is a tuning seed).
 CPU time (``time.process_time``) per reproduction is printed: the machine is shared.
 
-    .venv/bin/python benchmarks/bench_starts.py [--tasks cotter_pin drawing] [--seeds 301 ...]
+    .venv/bin/python benchmarks/bench_starts.py [--tasks cotter_pin drawing] [--seeds 5001 ...]
         [--support-radius R|none] [--only 0 5 ...] [--runs FOLDER]
 """
 
