@@ -25,11 +25,11 @@ UNDERFLOW = 750.0
 # compile _sum_kernels' functions into theirs: they are cached only while _sum_kernels.py is
 # the file they were written against (its SHA-256 here). Otherwise they compile afresh at each
 # import, and tests/learning/test_hsmm_kernels.py fails until this digest is updated (which
-# changes this file, so that its cache is renewed).
+# changes this file, so that its cache is renewed). Line ends are read as "\n" (a checkout
+# with CRLF keeps its cache).
 SUM_KERNELS_SHA256 = "6b84a4418e16ea855f72238c67f6c6d76cf6feaaa1d51c162aeccd32c80052ed"
-_CACHED = hashlib.sha256(Path(_sum_kernels.__file__).read_bytes()).hexdigest() == (
-    SUM_KERNELS_SHA256
-)
+_SUM_KERNELS_SOURCE = Path(_sum_kernels.__file__).read_bytes().replace(b"\r\n", b"\n")
+_CACHED = hashlib.sha256(_SUM_KERNELS_SOURCE).hexdigest() == SUM_KERNELS_SHA256
 
 
 @numba.njit(cache=_CACHED)

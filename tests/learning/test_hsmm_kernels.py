@@ -302,5 +302,5 @@ def test_suffix_bound_is_above_every_backward_value():
 def test_recursions_are_cached_against_the_sum_kernels_they_compile_in():
     """numba's cache does not see _sum_kernels.py change under _kernels.py's functions, which
     inline it: _kernels caches only against the pinned digest of that file (update it)."""
-    source = Path(_sum_kernels.__file__).read_bytes()
+    source = Path(_sum_kernels.__file__).read_bytes().replace(b"\r\n", b"\n")
     assert hashlib.sha256(source).hexdigest() == _kernels.SUM_KERNELS_SHA256
