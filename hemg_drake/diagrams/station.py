@@ -197,6 +197,41 @@ class SlaveStation:
         plant.SetVelocities(plant_context, np.zeros(plant.num_velocities()))
 
 
+def start_configuration(scenario, plant, arm, start=None):
+    """The arm's configuration with the tool point on ``start`` (default the task plan's
+    first point), its axis where the CLIK's orientation task holds it.
+
+    Inverse kinematics from the arm's home. SNOPT can stop infeasible from there at a start
+    in reach (5 cm above the drawing's first point it ran into the joint limits), so a start
+    off the plan's first point that fails is solved again from (and near) the solution at
+    that first point, as :func:`hemg_drake.placements.unreachable_point` walks the plan.
+
+    Raises
+    ------
+    ValueError
+        The start (with its axis) is out of the arm's reach.
+    """
+    first = np.asarray(scenario.task_plan().points[0], dtype=float)
+    start = first if start is None else np.asarray(start, dtype=float)
+    axes = {}
+    if scenario.clik.orientation_gain > 0:
+        axes = dict(axis_E=scenario.clik.axis_E, axis_W=scenario.clik.axis_W_desired)
+    try:
+        return solve_tool_point_ik(plant, arm, start, **axes)
+    except ValueError as error:
+        failure = error
+    if start.shape == first.shape and not np.array_equal(start, first):
+        try:
+            q_first = solve_tool_point_ik(plant, arm, first, **axes)
+            return solve_tool_point_ik(plant, arm, start, q_guess=q_first, **axes)
+        except ValueError:
+            pass
+    raise ValueError(
+        f"the task's start {np.round(start, 4).tolist()} m (the plan's first point, "
+        f"placed by scene.position and scene.yaw_deg) is out of the arm's reach: {failure}"
+    ) from None
+
+
 def make_slave_station(
     scenario,
     *,
@@ -258,19 +293,7 @@ def make_slave_station(
         block = add_block(plant, scenario.scene.block, scenario.X_WT())
     plant.Finalize()
     if q0 is None:
-        if start is None:
-            start = scenario.task_plan().points[0]
-        axes = {}
-        if scenario.clik.orientation_gain > 0:
-            # Start with the tool's axis where the CLIK's orientation task holds it.
-            axes = dict(axis_E=scenario.clik.axis_E, axis_W=scenario.clik.axis_W_desired)
-        try:
-            q0 = solve_tool_point_ik(plant, arm, start, **axes)
-        except ValueError as error:
-            raise ValueError(
-                f"the task's start {np.round(start, 4).tolist()} m (the plan's first point, "
-                f"placed by scene.position and scene.yaw_deg) is out of the arm's reach: {error}"
-            ) from None
+        q0 = start_configuration(scenario, plant, arm, start)
     q0 = np.array(q0, dtype=float)
     plant.SetDefaultPositions(arm.model_instance, q0)
 

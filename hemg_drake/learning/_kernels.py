@@ -1,187 +1,38 @@
 """Time recursions of the explicit-duration HSMM in log space, compiled by numba.
 
-Step t needs step t - 1, so the loops are JIT-compiled (``cache=True``). Indices: t time,
-i and j states, d duration in steps (1 .. n_durations, at column d - 1). The cost is the
-duration sums: per (time, state) a log-sum-exp over the state's support, of which only a few
-terms are within _NEGLIGIBLE nats of the largest (the segments' emission products fall by
-hundreds of nats per step); so the sums skip chunks of segment boundaries whose largest
-value cannot reach the best term so far, looking at the window's two ends first
-(:func:`_window`). Everything stays in log space. Viterbi and the state posteriors are in
-:mod:`._segment_kernels`, the E-step's bounds in :mod:`._bound_kernels`, the emissions'
-distances and the reproduction's step in :mod:`._step_kernels` (importable from here).
+Step t needs step t - 1, so the loops are JIT-compiled. Indices: t time, i and j states, d
+duration in steps (1 .. n_durations, at column d - 1). The cost is the duration sums, which
+:mod:`._sum_kernels` computes (skipping the negligible terms); everything stays in log space.
+Viterbi and the state posteriors are in :mod:`._segment_kernels`, the E-step's bounds in
+:mod:`._bound_kernels`, the emissions' distances and the reproduction's step in
+:mod:`._step_kernels`.
 """
+
+import hashlib
+from pathlib import Path
 
 import numba
 import numpy as np
 
-from hemg_drake.learning._step_kernels import mahalanobis, residual_step  # noqa: F401
+from hemg_drake.learning import _sum_kernels
+from hemg_drake.learning._sum_kernels import finite_entries, log_row, push, window, workspace
 
 _NEG_INF = -np.inf
-# Terms more than this many nats below the largest are skipped in a log-sum-exp: together
-# (at most n_durations of them) they change it by less than 1e-19 relative.
-_NEGLIGIBLE = 50.0
 # A posterior below e^-745 is 0 in double precision (the smallest subnormal is 4.9e-324):
-# the E-step leaves out segments whose paths carry less than e^-_UNDERFLOW of the likelihood.
-_UNDERFLOW = 750.0
+# the E-step leaves out segments whose paths carry less than e^-UNDERFLOW of the likelihood.
+UNDERFLOW = 750.0
+# numba's on-disk cache notices changes to a kernel's own file only, and the kernels here
+# compile _sum_kernels' functions into theirs: they are cached only while _sum_kernels.py is
+# the file they were written against (its SHA-256 here). Otherwise they compile afresh at each
+# import, and tests/learning/test_hsmm_kernels.py fails until this digest is updated (which
+# changes this file, so that its cache is renewed). Line ends are read as "\n" (a checkout
+# with CRLF keeps its cache).
+SUM_KERNELS_SHA256 = "6b84a4418e16ea855f72238c67f6c6d76cf6feaaa1d51c162aeccd32c80052ed"
+_SUM_KERNELS_SOURCE = Path(_sum_kernels.__file__).read_bytes().replace(b"\r\n", b"\n")
+_CACHED = hashlib.sha256(_SUM_KERNELS_SOURCE).hexdigest() == SUM_KERNELS_SHA256
 
 
-@numba.njit(cache=True)
-def support(log_duration):
-    """First and last duration index (0-based, inclusive) of each state with p_i(d) > 0."""
-    n_states, n_durations = log_duration.shape
-    first = np.zeros(n_states, dtype=np.int64)
-    last = np.full(n_states, -1, dtype=np.int64)
-    for i in range(n_states):
-        for d in range(n_durations):
-            if log_duration[i, d] > _NEG_INF:
-                if last[i] < 0:
-                    first[i] = d
-                last[i] = d
-    return first, last
-
-
-@numba.njit(cache=True)
-def cumulative(log_emission):
-    """Per-state running sums, shape (N, T + 1): a segment's log-likelihood is a difference.
-
-    State-major, like the other arrays the duration loops read, so that they read
-    consecutive memory.
-    """
-    n_steps, n_states = log_emission.shape
-    total = np.zeros((n_states, n_steps + 1))
-    for i in range(n_states):
-        for t in range(n_steps):
-            total[i, t + 1] = total[i, t] + log_emission[t, i]
-    return total
-
-
-# exp() on (-_NEGLIGIBLE, 0], where every kept term is: e^(-k/64) from a table times a
-# degree-6 Taylor polynomial of the rest (|r| <= 1/128), within 2 ulp of np.exp (tested) at
-# half its cost here, where it took 40 % of the duration sums' time.
-_EXP_STEPS = 64
-_EXP_TABLE = np.exp(-np.arange(int(_NEGLIGIBLE) * _EXP_STEPS + 2) / _EXP_STEPS)
-
-
-@numba.njit(cache=True, inline="always")
-def _exp_kept(x):
-    """e^x for x in (-_NEGLIGIBLE, 0] (exactly 1 at 0)."""
-    k = int(-x * _EXP_STEPS + 0.5)
-    r = x + k / _EXP_STEPS
-    polynomial = 1.0 / 120.0 + r * (1.0 / 720.0)
-    polynomial = 1.0 / 24.0 + r * polynomial
-    polynomial = 1.0 / 6.0 + r * polynomial
-    polynomial = 0.5 + r * polynomial
-    polynomial = 1.0 + r * polynomial
-    return _EXP_TABLE[k] * (1.0 + r * polynomial)
-
-
-@numba.njit(cache=True)
-def _finite_entries(log_matrix):
-    """(start, columns): row i of ``log_matrix`` (N, N) is finite at columns[start[i] :
-    start[i + 1]] (increasing) only."""
-    n_rows, n_columns = log_matrix.shape
-    start = np.zeros(n_rows + 1, dtype=np.int64)
-    columns = np.empty(n_rows * n_columns, dtype=np.int64)
-    k = 0
-    for i in range(n_rows):
-        for j in range(n_columns):
-            if log_matrix[i, j] > _NEG_INF:
-                columns[k] = j
-                k += 1
-        start[i + 1] = k
-    return start, columns[:k]
-
-
-@numba.njit(cache=True, inline="always")
-def _log_row(log_row, log_values, columns, low, high, weights):
-    """log sum_j exp(log_row[j] + log_values[j]) over j = columns[low:high] (the row's
-    finite entries) as top and sum / e^top (0 if all -inf); terms over _NEGLIGIBLE below the
-    largest left out. weights[k - low] is left the k-th's exp(term - top) (0 if left out)."""
-    top = _NEG_INF
-    for k in range(low, high):
-        j = columns[k]
-        weights[k - low] = log_row[j] + log_values[j]
-        if weights[k - low] > top:
-            top = weights[k - low]
-    total = 0.0
-    for k in range(high - low):
-        weights[k] = _exp_kept(weights[k] - top) if weights[k] > top - _NEGLIGIBLE else 0.0
-        total += weights[k]
-    return top, total
-
-
-# Positions per chunk: the duration loops skip a whole chunk of segment boundaries whose
-# largest log value is too low to matter, instead of looking at each.
-_CHUNK = 8
-
-
-@numba.njit(cache=True, inline="always")
-def _push(chunk_top, row, position, value):
-    """Keep chunk_top[row, c] the largest value pushed at a position of chunk c."""
-    c = position // _CHUNK
-    if value > chunk_top[row, c]:
-        chunk_top[row, c] = value
-
-
-@numba.njit(cache=True, inline="always")
-def _window(values, chunk_top, weights, offset, low, high, bound, descending, kept, where):
-    """sum_{p = low .. high} exp(values[p] + weights[offset + p]) as top and sum / e^top.
-
-    Terms more than _NEGLIGIBLE below the largest are left out; a chunk whose
-    ``chunk_top`` plus ``bound`` (the largest weight) is that far below the best term so far
-    is not looked at. The window's end chunks go first (on steep stretches the largest term
-    is at one of them), then the others from the newest (``descending``: the highest
-    position). Returns top (-inf if no term), the sum of exp(term - top) and n: the kept
-    terms' exp(term - top) are left in ``kept[:n]``, their positions in ``where[:n]``.
-    """
-    n = 0
-    top = _NEG_INF
-    newest, oldest = low // _CHUNK, high // _CHUNK
-    step = 1
-    if descending:
-        newest, oldest, step = oldest, newest, -1
-    for k in range(abs(oldest - newest) + 1):
-        c = newest if k == 0 else (oldest if k == 1 else newest + (k - 1) * step)
-        if chunk_top[c] == _NEG_INF or chunk_top[c] + bound < top - _NEGLIGIBLE:
-            continue
-        for p in range(max(low, c * _CHUNK), min(high, c * _CHUNK + _CHUNK - 1) + 1):
-            # Without branches (whether a term is kept is unpredictable): always written,
-            # kept by counting it.
-            value = values[p] + weights[offset + p]
-            kept[n] = value
-            where[n] = p
-            n += value > top - _NEGLIGIBLE
-            top = max(top, value)
-    total = 0.0
-    for k in range(n):
-        kept[k] = _exp_kept(kept[k] - top) if kept[k] > top - _NEGLIGIBLE else 0.0
-        total += kept[k]
-    return top, total, n
-
-
-@numba.njit(cache=True)
-def _workspace(log_emission, log_duration):
-    """What both passes need: each state's support and largest log p_i(d), the running
-    sums of the emissions (:func:`cumulative`), empty chunk maxima (:func:`_push`) with
-    the state-major array of the duration sums' values they bound, and scratch for
-    :func:`_log_row` and :func:`_window`."""
-    n_steps, n_states = log_emission.shape
-    n_durations = log_duration.shape[1]
-    first, last = support(log_duration)
-    bound = np.full(n_states, _NEG_INF)
-    for i in range(n_states):
-        if last[i] >= first[i]:
-            bound[i] = log_duration[i, first[i] : last[i] + 1].max()
-    chunk_top = np.full((n_states, n_steps // _CHUNK + 1), _NEG_INF)
-    values = np.empty((n_states, n_steps))
-    weights = np.empty(n_states)
-    kept = np.empty(n_durations)
-    where = np.empty(n_durations, dtype=np.int64)
-    return (first, last, bound, cumulative(log_emission), chunk_top, values, weights, kept,
-            where)  # fmt: skip
-
-
-@numba.njit(cache=True)
+@numba.njit(cache=_CACHED)
 def forward(log_emission, log_startprob, log_transmat, log_duration):
     """Segment forward variables (eq. 11) of one sequence, every path kept.
 
@@ -201,12 +52,12 @@ def forward(log_emission, log_startprob, log_transmat, log_duration):
         log p(xi_0..t, a segment of i ends at t), log p(xi_0..t-1, one starts at t).
     """
     none = np.zeros((0, 0))
-    return _forward(log_emission, log_startprob, log_transmat, log_duration, _NEG_INF,
+    return forward_pruned(log_emission, log_startprob, log_transmat, log_duration, _NEG_INF,
                     (none, none))  # fmt: skip
 
 
-@numba.njit(cache=True)
-def _forward(log_emission, log_startprob, log_transmat, log_duration, floor, suffix):
+@numba.njit(cache=_CACHED)
+def forward_pruned(log_emission, log_startprob, log_transmat, log_duration, floor, suffix):
     """:func:`forward` with the segment starts and ends that cannot matter left out.
 
     A segment start (end) of i at t whose forward value plus ``suffix[0][t, i]``
@@ -219,13 +70,13 @@ def _forward(log_emission, log_startprob, log_transmat, log_duration, floor, suf
     n_durations = log_duration.shape[1]
     # boundary[i, b] = log alpha_in - the emissions before b: a segment's term is
     # boundary[i, b] + log p_i(d) + total[i, t + 1].
-    first, last, bound, total, chunk_top, boundary, weights, kept, where = _workspace(
+    first, last, bound, total, chunk_top, boundary, weights, kept, where = workspace(
         log_emission, log_duration
     )
     reversed_duration = np.ascontiguousarray(log_duration[:, ::-1])  # [i, n_durations - d]
     log_transmat_T = np.ascontiguousarray(log_transmat.T)
     # The transitions into each state that can happen (a left-to-right model has one).
-    start, predecessors = _finite_entries(log_transmat_T)
+    start, predecessors = finite_entries(log_transmat_T)
     log_alpha = np.empty((n_steps, n_states))
     log_alpha_in = np.empty((n_steps, n_states))
     newest = np.full(n_states, -1)  # the last step at which a segment of i can start
@@ -234,13 +85,13 @@ def _forward(log_emission, log_startprob, log_transmat, log_duration, floor, suf
             if t == 0:
                 log_alpha_in[0, i] = log_startprob[i]
             else:
-                top, weight = _log_row(log_transmat_T[i], log_alpha[t - 1], predecessors,
+                top, weight = log_row(log_transmat_T[i], log_alpha[t - 1], predecessors,
                                        start[i], start[i + 1], weights)  # fmt: skip
                 log_alpha_in[t, i] = top + np.log(weight) if weight > 0.0 else _NEG_INF
             if floor > _NEG_INF and log_alpha_in[t, i] + suffix_starts[t, i] < floor:
                 log_alpha_in[t, i] = _NEG_INF
             boundary[i, t] = log_alpha_in[t, i] - total[i, t]
-            _push(chunk_top, i, t, boundary[i, t])
+            push(chunk_top, i, t, boundary[i, t])
             if log_alpha_in[t, i] > _NEG_INF:
                 newest[i] = t
         for i in range(n_states):
@@ -248,7 +99,7 @@ def _forward(log_emission, log_startprob, log_transmat, log_duration, floor, suf
             low, high = max(0, t - last[i]), t - first[i]
             log_alpha[t, i] = _NEG_INF
             if high >= low and newest[i] >= low:  # (else no segment of i can end at t)
-                top, weight, _ = _window(boundary[i], chunk_top[i], reversed_duration[i],
+                top, weight, _ = window(boundary[i], chunk_top[i], reversed_duration[i],
                                          n_durations - 1 - t, low, high, bound[i], True, kept,
                                          where)  # fmt: skip
                 if weight > 0.0:
@@ -258,7 +109,7 @@ def _forward(log_emission, log_startprob, log_transmat, log_duration, floor, suf
     return log_alpha, log_alpha_in
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=_CACHED)
 def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, log_likelihood):
     """Backward variables and the expected counts of one sequence.
 
@@ -286,10 +137,10 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
     n_durations = log_duration.shape[1]
     # end[i, e] = the emissions up to e + log beta_e: a segment's term is
     # end[i, e] + log p_i(d) - total[i, s].
-    first, last, bound, total, chunk_top, end, weights, kept, where = _workspace(
+    first, last, bound, total, chunk_top, end, weights, kept, where = workspace(
         log_emission, log_duration
     )
-    start, successors = _finite_entries(log_transmat)  # the transitions out of each state
+    start, successors = finite_entries(log_transmat)  # the transitions out of each state
     log_beta = np.empty((n_steps, n_states))
     log_beta_in = np.empty((n_steps, n_states))
     starts = np.zeros((n_steps, n_states))
@@ -305,7 +156,7 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
             elif log_alpha[s, i] == _NEG_INF:
                 log_beta[s, i] = _NEG_INF  # not reached: left out (see Returns)
             else:
-                top, weight = _log_row(log_transmat[i], log_beta_in[s + 1], successors,
+                top, weight = log_row(log_transmat[i], log_beta_in[s + 1], successors,
                                        start[i], start[i + 1], weights)  # fmt: skip
                 log_beta[s, i] = top + np.log(weight) if weight > 0.0 else _NEG_INF
                 if weight > 0.0:
@@ -316,14 +167,14 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
                         for k in range(start[i], start[i + 1]):
                             transition_counts[i, successors[k]] += weights[k - start[i]] * scale
             end[i, s] = total[i, s + 1] + log_beta[s, i]
-            _push(chunk_top, i, s, end[i, s])
+            push(chunk_top, i, s, end[i, s])
         for i in range(n_states):
             # Durations d = first + 1 .. min(last + 1, T - s): segment xi_{s..e}, e = s + d - 1.
             low, high = s + first[i], min(s + last[i], n_steps - 1)
             log_beta_in[s, i] = _NEG_INF
             if high < low or log_alpha_in[s, i] == _NEG_INF:  # (not reached: left out)
                 continue
-            top, weight, n_kept = _window(end[i], chunk_top[i], log_duration[i], -s, low, high,
+            top, weight, n_kept = window(end[i], chunk_top[i], log_duration[i], -s, low, high,
                                           bound[i], False, kept, where)  # fmt: skip
             if weight == 0.0:
                 continue
@@ -340,7 +191,7 @@ def backward(log_emission, log_transmat, log_duration, log_alpha, log_alpha_in, 
 _LOG_2 = np.log(2.0)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=_CACHED, inline="always")
 def _logaddexp(x, y):
     """log(e^x + e^y), the way numpy's logaddexp computes it (so the same to the bit)."""
     if x == y:
@@ -353,16 +204,16 @@ def _logaddexp(x, y):
     return difference  # NaN
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=_CACHED)
 def expectation(log_emission, bounds, log_startprob, log_transmat, log_duration, guesses,
                 suffix_starts, suffix_ends):
     """The E-step over all sequences in one call: :func:`forward` and :func:`backward` of
     each, their counts added up in the sequences' order.
 
-    Segment starts and ends whose paths carry under e^-_UNDERFLOW of a sequence's likelihood
+    Segment starts and ends whose paths carry under e^-UNDERFLOW of a sequence's likelihood
     (bounded by ``suffix_*``) are left out, with the results of every path: their posteriors
     underflow to 0 when kept, and together (at most 2 T N) they move the others by under
-    e^-700 relative. The forward pass drops those below ``guesses[c] - _UNDERFLOW -
+    e^-700 relative. The forward pass drops those below ``guesses[c] - UNDERFLOW -
     log(2 T N)``, ``guesses[c]`` a guess of sequence c's log-likelihood (the previous EM
     iteration's; -inf keeps all); if it then finds less than the guess minus 1 nat, it runs
     again with the floor from what it found (dropping less finds at least as much). The
@@ -400,10 +251,10 @@ def expectation(log_emission, bounds, log_startprob, log_transmat, log_duration,
     for c in range(len(bounds) - 1):
         emission = log_emission[bounds[c] : bounds[c + 1]]
         suffix = (suffix_starts[bounds[c] : bounds[c + 1]], suffix_ends[bounds[c] : bounds[c + 1]])
-        margin = _UNDERFLOW + np.log(2.0 * emission.size)
+        margin = UNDERFLOW + np.log(2.0 * emission.size)
         floor = guesses[c] - margin if guesses[c] > _NEG_INF else _NEG_INF
         for _ in range(2):
-            log_alpha, log_alpha_in = _forward(
+            log_alpha, log_alpha_in = forward_pruned(
                 emission, log_startprob, log_transmat, log_duration, floor, suffix
             )
             sequence = _NEG_INF  # logaddexp.reduce(log_alpha[-1])

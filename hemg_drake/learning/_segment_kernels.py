@@ -1,7 +1,7 @@
 """Decoding kernels of the explicit-duration HSMM, compiled by numba: segmental Viterbi and
 the state posteriors from the segment posteriors of :func:`._kernels.expectation`.
 
-They take what they need of :mod:`hemg_drake.learning._kernels` (a state's duration
+They take what they need of :mod:`hemg_drake.learning._sum_kernels` (a state's duration
 support, the emissions' running sums) as arguments, from Python: numba's on-disk cache
 (``cache=True``) notices changes to a kernel's own file only, so no compiled function here
 calls one there.
@@ -10,7 +10,7 @@ calls one there.
 import numba
 import numpy as np
 
-from hemg_drake.learning import _kernels
+from hemg_drake.learning import _sum_kernels
 
 _NEG_INF = -np.inf
 
@@ -33,9 +33,9 @@ def viterbi(log_emission, log_startprob, log_transmat, log_duration):
     states : array of int, shape (T,)
         The state active at each step (all -1 if impossible).
     """
-    first, last = _kernels.support(log_duration)
+    first, last = _sum_kernels.support(log_duration)
     return _viterbi(log_emission, log_startprob, log_transmat, log_duration, first, last,
-                    _kernels.cumulative(log_emission))  # fmt: skip
+                    _sum_kernels.cumulative(log_emission))  # fmt: skip
 
 
 @numba.njit(cache=True)

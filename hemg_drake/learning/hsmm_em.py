@@ -7,7 +7,7 @@ parameters that the recursions (:mod:`hemg_drake.learning._kernels`) take.
 
 import numpy as np
 
-from hemg_drake.learning import _bound_kernels, _kernels, _segment_kernels
+from hemg_drake.learning import _bound_kernels, _kernels, _segment_kernels, _sum_kernels
 from hemg_drake.learning.gmr import gaussian_log_pdf
 
 
@@ -45,7 +45,7 @@ def log_durations(duration_means, duration_stds, max_duration):
     d = np.arange(1, max_duration + 1)
     z = (d[None, :] - duration_means[:, None]) / duration_stds[:, None]
     log_p = -0.5 * z**2 - np.log(np.sqrt(2.0 * np.pi) * duration_stds)[:, None]
-    return np.where(0.5 * z**2 <= _kernels._NEGLIGIBLE, log_p, -np.inf)
+    return np.where(0.5 * z**2 <= _sum_kernels.NEGLIGIBLE, log_p, -np.inf)
 
 
 def log_parameters(model):

@@ -10,6 +10,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, PortDataType
 from pydrake.systems.primitives import ConstantVectorSource
 
+from hemg_drake.control.ik import solve_tool_point_ik
 from hemg_drake.control.pd import STIFFNESS_SCALE
 from hemg_drake.diagrams.plan_follower import build_plan_follower
 from hemg_drake.diagrams.station import make_slave_station
@@ -101,6 +102,22 @@ def test_ports_names_and_sizes(pin_scenario):
         make_slave_station(pin_scenario, reference="torques")
     with pytest.raises(ValueError, match="out of the arm's reach"):
         make_slave_station(pin_scenario, start=[2.5, 0.0, 0.0], scene=False)
+
+
+def test_a_start_5_cm_above_the_sheet_is_reached_where_ik_from_home_stalls(drawing_scenario):
+    """Issue 23's starts: 5 cm above the drawing's first point is in reach, but SNOPT from
+    the arm's home stops infeasible at the joint limits (the bench's drawing start failed);
+    the station starts there from the IK at the plan's first point. Checked by Drake's
+    forward kinematics of the station's q0."""
+    start = np.asarray(drawing_scenario.task_plan().points[0]) + [0.0, 0.0, 0.05]
+    station = make_slave_station(drawing_scenario, start=start)
+    down = dict(axis_E=[0.0, 0.0, 1.0], axis_W=[0.0, 0.0, -1.0])
+    with pytest.raises(ValueError, match="out of the arm's reach"):  # the case stays a case
+        solve_tool_point_ik(station.plant, station.arm, start, **down)
+    X_WE = station.arm.tool_frame.CalcPoseInWorld(station.plant.CreateDefaultContext())
+    assert np.linalg.norm(X_WE.translation() - start) < 1e-3
+    pen_W = X_WE.rotation().matrix()[:, 2]
+    assert np.degrees(np.arccos(-pen_W[2])) < np.degrees(0.05) + 1e-6
 
 
 def test_tool_point_outputs_against_finite_differences(pin_scenario):

@@ -4,10 +4,13 @@ The kernels skip chunks of negligible terms; the reference sums every term with
 np.logaddexp, so a chunk skipped wrongly (or a term lost far below the best) shows here.
 """
 
+import hashlib
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-from hemg_drake.learning import _bound_kernels, _kernels, _segment_kernels
+from hemg_drake.learning import _bound_kernels, _kernels, _segment_kernels, _sum_kernels
 
 
 def logsumexp(values, axis=None):
@@ -55,7 +58,7 @@ def log_durations(means, stds, n_durations):
     d = np.arange(1, n_durations + 1)
     z = (d[None, :] - means[:, None]) / stds[:, None]
     log_p = -0.5 * z**2 - np.log(np.sqrt(2.0 * np.pi) * stds)[:, None]
-    return np.where(0.5 * z**2 <= _kernels._NEGLIGIBLE, log_p, -np.inf)
+    return np.where(0.5 * z**2 <= _sum_kernels.NEGLIGIBLE, log_p, -np.inf)
 
 
 def kernels(log_emission, log_startprob, log_transmat, log_duration):
@@ -177,13 +180,13 @@ def test_kept_terms_exp_within_two_ulp_of_numpy():
     def evaluate(x):
         out = np.empty_like(x)
         for k in range(len(x)):
-            out[k] = _kernels._exp_kept(x[k])
+            out[k] = _sum_kernels.exp_kept(x[k])
         return out
 
     rng = np.random.default_rng(3)
     x = np.concatenate([
-        -rng.uniform(0.0, _kernels._NEGLIGIBLE, 200_000),
-        [0.0, -1e-300, -1.0 / 128, -1.0 / 64, -np.nextafter(_kernels._NEGLIGIBLE, 0.0)],
+        -rng.uniform(0.0, _sum_kernels.NEGLIGIBLE, 200_000),
+        [0.0, -1e-300, -1.0 / 128, -1.0 / 64, -np.nextafter(_sum_kernels.NEGLIGIBLE, 0.0)],
     ])  # fmt: skip
     got, truth = evaluate(x), np.exp(x)
     assert np.max(np.abs(got - truth) / np.spacing(truth)) <= 2.0
@@ -260,10 +263,10 @@ def test_pruned_expectation_equals_every_segmentation_listed(steep):
         np.testing.assert_allclose(transitions, expected[3], atol=1e-12)
         np.testing.assert_allclose(durations, expected[4], atol=1e-12)
     if steep:  # the bound leaves some out at the likelihood's own floor
-        floor = expected[0] - _kernels._UNDERFLOW - np.log(2.0 * log_emission.size)
+        floor = expected[0] - _kernels.UNDERFLOW - np.log(2.0 * log_emission.size)
         full = _kernels.forward(*case)
         suffix = _bound_kernels.suffix_bound(case[0], bounds, *case[2:])
-        pruned = _kernels._forward(*case, floor, suffix)
+        pruned = _kernels.forward_pruned(*case, floor, suffix)
         assert np.sum(np.isfinite(pruned[1])) < np.sum(np.isfinite(full[1]))
 
 
@@ -294,3 +297,10 @@ def test_suffix_bound_is_above_every_backward_value():
         assert np.all(log_beta <= ends + 1e-9)
         # The last step: a segment of one step ending the sequence, weighted p_i(1) <= S.
         assert np.all(ends[-1] == 0.0)
+
+
+def test_recursions_are_cached_against_the_sum_kernels_they_compile_in():
+    """numba's cache does not see _sum_kernels.py change under _kernels.py's functions, which
+    inline it: _kernels caches only against the pinned digest of that file (update it)."""
+    source = Path(_sum_kernels.__file__).read_bytes().replace(b"\r\n", b"\n")
+    assert hashlib.sha256(source).hexdigest() == _kernels.SUM_KERNELS_SHA256
