@@ -34,6 +34,9 @@ class AssistConfig:
     activation_high: float = checked(0.6, fraction=True)
     # Time constant of the weight's first-order filter (s): no step in the reference.
     weight_time_constant: float = checked(0.1, positive=True)
+    # The operator's command about the learnt (tool) positions: a standard deviation (m)
+    # added to each state's position spread in the estimator's likelihood.
+    command_noise: float = checked(0.005)
     # Time constant of the estimator's average of the motion's likelihood (s).
     likelihood_time_constant: float = checked(0.2, positive=True)
     # Guidance on the master: a force K_g w (x_policy - p_command) at the slave, fed back

@@ -6,7 +6,8 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from hemg_drake.learning.forward import ResidualForward
-from hemg_drake.learning.gmr_policy import check_position, output_gmr
+from hemg_drake.learning.gmr import gaussian_log_pdf
+from hemg_drake.learning.gmr_policy import check_position
 
 
 class IntentModel:
@@ -39,16 +40,20 @@ class IntentModel:
         Step (s), the model's sample period.
     likelihood_time_constant : float
         tau of the average (s), >= dt.
+    command_noise : float
+        sigma_c (m), >= 0.
     """
 
-    def __init__(self, model, dt, likelihood_time_constant):
+    def __init__(self, model, dt, likelihood_time_constant, command_noise=0.0):
         self.forward = ResidualForward(model)
-        self.gmr, _ = output_gmr(model)
         self.n_states = model.n_states
-        self.n_position = len(model.position_dims_)
-        means = self.gmr.input_means_
-        self.position_means = means.copy()
-        self.reference = np.diag(self.gmr.log_input_likelihood(means)) - 0.5 * self.n_position
+        dims = model.position_dims_
+        self.n_position = len(dims)
+        self.position_means = model.means_[:, dims].copy()
+        block = model.covariances_[np.ix_(range(self.n_states), dims, dims)]
+        self.covariances = block + float(command_noise) ** 2 * np.eye(self.n_position)
+        peaks = gaussian_log_pdf(self.position_means, self.position_means, self.covariances)
+        self.reference = np.diag(peaks) - 0.5 * self.n_position
         transmat = model.transmat_.copy()
         final = transmat.sum(axis=1) == 0
         transmat[final, final] = 1.0
@@ -65,7 +70,7 @@ class IntentModel:
 
     def step(self, predicted, rbar, x):
         """One observation x: (h, predicted_next, rbar_next)."""
-        log_emission = self.gmr.log_input_likelihood(x)
+        log_emission = gaussian_log_pdf(x[None], self.position_means, self.covariances)[0]
         q = predicted.sum(axis=1)
         q = q / q.sum()
         top = log_emission.max()
@@ -125,16 +130,21 @@ def IntentEstimator_(T):
             Update period (s), the model's sample period (the scenario's log period).
         likelihood_time_constant : float
             tau of the likelihood's average (s).
+        command_noise : float
+            sigma_c, the command's spread about the learnt positions (m).
         """
 
-        def _construct(self, *, model, dt, likelihood_time_constant=0.2, converter=None):
+        def _construct(
+            self, *, model, dt, likelihood_time_constant=0.2, command_noise=0.0, converter=None
+        ):
             LeafSystem_[T].__init__(self, converter)
             self._arguments = dict(
-                model=model, dt=dt, likelihood_time_constant=likelihood_time_constant
-            )
+                model=model, dt=dt, likelihood_time_constant=likelihood_time_constant,
+                command_noise=command_noise,
+            )  # fmt: skip
             if not (np.isfinite(dt) and dt > 0):
                 raise ValueError(f"dt must be a finite number > 0 (s), got {dt!r}")
-            self.intent = IntentModel(model, dt, likelihood_time_constant)
+            self.intent = IntentModel(model, dt, likelihood_time_constant, command_noise)
             predicted, h, rbar = self.intent.initial()
             self._shape = predicted.shape
             self._input = self.DeclareVectorInputPort("p_WE_command", self.intent.n_position)

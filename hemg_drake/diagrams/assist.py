@@ -69,7 +69,8 @@ def add_assist(builder, scenario, *, model, start, command, p_WE, f_WE, activati
     intent = builder.AddNamedSystem(
         "intent",
         IntentEstimator(
-            model=model, dt=dt, likelihood_time_constant=settings.likelihood_time_constant
+            model=model, dt=dt, likelihood_time_constant=settings.likelihood_time_constant,
+            command_noise=settings.command_noise,
         ),
     )
     policy = builder.AddNamedSystem(
