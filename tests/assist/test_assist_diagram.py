@@ -117,3 +117,21 @@ def test_a_missing_model_file_names_the_key(tmp_path):
     broken = scenario("assist.mode=emg", f"assist.model={tmp_path / 'none.npz'}")
     with pytest.raises(ValueError, match="assist.model"):
         build_demonstration_diagram(broken)
+
+
+def test_the_assisted_diagram_clones(model_path):
+    """Clone() (double -> AutoDiffXd -> double) of the whole diagram with the assist: the
+    same reference, bit for bit, after 50 ms."""
+    built = build_demonstration_diagram(
+        scenario("assist.mode=fixed", "assist.weight=1.0", f"assist.model={model_path}")
+    )
+    references = []
+    for diagram in (built.diagram, built.diagram.Clone()):
+        from pydrake.systems.analysis import Simulator
+
+        simulator = Simulator(diagram, initial_context(built, 2, diagram=diagram))
+        simulator.AdvanceTo(0.05)
+        arbitration = diagram.GetSubsystemByName("arbitration")
+        own = arbitration.GetMyContextFromRoot(simulator.get_context())
+        references.append(arbitration.GetOutputPort("p_WE_reference").Eval(own).copy())
+    assert np.array_equal(references[0], references[1])
