@@ -221,10 +221,11 @@ class Scenario:
         """The assist's rules across sections: a model when it is on; guidance only through
         the force feedback and its passivity controller (an active port kept passive)."""
         assist = self.assist
-        if assist.mode != "none" and not assist.model:
+        if (assist.mode != "none" or assist.gap_duration > 0) and not assist.model:
             raise ValueError(
                 f"key 'assist.model' must name a fitted model file (hemg-drake learn's "
-                f"model.npz) when 'assist.mode' = {assist.mode!r}"
+                f"model.npz) when 'assist.mode' = {assist.mode!r} or 'assist.gap_duration' "
+                f"= {assist.gap_duration} > 0"
             )
         if assist.guidance_stiffness > 0 and (
             self.feedback.mode != "force" or self.feedback.passivity != "tdpa"

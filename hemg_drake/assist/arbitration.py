@@ -85,7 +85,9 @@ def Arbitration_(T):
         command is held. When its age exceeds ``config.link_timeout`` the link is lost:
         w* = 1, and the policy runs alone until its most probable state (``h_policy``, N)
         leaves the one active at the loss, where the reference holds x_pol (the current
-        phase completed, then hold). The link's return clears the watchdog.
+        phase completed, then hold). The link's return clears the watchdog. In mode
+        ``none`` (built only to simulate a gap) nothing takes over: w stays 0 and the slave
+        holds the last command, today's teleop on a lossy link.
 
         Updated every ``period`` (the master's); the reference is a direct feedthrough of
         the command (so w = 0 gives the command itself, bit for bit). State: [w, held
@@ -172,7 +174,9 @@ def Arbitration_(T):
             command = self._command(context, state)
             x_policy = self._read(context, "x_policy")
             lost = self._age(context) > config.link_timeout
-            if lost:
+            if lost and config.mode == "none":  # today's teleop: the stale command, alone
+                target = 0.0
+            elif lost:
                 target = 1.0
                 phase = int(np.argmax(self._read(context, "h_policy")))
                 if state[4] < 0:

@@ -46,7 +46,8 @@ class AssistConfig:
     # completes the current phase alone and holds.
     link_timeout: float = checked(1.0, positive=True)
     # A simulated outage of the master-to-slave link: commands sent in
-    # [gap_start, gap_start + gap_duration) are lost (s; duration 0: none).
+    # [gap_start, gap_start + gap_duration) are lost (s; duration 0: none). With mode none
+    # the link is simulated too (it needs the model): the slave holds the last command.
     gap_start: float = checked(0.0)
     gap_duration: float = checked(0.0)
 

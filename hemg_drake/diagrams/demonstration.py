@@ -208,7 +208,8 @@ def build_demonstration_diagram(
 
     f_WE = slave.GetOutputPort("f_WE")
     reference, fed_back, assist_sources = p_WE_desired, f_WE, None
-    if scenario.assist.mode != "none":  # the shared control (docs/shared_control.md)
+    if scenario.assist.mode != "none" or scenario.assist.gap_duration > 0:  # the assist, or
+        # a lossy link without it (docs/shared_control.md)
         from hemg_drake.diagrams.assist import add_assist, assist_model
 
         reference, fed_back, assist_sources = add_assist(

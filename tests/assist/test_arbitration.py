@@ -156,3 +156,13 @@ def test_a_returning_link_clears_the_watchdog():
 def test_config_checks():
     with pytest.raises(ValueError, match="activation_high"):
         dc.replace(AssistConfig(), activation_low=0.7).check("assist")
+
+
+def test_mode_none_on_a_lost_link_holds_the_last_command():
+    config = AssistConfig(mode="none", weight_time_constant=1e-3, link_timeout=0.05,
+                          gap_start=0.02, gap_duration=1.0)  # fmt: skip
+    arbitration = Harness(config)
+    arbitration.step(100)
+    arbitration.set(command=[5.0, 5.0, 5.0])
+    assert arbitration.out("link_lost")[0] == 1 and arbitration.out("weight")[0] == 0.0
+    assert np.array_equal(arbitration.out("p_WE_reference"), [0.1, 0.2, 0.3])
