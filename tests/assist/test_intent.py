@@ -163,3 +163,19 @@ def test_the_estimator_clones_in_a_diagram():
         simulator.AdvanceTo(0.1)
         values.append(system.get_output_port().Eval(simulator.get_context())[0])
     assert values[0] == values[1] and 0.0 < values[0] <= 1.0
+
+
+def test_forward_step_survives_an_observation_that_underflows_the_prediction():
+    """The assist's policy observes a tool far from every state (a noisy operator at 250 ms
+    gave NaN weights, measured): an observation whose weight underflows the next prediction
+    to zero is ignored, the prediction alone (by hand: state 0 holds all the mass)."""
+    from hemg_drake.learning._step_kernels import residual_step
+
+    # exp(-745) is the smallest subnormal: times 0.3 or 0.4 it rounds to 0.
+    predicted = np.array([[0.0, 0.3, 0.3, 0.4], [0.0, 0.0, 0.0, 0.0]])
+    transmat_T = np.array([[0.0, 0.0], [1.0, 0.0]])
+    durations = np.full((2, 4), 0.25)
+    h, predicted_next = residual_step(predicted, np.array([-745.0, 0.0]), transmat_T, durations)
+    assert np.all(np.isfinite(h)) and np.all(np.isfinite(predicted_next))
+    np.testing.assert_array_equal(h, [1.0, 0.0])
+    np.testing.assert_allclose(predicted_next, [[0.3, 0.3, 0.4, 0.0], [0.0] * 4], rtol=1e-15)
