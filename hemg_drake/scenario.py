@@ -37,6 +37,7 @@ from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import GetIntegrationSchemes, SimulatorConfig
 from pydrake.visualization import VisualizationConfig
 
+from hemg_drake.assist.config import AssistConfig
 from hemg_drake.config_fields import check_config, checked
 from hemg_drake.control.config import MAX_TIME_STEP, ClikConfig, PdConfig
 from hemg_drake.emg.config import EmgConfig
@@ -119,6 +120,8 @@ class Scenario:
     feedback: FeedbackConfig = dc.field(default_factory=FeedbackConfig)
     learning: LearningConfig = dc.field(default_factory=LearningConfig)
     reproduction: ReproductionConfig = dc.field(default_factory=ReproductionConfig)
+    # Shared control while teleoperating (docs/shared_control.md); mode none: none.
+    assist: AssistConfig = dc.field(default_factory=AssistConfig)
 
     def seeds(self):
         """Seeds of the C demonstrations: ``[seed, seed + 1, ..., seed + C - 1]``."""
@@ -211,6 +214,27 @@ class Scenario:
             raise ValueError(
                 f"key 'log_period' must be a whole multiple of 'plant.time_step', got "
                 f"{self.log_period}"
+            )
+        self._check_assist()
+
+    def _check_assist(self):
+        """The assist's rules across sections: a model when it is on; guidance only through
+        the force feedback and its passivity controller (an active port kept passive)."""
+        assist = self.assist
+        if (assist.mode != "none" or assist.gap_duration > 0) and not assist.model:
+            raise ValueError(
+                f"key 'assist.model' must name a fitted model file (hemg-drake learn's "
+                f"model.npz) when 'assist.mode' = {assist.mode!r} or 'assist.gap_duration' "
+                f"= {assist.gap_duration} > 0"
+            )
+        if assist.guidance_stiffness > 0 and (
+            self.feedback.mode != "force" or self.feedback.passivity != "tdpa"
+        ):
+            raise ValueError(
+                f"key 'assist.guidance_stiffness' = {assist.guidance_stiffness} needs "
+                "'feedback.mode' = 'force' and 'feedback.passivity' = 'tdpa' (the guidance is "
+                f"fed back with the contact force; got {self.feedback.mode!r} and "
+                f"{self.feedback.passivity!r})"
             )
 
     def to_yaml(self):

@@ -6,7 +6,7 @@ Layers, lowest first; a module may import its own layer and those below, never a
 0. configs and base helpers: the ``config.py`` of each package, ``config_fields``,
    ``_validate``, ``fileio``, ``folder_lock``, ``folder_versions``,
    ``yaml_schema``;
-1. systems: ``emg``, ``control``, ``teleop``, ``learning``, ``robots``, ``tasks``;
+1. systems: ``emg``, ``control``, ``teleop``, ``learning``, ``assist``, ``robots``, ``tasks``;
 2. station and diagrams: ``diagrams``, the ``scenario`` that composes the configs for the
    builders, ``placements``;
 3. analysis of logs: ``analysis``, ``evaluation``, ``tasks.metrics``;
@@ -37,6 +37,7 @@ PLACES = {
     "control": "systems",
     "teleop": "systems",
     "learning": "systems",
+    "assist": "systems",
     "robots": "systems",
     "tasks": "systems",
     # A task plan is data (numpy only); a config may check a written-out plan with it.

@@ -70,12 +70,16 @@ class DemonstrationDiagram(StationDiagram):
     mapping : WorkspaceMapping
     logger : VectorLogSink, ``LOGGED_FIELDS`` every ``scenario.log_period``.
     emg_logger : VectorLogSink, [sEMG (8), muscle activation (1)] every 5 ms.
+    assist_logger : VectorLogSink or None
+        With ``assist.mode`` other than none: the assist's signals
+        (:data:`~hemg_drake.diagrams.assist.ASSIST_LOGGED`) every ``scenario.log_period``.
     """
 
     scenario: object
     mapping: object
     logger: object
     emg_logger: object
+    assist_logger: object = None
 
 
 def operator_plan(scenario, seed):
@@ -200,12 +204,22 @@ def build_demonstration_diagram(
         connect(master.GetOutputPort(name), operator.GetInputPort(name))
         connect(master.GetOutputPort(name), workspace_map.GetInputPort(name))
     p_WE_desired = workspace_map.GetOutputPort("p_WE_desired")
-    connect(p_WE_desired, slave.GetInputPort("p_WE_desired"))
     connect(variable_gain.get_gain_output_port(), slave.GetInputPort("gain"))
 
     f_WE = slave.GetOutputPort("f_WE")
+    reference, fed_back, assist_sources = p_WE_desired, f_WE, None
+    if scenario.assist.mode != "none" or scenario.assist.gap_duration > 0:  # the assist, or
+        # a lossy link without it (docs/shared_control.md)
+        from hemg_drake.diagrams.assist import add_assist, assist_model
+
+        reference, fed_back, assist_sources = add_assist(
+            builder, scenario, model=assist_model(scenario), start=start,
+            command=p_WE_desired, p_WE=slave.GetOutputPort("p_WE"), f_WE=f_WE,
+            activation=variable_gain.get_activation_output_port(),
+        )  # fmt: skip
+    connect(reference, slave.GetInputPort("p_WE_desired"))
     if scenario.feedback.mode == "force":
-        connect(f_WE, force_feedback.GetInputPort("f_WE"))
+        connect(fed_back, force_feedback.GetInputPort("f_WE"))
         if force_feedback.HasInputPort("v_MS"):  # the passivity controller reads the stylus
             connect(master.GetOutputPort("v_MS"), force_feedback.GetInputPort("v_MS"))
     else:
@@ -238,6 +252,11 @@ def build_demonstration_diagram(
         "muscle_activation": operator.GetOutputPort("activation"),
     }
     emg_logger = add_logger(builder, emg_sources, MYO_PERIOD, name="emg_logger")
+    assist_logger = None
+    if assist_sources is not None:
+        assist_logger = add_logger(
+            builder, assist_sources, scenario.log_period, name="assist_logger"
+        )
     diagram = builder.Build()
     diagram.set_name("demonstration")
     return DemonstrationDiagram(
@@ -247,6 +266,7 @@ def build_demonstration_diagram(
         mapping=mapping,
         logger=logger,
         emg_logger=emg_logger,
+        assist_logger=assist_logger,
     )
 
 

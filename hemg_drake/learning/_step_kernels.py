@@ -70,26 +70,31 @@ def residual_step(predicted, log_emission, transmat_T, durations):
     -------
     h : array, shape (N,)
         p(state i active now | observations), summing to 1. If the
-        observation is impossible under every state, the prediction alone.
+        observation is impossible under every state (or so unlikely that the next
+        prediction underflows to zero), the prediction alone.
     predicted_next : array, shape (N, n_durations)
     """
     n_states, n_durations = predicted.shape
     top = log_emission.max()
     weight = np.exp(log_emission - top)
     h = np.empty(n_states)
-    for i in range(n_states):
-        h[i] = weight[i] * predicted[i].sum()
-    total = h.sum()
-    if not total > 0:
-        weight[:] = 1.0
-        for i in range(n_states):
-            h[i] = predicted[i].sum()
-        total = h.sum()
-    # Segments ending now (one step left) start the next states; the rest count down.
-    starts = transmat_T @ (weight * predicted[:, 0])
     predicted_next = np.empty_like(predicted)
-    for i in range(n_states):
-        for d in range(n_durations - 1):
-            predicted_next[i, d] = weight[i] * predicted[i, d + 1] + starts[i] * durations[i, d]
-        predicted_next[i, n_durations - 1] = starts[i] * durations[i, n_durations - 1]
+    for attempt in range(2):
+        if attempt:  # the observation weighed everything to zero: ignore it
+            weight[:] = 1.0
+        for i in range(n_states):
+            h[i] = weight[i] * predicted[i].sum()
+        total = h.sum()
+        if not total > 0:
+            continue
+        # Segments ending now (one step left) start the next states; the rest count down.
+        starts = transmat_T @ (weight * predicted[:, 0])
+        for i in range(n_states):
+            for d in range(n_durations - 1):
+                predicted_next[i, d] = (
+                    weight[i] * predicted[i, d + 1] + starts[i] * durations[i, d]
+                )
+            predicted_next[i, n_durations - 1] = starts[i] * durations[i, n_durations - 1]
+        if predicted_next.sum() > 0:
+            break
     return h / total, predicted_next / predicted_next.sum()

@@ -37,8 +37,8 @@ OPTIONAL = {"reproduce": ["push.start_s", "push.release_s", "push.deviation_befo
 METRICS = {
     "demonstrate": {
         "*": ["tracking_error_m", "master_oscillation_mm", "master_energy_peak_mj",
-              "master_hit_wall", "gain_lag_s"],
-        "cotter_pin": ["pin_out"],
+              "master_hit_wall", "gain_lag_s", "contact_force_peak_n", "muscle_effort"],
+        "cotter_pin": ["pin_out", "completion_s"],
         "drawing": ["strokes", "three_strokes"],
     },
     "learn": {"*": ["n_iter", "converged"]},

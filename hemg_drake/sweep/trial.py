@@ -50,8 +50,11 @@ def demonstration_metrics(scenario, demos):
       workspace box.
     - ``gain_lag_s``: the lag maximising the cross-correlation of the operator's muscle
       activation and the gain K (0 to 0.5 s).
+    - ``contact_force_peak_n``: the largest |f_WE| (N); ``muscle_effort``: the operator's
+      muscle activation averaged over time (dimensionless; the shared-control study).
     - cotter pin: ``pin_out``: fraction of demonstrations whose tool point rose 8 cm (the
-      pin comes out after its 3 mm detent, the grasp stretches 1 cm at most); drawing:
+      pin comes out after its 3 mm detent, the grasp stretches 1 cm at most);
+      ``completion_s``: when it had (mean over those that did; NaN if none); drawing:
       ``strokes`` (mean count) and ``three_strokes`` (fraction with exactly three).
     """
     import numpy as np
@@ -62,8 +65,9 @@ def demonstration_metrics(scenario, demos):
     mapping = scenario.workspace_mapping()
     half_box = 0.5 * np.asarray(scenario.master.workspace_size)
     record = {k: [] for k in ("tracking_error_m", "master_oscillation_mm", "master_energy_peak_mj",
-                              "master_hit_wall", "gain_lag_s")}  # fmt: skip
-    task = {"pin_out": [], "strokes": [], "three_strokes": []}
+                              "master_hit_wall", "gain_lag_s", "contact_force_peak_n",
+                              "muscle_effort")}  # fmt: skip
+    task = {"pin_out": [], "completion_s": [], "strokes": [], "three_strokes": []}
     for demo in demos:
         error = np.linalg.norm(demo.p_WE - mapping.master_to_slave(demo.p_MS), axis=1)
         record["tracking_error_m"].append(float(np.sqrt(np.mean(error**2))))
@@ -81,12 +85,19 @@ def demonstration_metrics(scenario, demos):
         record["master_hit_wall"].append(float(np.any(np.abs(demo.p_MS) > half_box)))
         lag = _lag(demo.emg_time, demo.muscle_activation, demo.time, demo.gain)
         record["gain_lag_s"].append(lag)
+        record["contact_force_peak_n"].append(float(np.linalg.norm(demo.f_WE, axis=1).max()))
+        record["muscle_effort"].append(float(np.mean(demo.muscle_activation)))
         if scenario.task == "cotter_pin":
-            task["pin_out"].append(float(demo.p_WE[:, 2].max() - demo.p_WE[0, 2] >= 0.08))
+            risen = np.flatnonzero(demo.p_WE[:, 2] - demo.p_WE[0, 2] >= 0.08)
+            task["pin_out"].append(float(len(risen) > 0))
+            if len(risen):
+                task["completion_s"].append(float(demo.time[risen[0]]))
         else:
             count = len(strokes(demo.time, demo.p_WE, demo.f_WE))
             task["strokes"].append(float(count))
             task["three_strokes"].append(float(count == 3))
+    if scenario.task == "cotter_pin" and not task["completion_s"]:
+        task["completion_s"] = [float("nan")]
     record.update({k: v for k, v in task.items() if v})
     return {name: float(np.mean(values)) for name, values in record.items()}
 

@@ -1,0 +1,1 @@
+"""Shared control: the learnt model assists the operator while they teleoperate."""
