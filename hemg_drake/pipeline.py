@@ -84,13 +84,10 @@ def _learning_data(demos, scenario):
     from hemg_drake.learning.align import aligned
     from hemg_drake.learning.demos import observations
 
-    if scenario.learning.positions == "tool":
-        data = observations(demos)
-    else:
-        data = []
-        for demo in demos:
-            v_WE_desired = np.gradient(demo.p_WE_desired, demo.time, axis=0)
-            data.append(np.column_stack([demo.p_WE_desired, v_WE_desired, demo.gain]))
+    data = observations(demos) if scenario.learning.positions == "tool" else [
+        np.column_stack([d.p_WE_desired, np.gradient(d.p_WE_desired, d.time, axis=0), d.gain])
+        for d in demos
+    ]  # fmt: skip
     return aligned(data, scenario.learning.align)
 
 
