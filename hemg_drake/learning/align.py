@@ -3,30 +3,35 @@
 A person's takes start at different times and end with the hand at rest for a while; the
 HSMM's first and last states then learn the idle, with durations that vary as much as the
 idle does. ``"trim"`` cuts each demonstration to its active span: from ``margin`` samples
-before the first sample that moves or stiffens, to ``margin`` after the last, where moving
-is a speed above ``speed_fraction`` of the take's peak speed and stiffening a gain more than
-``gain_fraction`` of its range away from its level at that end of the take.
+before the first sample that has moved or stiffened, to ``margin`` after the last, where
+moved is a position more than ``distance`` from the take's first (for the lead-in) or last
+(lead-out) one, and stiffened a gain above its rest level (10th percentile) by more than
+``gain_fraction`` of its range. Positions and a threshold on the gain's level, not speeds
+nor gain changes: the arm's settling at the start of a take and the sEMG's noise at rest
+(measured: up to 0.02 m/s and 25 % of the range) would pass for motion.
 """
 
 import numpy as np
 
 from hemg_drake.learning.config import ALIGNMENTS
 from hemg_drake.learning.sequences import position_count
-# Defaults of active_span: 5 % of the peak speed or of the gain's range, 0.2 s of 0.01 s.
-SPEED_FRACTION = 0.05
-GAIN_FRACTION = 0.05
+
+# Defaults of active_span: 5 mm, 30 % of the gain's range, 0.2 s of 0.01 s samples.
+DISTANCE = 0.005
+GAIN_FRACTION = 0.3
+REST_PERCENTILE = 10.0
 MARGIN = 20
 
 
-def active_span(demo, *, speed_fraction=SPEED_FRACTION, gain_fraction=GAIN_FRACTION,
-                margin=MARGIN, n_position=None):  # fmt: skip
+def active_span(demo, *, distance=DISTANCE, gain_fraction=GAIN_FRACTION, margin=MARGIN,
+                n_position=None):  # fmt: skip
     """The active samples of one demonstration [x, xdot, k]: (begin, end), a slice's bounds.
 
     Parameters
     ----------
     demo : array, shape (T, D), layout [x (P), xdot (P), k (rest)].
-    speed_fraction, gain_fraction : float in [0, 1)
-    margin : int, samples kept on either side of the active ones.
+    distance : float, m; gain_fraction : float in [0, 1); margin : int, samples kept on
+        either side of the active ones.
 
     Returns
     -------
@@ -35,14 +40,13 @@ def active_span(demo, *, speed_fraction=SPEED_FRACTION, gain_fraction=GAIN_FRACT
     demo = np.asarray(demo, dtype=float)
     count = len(demo)
     p = position_count(demo.shape[1], n_position)
-    speed = np.linalg.norm(demo[:, p : 2 * p], axis=1)
-    gain = demo[:, 2 * p :]
-    spread = np.ptp(gain, axis=0)
-    moving = speed > speed_fraction * speed.max() if speed.max() > 0 else np.zeros(count, bool)
-    lead = np.any(np.abs(gain - gain[0]) > gain_fraction * spread, axis=1) if gain.size else moving
-    tail = np.any(np.abs(gain - gain[-1]) > gain_fraction * spread, axis=1) if gain.size else moving
-    first = np.flatnonzero(moving | lead)
-    last = np.flatnonzero(moving | tail)
+    x, gain = demo[:, :p], demo[:, 2 * p :]
+    stiff = np.zeros(count, bool)
+    if gain.size:
+        rest = np.percentile(gain, REST_PERCENTILE, axis=0)
+        stiff = np.any(gain - rest > gain_fraction * np.ptp(gain, axis=0), axis=1)
+    first = np.flatnonzero(stiff | (np.linalg.norm(x - x[0], axis=1) > distance))
+    last = np.flatnonzero(stiff | (np.linalg.norm(x - x[-1], axis=1) > distance))
     if first.size == 0 or last.size == 0:
         return 0, count
     begin = max(int(first[0]) - margin, 0)
