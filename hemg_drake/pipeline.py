@@ -74,16 +74,21 @@ def learning_data(demos, scenario):
     Learnt from the tool point, a pen on the sheet teaches a reference on the sheet's
     surface and the reproduction barely presses (measured: strokes broke off). k is the
     logged gain in both cases, logged at the same instants as the reference.
+    With ``learning.align`` "trim" each is cut to its active span (learning/align.py).
     """
+    return _learning_data(demos, scenario)[0]
+
+
+def _learning_data(demos, scenario):
+    """(:func:`learning_data`, the (begin, end) span of each demonstration it kept)."""
+    from hemg_drake.learning.align import aligned
     from hemg_drake.learning.demos import observations
 
-    if scenario.learning.positions == "tool":
-        return observations(demos)
-    data = []
-    for demo in demos:
-        v_WE_desired = np.gradient(demo.p_WE_desired, demo.time, axis=0)
-        data.append(np.column_stack([demo.p_WE_desired, v_WE_desired, demo.gain]))
-    return data
+    data = observations(demos) if scenario.learning.positions == "tool" else [
+        np.column_stack([d.p_WE_desired, np.gradient(d.p_WE_desired, d.time, axis=0), d.gain])
+        for d in demos
+    ]  # fmt: skip
+    return aligned(data, scenario.learning.align)
 
 
 def fit_model(data, scenario, *, n_iter=None, frames=None):
@@ -254,7 +259,7 @@ def _learn(folder, overrides, n_iter, diagrams, progress):
     folder.check("demonstrate", folder.dataset, run_hint=_demonstrate_hint(folder))
     demos, scenario = load_demonstrations(folder.dataset)
     scenario = scenario.replaced(overrides)
-    data = learning_data(demos, scenario)
+    data, spans = _learning_data(demos, scenario)
     frames = demonstration_frames(demos, scenario)
     start = time.perf_counter()
     model = fit_model(data, scenario, n_iter=n_iter, frames=frames)
@@ -274,7 +279,8 @@ def _learn(folder, overrides, n_iter, diagrams, progress):
     with folder.transaction("learn", progress=progress) as new:
         model.save(new.model)
         written = [new.model]
-        written.append(write_state_activations_figure(demos[0].time, h, scenario.task, new.path))
+        time_0 = demos[0].time[slice(*spans[0])]
+        written.append(write_state_activations_figure(time_0, h, scenario.task, new.path))
         if diagrams:
             written += write_diagrams(scenario, model, new.path, progress=progress)
         new.finish("learn", written, inputs=[new.dataset])

@@ -83,14 +83,21 @@ class DemonstrationDiagram(StationDiagram):
 
 
 def operator_plan(scenario, seed):
-    """The plan the seeded operator follows: the task plan perturbed by ``seed``."""
+    """The plan the seeded operator follows: the task plan perturbed by ``seed`` (and, with
+    ``operator.style`` "human", humanised by the seed's human draws)."""
+    from hemg_drake.teleop.human_style import human_draws, humanised
+
     config = scenario.operator
-    return scenario.task_plan().perturbed(
+    nominal = scenario.task_plan()
+    plan = nominal.perturbed(
         seed,
         timing_std=config.timing_std,
         path_std=config.path_std,
         effort_std=config.effort_std,
     )
+    if config.style == "human":
+        plan = humanised(plan, human_draws(nominal, seed), config.human)
+    return plan
 
 
 def emg_calibration(scenario):

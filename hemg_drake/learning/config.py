@@ -5,6 +5,9 @@ import dataclasses as dc
 
 from hemg_drake.config_fields import checked, key_path
 
+# Alignments of learning.align (learning/align.py).
+ALIGNMENTS = ("none", "trim")
+
 # HSMM initialisations, reproduction state weightings, trackers and LQR state costs.
 HSMM_INITS = ("kmeans", "time", "polyline")
 WEIGHTINGS = ("temporal", "spatial", "forward")
@@ -54,6 +57,10 @@ class LearningConfig:
     # base frame pulls the drawing's strokes 8 mm towards where the sheet was on average
     # (its Gaussians are no wider than the covariance floor), the scene frame alone 0.5 mm.
     task_frames: str = checked("scene", choices=("scene", "base_and_scene"))
+    # How the demonstrations are aligned before the HSMM learns them (learning/align.py):
+    # "none" (as recorded) or "trim" (each cut to its active span: the idle lead-in and
+    # lead-out of a person's takes cut off, docs/learning.md "Learning from natural takes").
+    align: str = checked("none", choices=ALIGNMENTS)
 
 
 @dc.dataclass

@@ -4,7 +4,7 @@ force feedback (eqs. 19-21). Each dataclass owns its defaults; its system takes 
 
 import dataclasses as dc
 
-from hemg_drake.config_fields import checked
+from hemg_drake.config_fields import checked, key_path
 
 # Force-feedback modes and passivity layers (teleop/feedback.py).
 FEEDBACK_MODES = ("force", "position_error")
@@ -56,6 +56,48 @@ class MasterConfig:
     period: float = checked(1e-3, positive=True)
 
 
+OPERATOR_STYLES = ("scripted", "human")
+
+
+@dc.dataclass
+class HumanStyleConfig:
+    """The human-like operator's timing (``operator.style: human``;
+    :mod:`~hemg_drake.teleop.human_style`): every figure a range that a seeded uniform draw
+    picks from, per take or per segment."""
+
+    # Speed factor of each segment (1: the plan's own pace): the take's tempo, log-uniform in
+    # this range, times the phase's own, log-uniform in [1 / phase_spread, phase_spread],
+    # clipped to the range.
+    tempo_range: list[float] = checked([0.5, 2.0], positive=True, size=2)
+    phase_spread: float = checked(1.5, positive=True)
+    # Idle lead-in before the plan starts (s), uniform in the range.
+    idle_range: list[float] = checked([0.3, 2.0], size=2)
+    # A pause at each inner waypoint with this probability, lasting (s) uniform in the range.
+    pause_probability: float = checked(0.3, fraction=True)
+    pause_range: list[float] = checked([0.2, 1.0], size=2)
+    # A free move in the air overshoots its end with this probability, by a fraction of its
+    # displacement uniform in the range, at most max_overshoot (m), then comes back in
+    # correction_time (s).
+    overshoot_probability: float = checked(0.5, fraction=True)
+    overshoot_range: list[float] = checked([0.1, 0.3], size=2)
+    max_overshoot: float = checked(0.01)
+    correction_time: float = checked(0.3, positive=True)
+
+    def check(self, key=""):
+        """Each range [low, high] with low <= high (ValueError naming the key)."""
+        for name in ("tempo_range", "idle_range", "pause_range", "overshoot_range"):
+            low, high = getattr(self, name)
+            if low > high:
+                raise ValueError(
+                    f"key '{key_path(key, name)}' must be [low, high] with low <= high, "
+                    f"got {[low, high]}"
+                )
+        if self.phase_spread < 1:
+            raise ValueError(
+                f"key '{key_path(key, 'phase_spread')}' must be >= 1, got {self.phase_spread}"
+            )
+
+
 @dc.dataclass
 class OperatorConfig:
     """The simulated operator (:class:`~hemg_drake.teleop.operator.SimulatedOperator`) and
@@ -85,11 +127,15 @@ class OperatorConfig:
     timing_std: float = checked(0.1)
     path_std: list[float] = checked([0.003, 0.003, 0.003], size=3)
     effort_std: float = checked(0.1)
+    # "scripted": the plan's pace with the variability above; "human": also the human-like
+    # timing of `human` (per-phase tempo, pauses, overshoot then correction, idle start).
+    style: str = checked("scripted", choices=OPERATOR_STYLES)
+    human: HumanStyleConfig = dc.field(default_factory=HumanStyleConfig)
 
     def model_parameters(self):
         """Keyword arguments of ``SimulatedOperator`` (all fields but the variability)."""
         data = dc.asdict(self)
-        for name in ("timing_std", "path_std", "effort_std"):
+        for name in ("timing_std", "path_std", "effort_std", "style", "human"):
             del data[name]
         return data
 

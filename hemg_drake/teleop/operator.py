@@ -13,6 +13,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from hemg_drake._validate import all_finite, as_scalar
 from hemg_drake.tasks.plan import TaskPlan
 from hemg_drake.teleop.config import OperatorConfig
+from hemg_drake.teleop.human_style import human_draw_count, human_draws, humanised
 from hemg_drake.teleop.mapping import WorkspaceMapping
 from hemg_drake.teleop.master import saturate_norm
 
@@ -85,6 +86,7 @@ def OperatorLaw_(T):
             - feedback_force
             - normals
             - uniforms
+            - human (style "human" only)
             output_ports:
             - hand_force
             - activation
@@ -92,7 +94,9 @@ def OperatorLaw_(T):
         ``normals`` and ``uniforms`` are the draws of the plan's variability
         (:meth:`TaskPlan.perturbed_by`), read once by an initialisation event into the
         abstract state: the perturbed plan in W and in M (before initialisation: the plan
-        of zero draws, the unperturbed one). Double and AutoDiffXd (for Clone; the plan is
+        of zero draws, the unperturbed one). With ``config.style`` "human", ``human`` holds
+        the uniform draws of the human-like timing (:func:`~hemg_drake.teleop.human_style.
+        humanised`), applied after the perturbation. Double and AutoDiffXd (for Clone; the plan is
         a function of time only, so the hand force is differentiable in p_MS, v_MS).
         """
 
@@ -116,7 +120,12 @@ def OperatorLaw_(T):
             self._feedback_force_input = self.DeclareVectorInputPort("feedback_force", 3)
             self._normals_input = self.DeclareVectorInputPort("normals", n_normals)
             self._uniforms_input = self.DeclareVectorInputPort("uniforms", n_uniforms)
-            nominal = self._plans(np.zeros(n_normals), np.zeros(n_uniforms))
+            self._human_input = None
+            human = None
+            if config.style == "human":
+                human = np.full(human_draw_count(plan), 0.5)
+                self._human_input = self.DeclareVectorInputPort("human", human.size)
+            nominal = self._plans(np.zeros(n_normals), np.zeros(n_uniforms), human)
             self._plans_index = self.DeclareAbstractState(AbstractValue.Make(nominal))
             self.DeclareInitializationUnrestrictedUpdateEvent(self._draw)
             self._activation_index = self.DeclareDiscreteState([values["rest"]])
@@ -138,23 +147,28 @@ def OperatorLaw_(T):
                 converter=converter,
             )  # fmt: skip
 
-        def _plans(self, normals, uniforms):
-            """(plan in W, plan in M) perturbed by the draws."""
+        def _plans(self, normals, uniforms, human=None):
+            """(plan in W, plan in M) perturbed by the draws (and humanised by ``human``)."""
             values = self._values
             plan = self._plan.perturbed_by(
                 normals, uniforms, timing_std=values["timing_std"], path_std=self._path_std,
                 effort_std=values["effort_std"],
             )  # fmt: skip
+            if human is not None:
+                plan = humanised(plan, human, self._config.human)
             # The plan mapped into M once (the map is affine), rather than every sample.
             return plan, plan.in_frame(self._mapping.slave_to_master(plan.points))
 
         def _draw(self, context, state):
             normals = self._normals_input.Eval(context)
             uniforms = self._uniforms_input.Eval(context)
+            human = None if self._human_input is None else self._human_input.Eval(context)
             if not isinstance(context, _DOUBLE_CONTEXT):
                 normals = np.array([x.value() for x in normals])
                 uniforms = np.array([x.value() for x in uniforms])
-            plans = self._plans(normals, uniforms)
+                if human is not None:
+                    human = np.array([x.value() for x in human])
+            plans = self._plans(normals, uniforms, human)
             state.get_mutable_abstract_state(self._plans_index).set_value(plans)
 
         def plan(self, context):
@@ -248,7 +262,10 @@ class SimulatedOperator(Diagram):
     Variability in the Context: the operator follows ``plan.perturbed_by(draws)``
     (timing, path offset, effort; spreads ``config.timing_std``, ``path_std``,
     ``effort_std``), the draws held by two Drake ``RandomSource`` systems (standard normal
-    and uniform) and read at initialisation. So one built diagram runs many seeds:
+    and uniform) and read at initialisation. With ``config.style`` "human" a third
+    (uniform, ``human``) holds the human-like timing's draws
+    (:mod:`~hemg_drake.teleop.human_style`: per-phase tempo, pauses, overshoot then
+    correction, idle start). So one built diagram runs many seeds:
     ``diagram.SetRandomContext(context, RandomGenerator(seed))`` (as
     ``MonteCarloSimulation`` does) draws a new plan, and :meth:`set_seed` puts the draws of
     ``plan.perturbed(seed)`` (numpy's) in a context instead. Both before
@@ -282,6 +299,11 @@ class SimulatedOperator(Diagram):
             "uniforms", RandomSource(RandomDistribution.kUniform, n_uniforms, _DRAW_INTERVAL)
         )
         self._sources = (normals, uniforms)
+        if config.style == "human":
+            human = builder.AddNamedSystem("human", RandomSource(
+                RandomDistribution.kUniform, human_draw_count(plan), _DRAW_INTERVAL
+            ))  # fmt: skip
+            builder.Connect(human.get_output_port(), law.GetInputPort("human"))
         builder.Connect(normals.get_output_port(), law.GetInputPort("normals"))
         builder.Connect(uniforms.get_output_port(), law.GetInputPort("uniforms"))
         for name in ("p_MS", "v_MS", "feedback_force"):
@@ -307,7 +329,8 @@ def set_operator_seed(operator, context, plan, seed):
 
     Parameters
     ----------
-    operator : Diagram with the subsystems ``normals`` and ``uniforms`` (RandomSources).
+    operator : Diagram with the subsystems ``normals`` and ``uniforms`` (RandomSources), and
+        ``human`` with the human style.
     context : its Context (not the root's), before ``Simulator.Initialize``.
     plan : TaskPlan, the nominal plan the operator was built with.
     seed : int
@@ -315,3 +338,8 @@ def set_operator_seed(operator, context, plan, seed):
     for name, draws in zip(("normals", "uniforms"), plan.perturbation_draws(seed)):
         source = operator.GetSubsystemByName(name)
         operator.GetMutableSubsystemContext(source, context).SetDiscreteState(draws)
+    if operator.HasSubsystemNamed("human"):  # the human style's draws, their own stream
+        source = operator.GetSubsystemByName("human")
+        operator.GetMutableSubsystemContext(source, context).SetDiscreteState(
+            human_draws(plan, seed)
+        )
