@@ -147,6 +147,12 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
         page = TeleopPage(meshcat, k_min=scenario.emg.k_min, k_max=scenario.emg.k_max,
                           server=server, take=take_number,
                           right_W=right_W / np.linalg.norm(right_W))  # fmt: skip
+        if scenario.task == "drawing" and built.scene is not None:
+            from hemg_drake.analysis.contact import CONTACT_THRESHOLD
+
+            height = built.scene.paper_height + 5e-4  # as the replay's ink
+            page.draw_ink(height, CONTACT_THRESHOLD)
+            page.show_template(template_strokes(scenario.task_plan()), height - 2e-4)
     diagram = built.diagram
     simulator = Simulator(diagram)
     seed_context(built, simulator.get_mutable_context(), seed)  # the sEMG noise
@@ -225,6 +231,22 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
                     end_reason=reason if live else source.end_reason, seed=seed,
                     scenario=scenario.to_yaml())  # fmt: skip
     return Take(demo, log, built, master, page.updates if page else 0, wall)
+
+
+def template_strokes(plan):
+    """The plan's pen-down strokes: a list of (k, 3) polylines (its waypoints; the plan runs
+    straight between them)."""
+    strokes, current = [], None
+    for i, down in enumerate(plan.pen_down):
+        if down:
+            current = [plan.points[i]] if current is None else current
+            current.append(plan.points[i + 1])
+        elif current is not None:
+            strokes.append(np.array(current))
+            current = None
+    if current is not None:
+        strokes.append(np.array(current))
+    return strokes
 
 
 def _takes_hint(folder):
@@ -388,7 +410,7 @@ def _take(scenario, folder, out_dir, duration, replay_inputs, replays, progress,
         f"take {c}: {log.end_time:.2f} s ({log.end_reason}), "
         f"{len(log.time)} input samples, in {take.wall_seconds:.1f} s of wall time"
     )
-    span = active_span(log.time, log.rows, log.end_time)
+    span = active_span(take.master, log.time, log.rows, log.end_time)
     if replay_inputs is None:
         if log.end_reason == "page closed":
             raise TakeNotKept("page closed")

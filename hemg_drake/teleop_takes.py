@@ -17,54 +17,39 @@ import shutil
 
 import numpy as np
 
-from hemg_drake.teleop.browser import dead_zone
-from hemg_drake.teleop.browser_inputs import COLUMN_INDEX, N_AXES, TRIGGER_BUTTON
-
 # Kept before the first and after the last active input (s): the arm at rest before the
 # person starts, and settling after they stop (the virtual hand's 300 N/m settles the
 # stylus within about 0.3 s).
 LEAD_IN, LEAD_OUT = 0.2, 1.0
-# A gamepad stick or trigger counts as moved beyond this (the page rounds to 0.01).
-PAD_ACTIVE = 0.02
-_KEYBOARD = ("slider_x_mm", "slider_y_mm", "slider_z_mm", "slider_activation")
 
 
-def active_samples(rows, *, stick_dead_zone=0.15):
-    """Which input samples move something: a keyboard slider changed since the sample
-    before, or a gamepad stick beyond its dead zone, or its trigger pressed.
+def active_samples(master, rows):
+    """Which input samples move something: after which the stylus target or the activation
+    changed (by the master's own law, :meth:`BrowserMaster.targets`: a keyboard set-point
+    still being reached at the keyboard's speed, a stick beyond its dead zone, the trigger).
 
     Parameters
     ----------
+    master : BrowserMaster (float), the take's (its start, workspace, speeds).
     rows : array, shape (N, len(COLUMNS)), an inputs log's rows.
-    stick_dead_zone : float, the sticks' dead zone (BrowserMaster's).
 
     Returns
     -------
     array of bool, shape (N,); sample 0 is never active (nothing came before it).
     """
-    rows = np.asarray(rows, dtype=float)
-    active = np.zeros(len(rows), dtype=bool)
-    if len(rows) < 2:
-        return active
-    keys = rows[:, [COLUMN_INDEX[c] for c in _KEYBOARD]]
-    before, after = keys[:-1], keys[1:]
-    same = (before == after) | (np.isnan(before) & np.isnan(after))
-    active[1:] = ~same.all(axis=1)
-    for k in range(1, len(rows)):
-        if active[k] or rows[k, COLUMN_INDEX["gamepad_index"]] < 0:
-            continue
-        axes = [rows[k, COLUMN_INDEX[f"axis_{i}"]] for i in range(N_AXES)]
-        trigger = rows[k, COLUMN_INDEX[f"button_{TRIGGER_BUTTON}"]]
-        moved = any(abs(dead_zone(a, stick_dead_zone)) > 0.0 for a in axes)
-        active[k] = moved or (math.isfinite(trigger) and trigger > PAD_ACTIVE)
+    p_T, activation = master.targets(rows)
+    active = np.zeros(len(p_T), dtype=bool)
+    if len(p_T) >= 2:
+        moved = np.any(np.diff(p_T, axis=0) != 0.0, axis=1)
+        active[1:] = moved | (np.diff(activation) != 0.0)
     return active
 
 
-def active_span(times, rows, end_time, **options):
+def active_span(master, times, rows, end_time):
     """The part of a take to keep: (t_start, t_end) in s, from ``LEAD_IN`` before the first
     active input sample to ``LEAD_OUT`` after the last (within [0, end_time]); None when no
     input ever moved anything (an empty take)."""
-    active = np.flatnonzero(active_samples(rows, **options))
+    active = np.flatnonzero(active_samples(master, rows))
     if len(active) == 0:
         return None
     times = np.asarray(times, dtype=float)

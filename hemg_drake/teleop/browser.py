@@ -284,9 +284,9 @@ def BrowserMaster_(T):
             self.DeclareVectorInputPort("feedback_force", 3)
             # Discrete state: target p_T (3), its velocity v_T (3), gamepad displacement g
             # (3), activation (1), first keyboard slider values (3) and a "sampled" flag (1).
-            initial = [*self.p_MS_initial, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, initial_activation,
-                       0.0, 0.0, 0.0, 0.0]  # fmt: skip
-            self._state_index = self.DeclareDiscreteState(initial)
+            self.initial_state = [*self.p_MS_initial, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                                  initial_activation, 0.0, 0.0, 0.0, 0.0]  # fmt: skip
+            self._state_index = self.DeclareDiscreteState(self.initial_state)
             self._samples_index = self.DeclareAbstractState(AbstractValue.Make(NO_SAMPLES))
             self.DeclarePeriodicUnrestrictedUpdateEvent(
                 period_sec=self.period, offset_sec=0.0, update=self._sample
@@ -359,6 +359,16 @@ def BrowserMaster_(T):
             slider = slider if math.isfinite(slider) else 0.0
             activation = min(max(slider, trigger, 0.0), 1.0)
             return [*p_T, *v_T, *g, activation, *first, 1.0]
+
+        def targets(self, rows):
+            """The target p_T (m) and activation after each row of ``rows`` (an inputs
+            log's), by :meth:`step` from the initial state: arrays (N, 3) and (N,)."""
+            state, p_T, activation = list(self.initial_state), [], []
+            for row in np.asarray(rows, dtype=float).tolist():
+                state = self.step(row, state)
+                p_T.append(state[0:3])
+                activation.append(state[9])
+            return np.array(p_T, dtype=float).reshape(-1, 3), np.array(activation, dtype=float)
 
         def hand_force_floats(self, p_T, v_T, p_MS, v_MS):
             """The virtual hand's force (N, in M, list of 3 scalars)."""

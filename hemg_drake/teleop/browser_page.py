@@ -74,9 +74,45 @@ class TeleopPage:
         meshcat.SetProperty(f"{self.PATH}/force", "visible", False)
         meshcat.SetProperty("/Axes", "visible", False)  # the world axes hide the arm's base
         self.updates = 0
+        # Live ink (draw_ink): the strokes so far and the points of the piece being drawn.
+        self.ink_height = self.ink_threshold = None
+        self._stroke, self._piece, self._points, self._touching = 0, 0, [], False
         if server is not None:
             server.update(K=self.k_min, K_min=self.k_min, K_max=self.k_max,
                           force_max=MAX_SHOWN_FORCE)  # fmt: skip
+
+    INK_PIECE = 50  # points per Meshcat line of live ink (each update re-sends one piece)
+
+    def draw_ink(self, height, threshold):
+        """Draw ink on the sheet live, where the tool touches it (|f_WE| > ``threshold``, N),
+        at ``height`` (m, just above the paper)."""
+        self.ink_height, self.ink_threshold = float(height), float(threshold)
+        self.meshcat.Delete(f"{self.PATH}/ink")
+
+    def show_template(self, strokes, height):
+        """The demonstrated strokes, faint, at ``height`` (m): a list of (k, 3) polylines."""
+        self.meshcat.Delete(f"{self.PATH}/template")
+        for i, stroke in enumerate(strokes):
+            points = np.array(stroke, dtype=float)
+            points[:, 2] = height
+            self.meshcat.SetLine(f"{self.PATH}/template/{i}", np.asfortranarray(points.T), 6.0,
+                                 Rgba(0.55, 0.55, 0.6, 0.5))  # fmt: skip
+
+    def _ink(self, p_WE, f_WE):
+        touching = float(np.linalg.norm(f_WE)) > self.ink_threshold
+        if not touching:
+            if self._touching:
+                self._stroke, self._piece, self._points = self._stroke + 1, 0, []
+            self._touching = False
+            return
+        self._touching = True
+        self._points.append([p_WE[0], p_WE[1], self.ink_height])
+        if len(self._points) >= 2:
+            path = f"{self.PATH}/ink/{self._stroke}/{self._piece}"
+            self.meshcat.SetLine(path, np.asfortranarray(np.array(self._points).T), 3.0,
+                                 Rgba(0.05, 0.45, 0.15, 1.0))  # fmt: skip
+        if len(self._points) >= self.INK_PIECE:  # the next piece starts where this ends
+            self._piece, self._points = self._piece + 1, self._points[-1:]
 
     def state(self, state, t=0.0, hint=None):
         """The state line: "waiting", "recording", "ended", "saved" (or a not-kept reason)."""
@@ -110,6 +146,8 @@ class TeleopPage:
             m.SetTransform(f"{self.PATH}/force/head", head)
         if p_WT is not None:
             m.SetTransform(f"{self.PATH}/target", RigidTransform(np.asarray(p_WT, float)))
+        if self.ink_height is not None and recording:
+            self._ink(np.asarray(p_WE, dtype=float), f_WE)
         if self.server is not None:
             values = dict(K=float(gain), force=min(magnitude, MAX_SHOWN_FORCE))
             if activation is not None:

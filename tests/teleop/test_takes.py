@@ -13,7 +13,8 @@ import pytest
 from hemg_drake.cli import main
 from hemg_drake.learning.demos import load_dataset
 from hemg_drake.run_folder import RunFolder
-from hemg_drake.teleop.browser_inputs import COLUMNS, END_BUTTON, load_inputs
+from hemg_drake.teleop.browser import BrowserMaster
+from hemg_drake.teleop.browser_inputs import COLUMNS, END_BUTTON, LoggedInputs, load_inputs
 from hemg_drake.teleop.browser_page import DISCARD_BUTTON, KEEP_BUTTON, START_BUTTON
 from hemg_drake.teleop_session import TakeNotKept, teleop
 from hemg_drake.teleop_takes import active_samples, active_span, trim_demonstration
@@ -33,17 +34,22 @@ def row(x=0.0, activation=0.05, axes=None, trigger=math.nan):
 
 
 def test_active_samples_and_span_by_hand():
-    rows = [row(), row(), row(2.0), row(2.0), row(2.0, activation=0.1), row(2.0),  # back: moved
-            row(2.0, axes=[0.1, 0, 0, 0]),  # inside the dead zone: idle
-            row(2.0, axes=[0.5, 0, 0, 0]), row(2.0, axes=[0, 0, 0, 0], trigger=0.01),
-            row(2.0, axes=[0, 0, 0, 0], trigger=0.3), row(2.0)]  # fmt: skip
-    expected = [False, False, True, False, True, True, False, True, False, True, False]
-    assert active_samples(rows).tolist() == expected
+    rows = [row(), row(), row(0.5), row(0.5), row(0.5),
+            row(0.5, activation=0.1), row(0.5),  # the activation up, and back: both move
+            row(0.5, axes=[0.1, 0, 0, 0]),  # inside the dead zone: idle
+            row(0.5, axes=[0.5, 0, 0, 0]), row(0.5, axes=[0, 0, 0, 0], trigger=0.01),
+            row(0.5, axes=[0, 0, 0, 0], trigger=0.3), row(0.5)]  # fmt: skip
+    master = BrowserMaster(source=LoggedInputs(0.01 * np.arange(len(rows)), rows),
+                           p_MS_initial=[0.0, 0.0, 0.0])  # fmt: skip
+    # +0.5 mm at the keyboard's 0.25 mm per sample: samples 2 and 3; the trigger's 0.01 is
+    # under the slider's 0.05 (the larger counts); the trigger let go at 11 moves it back.
+    expected = [False, False, True, True, False, True, True, False, True, False, True, True]
+    assert active_samples(master, rows).tolist() == expected
     times = 0.5 * np.arange(len(rows))
-    # First active at 1.0 s, last at 4.5 s: 0.2 s before, 1.0 s after (within the end).
-    assert active_span(times, rows, 5.0) == pytest.approx((0.8, 5.0))
-    assert active_span(times, rows, 9.0) == pytest.approx((0.8, 5.5))
-    assert active_span(times, [row()] * 5, 2.0) is None
+    # First active at 1.0 s, last at 5.5 s: 0.2 s before, 1.0 s after (within the end).
+    assert active_span(master, times, rows, 6.0) == pytest.approx((0.8, 6.0))
+    assert active_span(master, times, rows, 9.0) == pytest.approx((0.8, 6.5))
+    assert active_span(master, times, [row()] * 5, 2.0) is None
 
 
 def _demo(n=101, emg_per=2):
@@ -143,10 +149,11 @@ def test_a_take_waits_for_start_and_is_saved_only_when_kept(scenario, meshcat, v
     demos, _ = load_dataset(tmp_path / "dataset.npz")
     log = load_inputs(tmp_path / "inputs_1.npz")
     assert log.end_reason == "button" and log.time[0] == 0.0, lines
-    # The slider moved at 0.40 s and nothing after it: kept 0.20 .. 1.40 s.
+    # The slider jumped 6 mm at 0.40 s and nothing after it; the target followed at
+    # 0.25 mm per sample, its last step at 0.40 + 0.23 s: kept 0.20 .. 1.63 s.
     first = log.time[np.flatnonzero(log.rows[:, COLUMNS.index("slider_x_mm")] == 6.0)[0]]
     assert first == pytest.approx(0.40, abs=0.011)
-    assert demos[0].time[-1] == pytest.approx(1.2, abs=0.011)
+    assert demos[0].time[-1] == pytest.approx(1.43, abs=0.011)
     assert any("trimmed" in line and "lead-in" in line for line in lines), lines
 
 
