@@ -31,7 +31,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-from pydrake.systems.analysis import Simulator
 
 from hemg_drake.fileio import write_bytes_atomic
 from hemg_drake.learning.demos import load_dataset
@@ -75,6 +74,16 @@ def state(page):
     return page.evaluate("document.getElementById('hemg-state').textContent") or ""
 
 
+def controls_ready(page, timeout=300.0):
+    """Wait until Meshcat has given the page its buttons and sliders."""
+    deadline = time.monotonic() + timeout
+    while not page.evaluate("!!(window.viewer && viewer.gui_controllers['Start take'] && "
+                            "viewer.gui_controllers['stylus x (mm)'])"):  # fmt: skip
+        if time.monotonic() > deadline:
+            raise RuntimeError("the page never got its controls")
+        time.sleep(0.05)
+
+
 def wait_for(page, text, timeout=300.0):
     deadline = time.monotonic() + timeout
     while text not in state(page):
@@ -86,13 +95,7 @@ def wait_for(page, text, timeout=300.0):
 def target_steps(log):
     """The stylus target per 10 ms sample, the inputs log re-driving a BrowserMaster alone."""
     master = BrowserMaster(source=LoggedInputs(log.time, log.rows), p_MS_initial=[0, -0.025, 0])
-    simulator = Simulator(master)
-    context = simulator.get_context()
-    targets = []
-    for t in log.time:
-        simulator.AdvanceTo(t + 0.005)
-        targets.append(master.GetOutputPort("p_MT").Eval(context).copy())
-    return np.array(targets)
+    return master.targets(log.rows)[0]
 
 
 def run(task, taps, hold, screenshot, seed):
@@ -109,9 +112,15 @@ def run(task, taps, hold, screenshot, seed):
         url = command.stdout.readline().split()[2]
         with HeadlessPage(url, size=(1280, 800)) as page:
             wait_for(page, "waiting")
+            controls_ready(page)
             page.evaluate(WATCHER)
-            page.press("Enter")
-            wait_for(page, "recording")
+            for _ in range(10):  # as a person would, press again if nothing happened
+                page.press("Enter")
+                try:
+                    wait_for(page, "recording", timeout=10.0)
+                    break
+                except RuntimeError:
+                    print("Enter again", file=sys.stderr)
             time.sleep(1.0)
             for k in range(taps):
                 page.press("ArrowRight" if k % 2 == 0 else "ArrowLeft")
@@ -122,20 +131,25 @@ def run(task, taps, hold, screenshot, seed):
             page.key("keyDown", "ArrowUp")
             held_from = time.monotonic()
             time.sleep(hold)
-            if screenshot:
-                write_bytes_atomic(screenshot, page.screenshot())
             page.key("keyUp", "ArrowUp")
             held = time.monotonic() - held_from
+            page.key("keyDown", "KeyW")  # pull
+            time.sleep(2.0)
+            if screenshot:
+                write_bytes_atomic(screenshot, page.screenshot())
+            page.key("keyUp", "KeyW")
             time.sleep(1.0)
             latencies = np.array(page.evaluate("window.hemgLatency") or [])
             page.press("Escape")
             wait_for(page, "ended")
             page.press("KeyK")
             out, _ = command.communicate(timeout=600)
-    finally:
+    except BaseException:
         if command.poll() is None:
             command.terminate()
-            command.communicate(timeout=30)
+        print(command.communicate(timeout=60)[0], file=sys.stderr)
+        raise
+    finally:
         loader.kill()
         loader.wait()
     line = next(x for x in out.splitlines() if " input samples, in " in x)
@@ -168,7 +182,8 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--task", default="cotter_pin", choices=["cotter_pin", "drawing"])
     parser.add_argument("--taps", type=int, default=20)
-    parser.add_argument("--hold", type=float, default=3.0, help="seconds the key is held")
+    parser.add_argument("--hold", type=float, default=2.0,
+                        help="seconds ArrowUp is held (under 5.5 s: the workspace's edge)")
     parser.add_argument("--seed", type=int, default=24)
     parser.add_argument("--screenshot", help="write a PNG of the page mid-take there")
     args = parser.parse_args()

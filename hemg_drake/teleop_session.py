@@ -164,9 +164,11 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
     gain_system = diagram.GetSubsystemByName("variable_gain")
     gain_port = gain_system.get_gain_output_port()
     if live and controls is not None:
+        controls.mark_start()
         page.state("waiting")
         if not controls.wait_start():
             raise TakeNotKept("page closed")
+        page.state("recording", 0.0)
         # Pace from now: the wait is no part of the take (Simulator's realtime base).
         simulator.ResetStatistics()
     recorder = None
@@ -218,6 +220,8 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
     wall = time.perf_counter() - began
     if page is not None:
         page.update(t, np.zeros(3), np.zeros(3), scenario.emg.k_min, False)
+        if controls is not None:
+            controls.mark_keep()
         page.state("ended", t)
     demo = demonstration_from_logs(
         built.logger.FindLog(context), built.emg_logger.FindLog(context), seed
@@ -308,8 +312,9 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     the take's active part (:func:`~hemg_drake.teleop_takes.active_span`: idle lead-in and
     lead-out trimmed, the trim said); the inputs log and replay keep the whole take.
 
-    Live (``replay_inputs`` None): without a ``visualization``, one is started on ``port`` and
-    the first line given to ``progress`` is ``Meshcat: http://localhost:P``. With ``wait``
+    Live (``replay_inputs`` None): without a ``visualization``, one is started, with the
+    teleop page (:mod:`hemg_drake.teleop.browser_server`) on ``port``, and the first line
+    given to ``progress`` is ``Teleop page: http://localhost:P/ ...``. With ``wait``
     (the CLI's default) the take starts with the page's Start take (Enter), ends with End
     take (Escape) or after ``duration``, and is saved only if the person then clicks Keep
     take (K); Discard take (D), a take where nothing moved, or a page closed before, during
@@ -336,11 +341,11 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
             said = {"discarded": "discarded", "empty": "nothing moved: not kept",
                     "page closed": "page closed: not kept"}  # fmt: skip
             page.update(state="not kept", headline=said[error.reason], hint="nothing written; "
-                        "Enter starts a new take")  # fmt: skip
+                        "the next take is being prepared")  # fmt: skip
         raise
     if page is not None:
         page.update(state="saved", headline=f"take {_count(written)}: saved",
-                    hint="Enter starts the next take")  # fmt: skip
+                    hint="the next take is being prepared")  # fmt: skip
     return [folder.shown(path) for path in written]
 
 
@@ -381,8 +386,13 @@ def _take(scenario, folder, out_dir, duration, replay_inputs, replays, progress,
     else:
         source, seed, operator_name = "meshcat", scenario.seed + c - 1, "browser"
         if visualization is None:
-            visualization = Visualization(port)
-            progress(f"Meshcat: http://localhost:{visualization.port()}")
+            from hemg_drake.teleop.browser_server import TeleopPageServer
+
+            visualization = Visualization(0)
+            page_server = TeleopPageServer(visualization.meshcat, task=scenario.task,
+                                           scale=scenario.workspace_mapping().scale, port=port)  # fmt: skip
+            progress(f"Teleop page: {page_server.url()} (open it in a browser; Meshcat on "
+                     f"port {visualization.port()})")  # fmt: skip
         controls = TakeControls(visualization.meshcat) if wait else None
         keys = ", ".join(f"{name}: {down}/{up}" for name, (down, up) in KEYS.items())
         how = "Enter starts it, " if wait else ""

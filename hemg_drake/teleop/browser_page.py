@@ -123,7 +123,7 @@ class TeleopPage:
             "waiting": (f"{c}: waiting", "press Enter (or Start take) to start"),
             "recording": (f"{c}: recording {t:.1f} s", "Esc (or End take) ends it"),
             "ended": (f"{c}: ended at {t:.1f} s", "K keeps it, D discards it"),
-            "saved": (f"{c}: saved", "Enter starts the next take"),
+            "saved": (f"{c}: saved", "the next take is being prepared"),
         }.get(state, (f"{c}: {state}", ""))
         self.server.update(state=state, headline=headline, hint=default if hint is None else hint)
 
@@ -193,6 +193,7 @@ class TakeControls:
     def __init__(self, meshcat, *, poll=0.02, clock=time.monotonic, sleep=time.sleep):
         self.meshcat = meshcat
         self.poll, self.clock, self.sleep = poll, clock, sleep
+        self._marked = {}  # clicks counted from a mark (mark), by button
         existing = set(meshcat.GetButtonNames())
         for name, key in ((START_BUTTON, START_KEY), (KEEP_BUTTON, KEEP_KEY),
                           (DISCARD_BUTTON, DISCARD_KEY)):  # fmt: skip
@@ -203,7 +204,8 @@ class TakeControls:
         """The first of ``names`` clicked from now on, or None once the page was closed for
         CLOSED_PAGE_SECONDS (after being open: ``opened`` says whether it was)."""
         m = self.meshcat
-        base = {name: m.GetButtonClicks(name) for name in names}
+        base = {name: self._marked.get(name, m.GetButtonClicks(name)) for name in names}
+        self._marked = {}
         began = last_open = self.clock()
         while True:
             for name in names:
@@ -217,6 +219,17 @@ class TakeControls:
             if on_wait is not None:
                 on_wait(now - began)
             self.sleep(self.poll)
+
+    def mark(self, *names):
+        """Count the clicks of ``names`` from now on (call it when the page starts asking,
+        before the state line says so: a click the page asked for is never missed)."""
+        self._marked = {name: self.meshcat.GetButtonClicks(name) for name in names}
+
+    def mark_start(self):
+        self.mark(START_BUTTON)
+
+    def mark_keep(self):
+        self.mark(KEEP_BUTTON, DISCARD_BUTTON)
 
     def wait_start(self, on_wait=None, *, opened=False):
         """Block until Start take is clicked (True) or the page was closed (False)."""

@@ -34,7 +34,7 @@ class Command:
         assert self.first.startswith("Teleop page: http://localhost:"), self.first
         self.url = self.first.split()[2]
 
-    def finish(self, timeout=120):
+    def finish(self, timeout=300):
         out, _ = self.process.communicate(timeout=timeout)
         return self.process.returncode, out
 
@@ -46,6 +46,16 @@ class Command:
 
 def state(page):
     return page.evaluate("document.getElementById('hemg-state').textContent") or ""
+
+
+def controls_ready(page, timeout=300.0):
+    """Wait until Meshcat has given the page its buttons and sliders."""
+    deadline = time.monotonic() + timeout
+    while not page.evaluate("!!(window.viewer && viewer.gui_controllers['Start take'] && "
+                            "viewer.gui_controllers['stylus x (mm)'])"):  # fmt: skip
+        if time.monotonic() > deadline:
+            raise RuntimeError("the page never got its controls")
+        time.sleep(0.05)
 
 
 def wait_for(page, text, timeout=120.0):
@@ -62,6 +72,7 @@ def test_takes_start_end_discard_keep_in_the_real_page(chromium, tmp_path):
     try:
         with HeadlessPage(command.url, size=(1280, 800)) as page:
             wait_for(page, "waiting")
+            controls_ready(page)
             # On load: the legend, the task's line and Meshcat's controls open.
             text = page.evaluate("document.getElementById('hemg-panel').innerText")
             for said in ("start a take", "end the take", "keep", "discard", "squeeze",
@@ -125,6 +136,7 @@ def test_closing_the_page_saves_nothing(chromium, tmp_path):
     try:
         with HeadlessPage(command.url) as page:
             wait_for(page, "waiting")
+            controls_ready(page)
             page.press("Enter")
             wait_for(page, "recording")
             page.key("keyDown", "KeyW")
