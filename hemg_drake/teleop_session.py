@@ -18,7 +18,6 @@ from hemg_drake._validate import as_scalar
 from hemg_drake.teleop.browser import BrowserMaster
 from hemg_drake.teleop.browser_inputs import (
     END_KEY,
-    KEYS,
     InputsLog,
     LoggedInputs,
     MeshcatInputs,
@@ -394,14 +393,14 @@ def _take(scenario, folder, out_dir, duration, replay_inputs, replays, progress,
             progress(f"Teleop page: {page_server.url()} (open it in a browser; Meshcat on "
                      f"port {visualization.port()})")  # fmt: skip
         controls = TakeControls(visualization.meshcat) if wait else None
-        keys = ", ".join(f"{name}: {down}/{up}" for name, (down, up) in KEYS.items())
-        how = "Enter starts it, " if wait else ""
-        progress(
-            f"take {c} into {folder.final}/: {how}keys {keys}; gamepad sticks and right "
-            f"trigger; End take or {END_KEY} ends it"
-            + (f" (or {duration:g} s)" if duration is not None else "")
-            + ("; then K keeps it, D discards it" if wait else "")
-        )
+        if wait:
+            progress(f"take {c} into {folder.final}/: press Enter in the page to start it "
+                     f"(the page's legend lists the keys), {END_KEY} to end it"
+                     + (f" (or {duration:g} s)" if duration is not None else "")
+                     + "; then K keeps it, D discards it")  # fmt: skip
+        else:
+            progress(f"take {c} into {folder.final}/: recording; {END_KEY} in the page ends it"
+                     + (f" (or {duration:g} s)" if duration is not None else ""))  # fmt: skip
     # With scene.placements each take happens at its own seed's placement, as a simulated
     # demonstration does (the same draw, so a re-driven log lands where it was recorded).
     here = demonstration_scenario(scenario, seed)
