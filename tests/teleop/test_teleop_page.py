@@ -148,3 +148,36 @@ def test_closing_the_page_saves_nothing(chromium, tmp_path):
     assert code == 0, out
     assert "the page was closed: not saved" in out and "0 takes kept" in out
     assert not run.exists() or not any(run.iterdir())
+
+
+def test_a_drawing_take_shows_ink_on_the_template_as_it_is_drawn(chromium, tmp_path):
+    command = Command("drawing", "--out", str(tmp_path / "run"), "--port", "0", "--no-replay")
+    children = "Object.keys(viewer.scene_tree.find(['teleop', '{}']).children).length"
+    try:
+        with HeadlessPage(command.url) as page:
+            wait_for(page, "waiting")
+            controls_ready(page)
+            assert page.evaluate(children.format("template")) == 3  # the three strokes
+            page.press("Enter")
+            wait_for(page, "recording")
+            page.key("keyDown", "KeyS")  # the pen down onto the sheet: 30 mm at 20 mm/s
+            time.sleep(2.2)
+            page.key("keyUp", "KeyS")
+            page.key("keyDown", "ArrowRight")  # and along it
+            time.sleep(1.5)
+            page.key("keyUp", "ArrowRight")
+            deadline = time.monotonic() + 120
+            while not page.evaluate(children.format("ink")):
+                panel = page.evaluate("document.getElementById('hemg-panel').innerText")
+                sliders = page.evaluate("JSON.stringify(Object.fromEntries(Object.entries("
+                                        "viewer.gui_controllers).map(([k, c]) => [k, c.getValue()])))")  # fmt: skip
+                assert time.monotonic() < deadline, f"no ink appeared: {panel[:300]} {sliders}"
+                time.sleep(0.2)
+            (tmp_path / "drawing.png").write_bytes(page.screenshot())
+            page.press("Escape")
+            wait_for(page, "ended")
+            page.press("KeyK")
+            code, out = command.finish()
+    finally:
+        command.stop()
+    assert code == 0 and "1 take kept" in out, out
