@@ -12,15 +12,12 @@ gamepad messages on Meshcat's websocket, as the page does, at irregular wall tim
 each deflection of the left stick it prints the wall time until the BrowserMaster sampled
 it and until the stylus had moved 0.05 mm (the demonstration log's 10 ms resolution).
 
-``--chromium``: the speed again with the page open in headless Chromium on the same
-cores (software WebGL, the worst case for a browser on this machine), and the latency
-from a key press in that page (DevTools) to the BrowserMaster's sample of the slider.
-
-``--screenshot PNG``: a picture of the live page (headless Chromium) mid-take, with the
-controls open and the arm pulling the pin, e.g. docs/img/teleop_page.png.
+``--chromium``: the speed again with Drake's page open in headless Chromium on the same
+cores (software WebGL, the worst case for a browser on this machine). The teleop page a
+person opens (its keys, legend and takes), its key-to-motion latency and its screenshot:
+``benchmarks/bench_teleop_page.py``.
 
     .venv/bin/python benchmarks/bench_teleop_browser.py [--seconds 6] [--chromium]
-    .venv/bin/python benchmarks/bench_teleop_browser.py --screenshot docs/img/teleop_page.png
 """
 
 import argparse
@@ -37,7 +34,6 @@ import numpy as np
 import websocket
 
 from hemg_drake.diagrams.visualization import Visualization
-from hemg_drake.fileio import write_bytes_atomic
 from hemg_drake.scenario import load_scenario, shipped_scenario
 from hemg_drake.teleop.browser_inputs import COLUMNS
 from hemg_drake.teleop_session import run_take
@@ -170,90 +166,19 @@ def latency(seconds):
     )
 
 
-def keyboard_latency(seconds):
-    """Key presses in the real page (headless Chromium, DevTools) to the sampled slider."""
-    scenario = load_scenario(shipped_scenario("cotter_pin"))
-    visualization = Visualization(0)
-    meshcat = visualization.meshcat
-    presses = []
-    with HeadlessPage(meshcat.web_url()) as page:
-
-        def script(t):
-            if not presses:
-                deadline = time.monotonic() + 60
-                while not page.evaluate("document.body.innerText.includes('stylus x')"):
-                    if time.monotonic() > deadline:
-                        raise RuntimeError("the page never showed its controls")
-                    time.sleep(0.05)
-            if t > 0.5 and (not presses or t - presses[-1][1] > 0.3):
-                presses.append((time.monotonic(), t))
-                page.press("ArrowRight")
-
-        take = run_take(scenario, seed=1, visualization=visualization, duration=seconds,
-                        realtime=True, on_step=script, progress=lambda line: None,
-                        scene=False)  # fmt: skip
-    slider = take.inputs.rows[:, COLUMNS.index("slider_x_mm")]
-    walls = take.inputs.wall_time
-    delays = []
-    for n, (pressed_at, _) in enumerate(presses[1:], start=1):
-        # After the n-th press the slider reads n steps of 2 mm over its start.
-        later = np.nonzero((walls >= pressed_at) & (slider - slider[0] >= 2.0 * (n + 1) - 1e-9))[0]
-        if len(later):
-            delays.append(walls[later[0]] - pressed_at)
-    print(
-        f"key press in the page -> sampled slider, {len(delays)} presses at real time: median "
-        f"{1e3 * np.median(delays):.1f} ms (max {1e3 * np.max(delays):.1f})"
-    )
-
-
-def screenshot(path):
-    scenario = load_scenario(shipped_scenario("cotter_pin"))
-    visualization = Visualization(0)
-    meshcat = visualization.meshcat
-    state = {}
-    with HeadlessPage(meshcat.web_url(), size=(1280, 800)) as page:
-
-        def script(t):
-            if "ready" not in state:
-                deadline = time.monotonic() + 60
-                while not page.evaluate("document.body.innerText.includes('stylus x')"):
-                    if time.monotonic() > deadline:
-                        raise RuntimeError("the page never showed its controls")
-                    time.sleep(0.05)
-                page.evaluate("document.querySelector('.close-button') && "
-                              "document.querySelector('.close-button').click()")  # fmt: skip
-                state["ready"] = t
-            elif t - state["ready"] < 2.0:
-                page.press("KeyW")  # up: pull the pin
-                page.press("KeyX")  # tense: a stiffer slave
-            elif "shot" not in state:
-                state["shot"] = page.screenshot()
-
-        run_take(scenario, seed=1, visualization=visualization, duration=4.0, realtime=True,
-                 on_step=script, progress=lambda line: None)  # fmt: skip
-    write_bytes_atomic(path, state["shot"])
-    print(f"wrote {path}")
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=6.0)
-    parser.add_argument("--screenshot", help="write a PNG of the live page there")
     parser.add_argument(
         "--chromium", action="store_true",
         help="also measure the speed with the page rendered in headless Chromium",
     )  # fmt: skip
     args = parser.parse_args()
-    if args.screenshot:
-        screenshot(args.screenshot)
-        return
     for task in ("cotter_pin", "drawing"):
         speed(task, args.seconds)
         if args.chromium:
             speed(task, args.seconds, chromium=True)
     latency(args.seconds)
-    if args.chromium:
-        keyboard_latency(args.seconds)
 
 
 if __name__ == "__main__":

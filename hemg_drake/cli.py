@@ -25,6 +25,7 @@ from hemg_drake.commands import (
     reproduce_command,
     stability_command,
     sweep_command,
+    takes_command,
     teleop_command,
 )
 
@@ -288,11 +289,25 @@ def build_parser():
     )  # fmt: skip
     teleop.add_argument(
         "--takes", type=_positive_int("--takes"), default=1,
-        help="record this many takes in a row on the same page",
+        help="keep this many takes in a row on the same page (each started with Enter)",
     )  # fmt: skip
     teleop.add_argument("--no-replay", action="store_true", help="write no HTML replay")
+    teleop.add_argument(
+        "--no-wait", action="store_true",
+        help="for scripts: start each take at once and keep it when it ends (default: Enter "
+        "starts a take at the page; K keeps it, D discards it)",
+    )  # fmt: skip
     add_set(teleop)
     teleop.set_defaults(func=teleop_command)
+
+    takes = command("takes", "list the takes (demonstrations) of a run folder, or remove one")
+    takes.add_argument("run", help="run folder, e.g. runs/my_pin/")
+    takes.add_argument(
+        "--remove", type=_positive_int("--remove"), metavar="K",
+        help="remove take K (the later ones are renumbered; the model and reproductions made "
+        "from the older dataset go with it)",
+    )  # fmt: skip
+    takes.set_defaults(func=takes_command)
 
     stability = command(
         "stability", "the teleoperation loop's stability against delay, by linearisation"

@@ -147,12 +147,12 @@ def reproduce_command(args):
 def teleop_command(args):
     """``hemg-drake teleop``: takes at the browser page (or one replayed from its inputs)."""
     from hemg_drake.scenario import load_scenario
-    from hemg_drake.teleop_session import existing_takes, teleop
+    from hemg_drake.teleop_session import TakeNotKept, existing_takes, teleop
 
     scenario = load_scenario(_scenario_path(args.scenario), overrides=args.set)
     check_output_folder(args.out)
     existing_takes(scenario, args.out)  # refuse a mismatched folder before opening a port
-    visualization = None
+    visualization = page = None
     if args.replay_inputs is not None:
         if not Path(args.replay_inputs).is_file():
             raise ValueError(f"{args.replay_inputs}: no such inputs log")
@@ -160,15 +160,46 @@ def teleop_command(args):
             raise ValueError("--takes needs a person at the page; --replay-inputs replays one")
     else:
         from hemg_drake.diagrams.visualization import Visualization
+        from hemg_drake.teleop.browser_server import TeleopPageServer
 
-        visualization = Visualization(args.port)
-        _print(f"Meshcat: http://localhost:{visualization.port()}")  # the first line, always
-    for _ in range(args.takes):
-        written = teleop(
-            scenario, args.out, visualization=visualization, duration=args.duration,
-            replay_inputs=args.replay_inputs, replays=not args.no_replay, progress=_print,
-        )  # fmt: skip
+        visualization = Visualization(0)
+        page = TeleopPageServer(visualization.meshcat, task=scenario.task,
+                                scale=scenario.workspace_mapping().scale, port=args.port)  # fmt: skip
+        # The first line, always.
+        _print(f"Teleop page: {page.url()} (open it in a browser; Meshcat on port "
+               f"{visualization.port()})")  # fmt: skip
+    kept = 0
+    while kept < args.takes:
+        try:
+            written = teleop(
+                scenario, args.out, visualization=visualization, duration=args.duration,
+                replay_inputs=args.replay_inputs, replays=not args.no_replay, progress=_print,
+                wait=args.replay_inputs is None and not args.no_wait, page=page,
+            )  # fmt: skip
+        except TakeNotKept as not_kept:
+            said = {"discarded": "discarded", "empty": "nothing moved in it: discarded",
+                    "page closed": "the page was closed: not saved"}  # fmt: skip
+            _print(f"take not kept ({said[not_kept.reason]}); nothing written")
+            if not_kept.reason == "page closed":
+                break
+            continue
+        kept += 1
         _print("wrote " + ", ".join(str(path) for path in written))
+    if args.replay_inputs is None:
+        _print(f"{kept} take{'s' if kept != 1 else ''} kept in {args.out}")
+
+
+def takes_command(args):
+    """``hemg-drake takes``: list a run folder's takes, or remove one."""
+    from hemg_drake.teleop_takes import list_takes, remove_take
+
+    if args.remove is not None:
+        for path in remove_take(args.run, args.remove, progress=_print):
+            _print(f"wrote {path}")
+        return
+    for c, operator, seconds, samples, own in list_takes(args.run):
+        files = ", ".join(own) if own else "-"
+        _print(f"{c:3d}  {operator:<10s} {seconds:7.2f} s  {samples:6d} samples  {files}")
 
 
 def emg_figure_command(args):

@@ -18,17 +18,25 @@ from hemg_drake._validate import as_scalar
 from hemg_drake.teleop.browser import BrowserMaster
 from hemg_drake.teleop.browser_inputs import (
     END_KEY,
-    KEYS,
     InputsLog,
     LoggedInputs,
     MeshcatInputs,
     load_inputs,
     save_inputs,
 )
-from hemg_drake.teleop.browser_page import TeleopPage
+from hemg_drake.teleop.browser_page import TeleopPage, operator_view
 
 # The page is refreshed, and the simulator advanced, in steps of this (s): 32 Hz.
 PAGE_PERIOD = 1 / 32
+
+
+class TakeNotKept(Exception):
+    """A take the person did not keep: ``reason`` is "discarded", "empty" (no input moved
+    anything) or "page closed" (before or during the take, or before keeping it)."""
+
+    def __init__(self, reason):
+        super().__init__(reason)
+        self.reason = reason
 
 
 @dc.dataclass(frozen=True, eq=False)
@@ -45,7 +53,7 @@ class Take:
 
 def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=None,
              realtime=True, replay_path=None, title="teleoperated take", progress=print,
-             on_step=None, scene=True):  # fmt: skip
+             on_step=None, scene=True, controls=None, server=None, take_number=None):  # fmt: skip
     """Run one take of the demonstration diagram with a :class:`BrowserMaster`.
 
     Parameters
@@ -71,6 +79,13 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
         Called as ``on_step(t)`` after each page period (tests script the page with it).
     scene : bool
         False leaves out the task's scene (the arm in free space).
+    controls : TakeControls, optional
+        Live only: the take starts when the page's Start take is clicked (the arm shown at
+        its start meanwhile), not before. A page closed before it raises
+        :class:`TakeNotKept`.
+    server : TeleopPageServer, optional; take_number : int, optional
+        Live only: the teleop page's read-outs (state, time, K, activation, force, a slow
+        simulation) and the take's number on them.
 
     Returns
     -------
@@ -123,9 +138,20 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
     page = None
     view = frame_task(scenario.task_plan().points)
     if live:
-        meshcat.SetCameraPose(*view)
+        meshcat.SetCameraPose(*operator_view(scenario.task_plan().points,
+                                             built.mapping.master_to_slave))  # fmt: skip
         meshcat.SetTransform("/Grid", RigidTransform([0.0, 0.0, FLOOR_Z]))
-        page = TeleopPage(meshcat, k_min=scenario.emg.k_min, k_max=scenario.emg.k_max)
+        to_W = built.mapping.master_to_slave
+        right_W = to_W(np.array([1.0, 0.0, 0.0])) - to_W(np.zeros(3))
+        page = TeleopPage(meshcat, k_min=scenario.emg.k_min, k_max=scenario.emg.k_max,
+                          server=server, take=take_number,
+                          right_W=right_W / np.linalg.norm(right_W))  # fmt: skip
+        if scenario.task == "drawing" and built.scene is not None:
+            from hemg_drake.analysis.contact import CONTACT_THRESHOLD
+
+            height = built.scene.paper_height + 5e-4  # as the replay's ink
+            page.draw_ink(height, CONTACT_THRESHOLD)
+            page.show_template(template_strokes(scenario.task_plan()), height - 2e-4)
     diagram = built.diagram
     simulator = Simulator(diagram)
     seed_context(built, simulator.get_mutable_context(), seed)  # the sEMG noise
@@ -136,12 +162,22 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
     station = built.station.diagram
     gain_system = diagram.GetSubsystemByName("variable_gain")
     gain_port = gain_system.get_gain_output_port()
+    if live and controls is not None:
+        controls.mark_start()
+        page.state("waiting")
+        if not controls.wait_start():
+            raise TakeNotKept("page closed")
+        page.state("recording", 0.0)
+        # Pace from now: the wait is no part of the take (Simulator's realtime base).
+        simulator.ResetStatistics()
     recorder = None
     if replay_path is not None:
         recorder = ReplayRecorder(floor_z=FLOOR_Z, title=title, view=view)
         recorder.start(diagram, meshcat)
     began = time.perf_counter()
     k, reason, t, printed = 0, None, 0.0, 0
+    paced = [(0.0, began)]  # (simulated, wall) over the last second: the real-time factor
+    activation_port = master.GetOutputPort("activation")
     master_context = master.GetMyContextFromRoot(context)
     while True:
         k += 1
@@ -157,6 +193,11 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
             station_context = station.GetMyContextFromRoot(context)
             p_WT = built.mapping.master_to_slave(
                 master.GetOutputPort("p_MT").Eval(master_context))
+            now = time.perf_counter()
+            paced.append((t, now))
+            while len(paced) > 2 and now - paced[1][1] >= 1.0:
+                paced.pop(0)
+            rate = (t - paced[0][0]) / max(now - paced[0][1], 1e-9) if now - paced[0][1] > 0.5 else None
             page.update(
                 t,
                 station.GetOutputPort("p_WE").Eval(station_context),
@@ -164,6 +205,8 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
                 gain_port.Eval(gain_system.GetMyContextFromRoot(context))[0],
                 True,
                 p_WT,
+                activation=activation_port.Eval(master_context)[0],
+                rate=rate if realtime else None,
             )  # fmt: skip
         if on_step is not None:
             on_step(t)
@@ -176,6 +219,9 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
     wall = time.perf_counter() - began
     if page is not None:
         page.update(t, np.zeros(3), np.zeros(3), scenario.emg.k_min, False)
+        if controls is not None:
+            controls.mark_keep()
+        page.state("ended", t)
     demo = demonstration_from_logs(
         built.logger.FindLog(context), built.emg_logger.FindLog(context), seed
     )
@@ -188,6 +234,22 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
                     end_reason=reason if live else source.end_reason, seed=seed,
                     scenario=scenario.to_yaml())  # fmt: skip
     return Take(demo, log, built, master, page.updates if page else 0, wall)
+
+
+def template_strokes(plan):
+    """The plan's pen-down strokes: a list of (k, 3) polylines (its waypoints; the plan runs
+    straight between them)."""
+    strokes, current = [], None
+    for i, down in enumerate(plan.pen_down):
+        if down:
+            current = [plan.points[i]] if current is None else current
+            current.append(plan.points[i + 1])
+        elif current is not None:
+            strokes.append(np.array(current))
+            current = None
+    if current is not None:
+        strokes.append(np.array(current))
+    return strokes
 
 
 def _takes_hint(folder):
@@ -234,7 +296,8 @@ def existing_takes(scenario, out_dir):
 
 
 def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, replays=True,
-           progress=print, visualization=None, on_step=None, realtime=True):  # fmt: skip
+           progress=print, visualization=None, on_step=None, realtime=True, wait=False,
+           page=None):  # fmt: skip
     """Record one take from the browser (or re-drive one from its inputs log) and append it
     to ``out_dir/dataset.npz``, as :func:`hemg_drake.pipeline.demonstrate` writes it.
 
@@ -244,15 +307,23 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     folder's manifest records the demonstrate stage again, so ``learn`` and ``reproduce``
     take it; an older model and reproduction are replaced (they no longer match). Takes
     already there are kept. The folder is locked for the take and changes only when it is
-    saved (:meth:`~hemg_drake.run_folder.RunFolder.transaction`).
+    saved (:meth:`~hemg_drake.run_folder.RunFolder.transaction`). The demonstration keeps
+    the take's active part (:func:`~hemg_drake.teleop_takes.active_span`: idle lead-in and
+    lead-out trimmed, the trim said); the inputs log and replay keep the whole take.
 
-    Live (``replay_inputs`` None): without a ``visualization``, one is started on ``port`` and
-    the first line given to ``progress`` is ``Meshcat: http://localhost:P``. The take
-    ends with the page's End take button or Escape, after ``duration`` simulated seconds,
-    or when the page has been closed for 2 s, and is saved in each case. Ctrl-C
-    (KeyboardInterrupt) discards it: nothing is written. With ``replay_inputs`` (a log
-    path): headless, as fast as it runs, the same demonstration bit for bit (the log's
-    seed; the scenario must be the log's).
+    Live (``replay_inputs`` None): without a ``visualization``, one is started, with the
+    teleop page (:mod:`hemg_drake.teleop.browser_server`) on ``port``, and the first line
+    given to ``progress`` is ``Teleop page: http://localhost:P/ ...``. With ``wait``
+    (the CLI's default) the take starts with the page's Start take (Enter), ends with End
+    take (Escape) or after ``duration``, and is saved only if the person then clicks Keep
+    take (K); Discard take (D), a take where nothing moved, or a page closed before, during
+    or after the take raise :class:`TakeNotKept` and write nothing. Without ``wait``
+    (scripts) the take starts at once and is kept when it ends (End take or ``duration``;
+    a closed page still discards). Ctrl-C (KeyboardInterrupt) discards it: nothing is
+    written. With ``replay_inputs`` (a log path): headless, as fast as it runs, the same
+    demonstration bit for bit (the log's seed; the scenario must be the log's). ``page`` (a
+    :class:`~hemg_drake.teleop.browser_server.TeleopPageServer`) shows the take's state and
+    read-outs.
 
     Returns
     -------
@@ -260,17 +331,35 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     """
     from hemg_drake.run_folder import RunFolder
 
-    with RunFolder.output(out_dir).transaction("demonstrate", keep_own=True) as folder:
-        written = _take(scenario, folder, out_dir, duration, replay_inputs, replays, progress,
-                        visualization, port, on_step, realtime)  # fmt: skip
+    try:
+        with RunFolder.output(out_dir).transaction("demonstrate", keep_own=True) as folder:
+            written = _take(scenario, folder, out_dir, duration, replay_inputs, replays,
+                            progress, visualization, port, on_step, realtime, wait, page)  # fmt: skip
+    except TakeNotKept as error:
+        if page is not None:
+            said = {"discarded": "discarded", "empty": "nothing moved: not kept",
+                    "page closed": "page closed: not kept"}  # fmt: skip
+            page.update(state="not kept", headline=said[error.reason], hint="nothing written; "
+                        "the next take is being prepared")  # fmt: skip
+        raise
+    if page is not None:
+        page.update(state="saved", headline=f"take {_count(written)}: saved",
+                    hint="the next take is being prepared")  # fmt: skip
     return [folder.shown(path) for path in written]
 
 
+def _count(written):
+    """The number of the take just saved: its inputs log's (``inputs_<c>.npz``, the last)."""
+    names = [p.name for p in written if p.name.startswith("inputs_")]
+    return int(names[-1][len("inputs_"):-len(".npz")]) if names else "?"
+
+
 def _take(scenario, folder, out_dir, duration, replay_inputs, replays, progress, visualization,
-          port, on_step, realtime):  # fmt: skip
+          port, on_step, realtime, wait, page_server):  # fmt: skip
     """One take into ``folder`` (the run's next version, being built; see :func:`teleop`)."""
     from hemg_drake.learning.demos import save_dataset
     from hemg_drake.diagrams.visualization import Visualization
+    from hemg_drake.emg.sources import MYO_PERIOD
     from hemg_drake.placements import (
         demonstration_scenario,
         describe_placement,
@@ -278,10 +367,13 @@ def _take(scenario, folder, out_dir, duration, replay_inputs, replays, progress,
         task_frames,
     )
     from hemg_drake.run_folder import RunFolder
+    from hemg_drake.teleop.browser_page import TakeControls
+    from hemg_drake.teleop_takes import active_span, describe_trim, trim_demonstration
     from hemg_drake.viz.figures import plot_demonstrations, plot_emg_envelopes, save_figure
 
     demos, metadata = existing_takes(scenario, out_dir)
     c = len(demos) + 1
+    controls = None
     if replay_inputs is not None:
         source = load_inputs(replay_inputs)
         if not same_takes(source.scenario, scenario.to_yaml()):
@@ -293,14 +385,22 @@ def _take(scenario, folder, out_dir, duration, replay_inputs, replays, progress,
     else:
         source, seed, operator_name = "meshcat", scenario.seed + c - 1, "browser"
         if visualization is None:
-            visualization = Visualization(port)
-            progress(f"Meshcat: http://localhost:{visualization.port()}")
-        keys = ", ".join(f"{name}: {down}/{up}" for name, (down, up) in KEYS.items())
-        progress(
-            f"take {c} into {folder.final}/: keys {keys}; gamepad sticks and right trigger; "
-            f"End take or {END_KEY} ends it"
-            + (f" (or {duration:g} s)" if duration is not None else "")
-        )
+            from hemg_drake.teleop.browser_server import TeleopPageServer
+
+            visualization = Visualization(0)
+            page_server = TeleopPageServer(visualization.meshcat, task=scenario.task,
+                                           scale=scenario.workspace_mapping().scale, port=port)  # fmt: skip
+            progress(f"Teleop page: {page_server.url()} (open it in a browser; Meshcat on "
+                     f"port {visualization.port()})")  # fmt: skip
+        controls = TakeControls(visualization.meshcat) if wait else None
+        if wait:
+            progress(f"take {c} into {folder.final}/: press Enter in the page to start it "
+                     f"(the page's legend lists the keys), {END_KEY} to end it"
+                     + (f" (or {duration:g} s)" if duration is not None else "")
+                     + "; then K keeps it, D discards it")  # fmt: skip
+        else:
+            progress(f"take {c} into {folder.final}/: recording; {END_KEY} in the page ends it"
+                     + (f" (or {duration:g} s)" if duration is not None else ""))  # fmt: skip
     # With scene.placements each take happens at its own seed's placement, as a simulated
     # demonstration does (the same draw, so a re-driven log lands where it was recorded).
     here = demonstration_scenario(scenario, seed)
@@ -311,12 +411,26 @@ def _take(scenario, folder, out_dir, duration, replay_inputs, replays, progress,
     take = run_take(
         here, seed=seed, source=source, visualization=visualization, duration=duration,
         realtime=realtime and replay_inputs is None, replay_path=replay, title=title,
-        progress=progress, on_step=on_step,
+        progress=progress, on_step=on_step, controls=controls, server=page_server,
+        take_number=c,
     )  # fmt: skip
+    log = take.inputs
     progress(
-        f"take {c}: {take.inputs.end_time:.2f} s ({take.inputs.end_reason}), "
-        f"{len(take.inputs.time)} input samples, in {take.wall_seconds:.1f} s of wall time"
+        f"take {c}: {log.end_time:.2f} s ({log.end_reason}), "
+        f"{len(log.time)} input samples, in {take.wall_seconds:.1f} s of wall time"
     )
+    span = active_span(take.master, log.time, log.rows, log.end_time)
+    if replay_inputs is None:
+        if log.end_reason == "page closed":
+            raise TakeNotKept("page closed")
+        if span is None and wait:
+            raise TakeNotKept("empty")
+        if controls is not None and not controls.ask_keep():
+            raise TakeNotKept("discarded")
+    demo = take.demonstration
+    if span is not None:
+        progress(describe_trim(c, span, log.end_time))
+        demo = trim_demonstration(demo, *span, emg_period=MYO_PERIOD)
     inputs_path = folder / f"inputs_{c}.npz"
     new_files = [p for p in (replay, inputs_path) if p is not None]
     # The takes already recorded stay (the transaction kept them); the model and
@@ -326,8 +440,7 @@ def _take(scenario, folder, out_dir, duration, replay_inputs, replays, progress,
         for name in RunFolder(out_dir).manifest().get("demonstrate", {}).get("files", {})
         if name.startswith(("replay_", "inputs_")) and (folder / name).is_file()
     ]
-    save_inputs(inputs_path, take.inputs)
-    demo = take.demonstration
+    save_inputs(inputs_path, log)
     if not demos or demos[0].frame_A is not None:
         # Each demonstration carries the task frames where it was shown (an older
         # dataset without them keeps none).

@@ -27,7 +27,13 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from hemg_drake._validate import as_scalar, as_vector
-from hemg_drake.teleop.browser_inputs import COLUMN_INDEX, COLUMNS, N_AXES, TRIGGER_BUTTON
+from hemg_drake.teleop.browser_inputs import (
+    COLUMN_INDEX,
+    COLUMNS,
+    KEY_SPEED,
+    N_AXES,
+    TRIGGER_BUTTON,
+)
 from hemg_drake.teleop.master import TOUCH_X_WORKSPACE
 from hemg_drake.teleop.operator import (
     HAND_DAMPING,
@@ -176,8 +182,9 @@ def BrowserMaster_(T):
         other systems' updates at that time see the previous sample, as from any discrete
         system):
 
-        - keyboard: s = p_MS_initial + (slider - slider at the first sample), in m (a
-          non-finite slider value holds that axis);
+        - keyboard: s_k = s_(k-1) + clip(s*_k - s_(k-1), +-T v_key), the set-point
+          s*_k = p_MS_initial + (slider - slider at the first sample) (mm to m) approached at
+          no more than ``key_speed`` per axis (a non-finite slider value holds that axis);
         - gamepad: displacement g_k = clip(s_k + g_(k-1) + T v_pad, box) - s_k with
           v_pad = speed [dz(axis 0), -dz(axis 3), dz(axis 1)] (dz: :func:`dead_zone`; sticks
           up are negative), so p_T = s + g stays in the workspace box and v_T = (g_k -
@@ -207,6 +214,8 @@ def BrowserMaster_(T):
             The virtual hand (N/m, N s/m, N): ``scenario.operator``'s.
         speed : float
             Target speed at full stick deflection (m/s).
+        key_speed : float
+            The fastest the keyboard's part of the target moves, per axis (m/s).
         stick_dead_zone : float
             Dead zone of the sticks, in [0, 1).
         period : float
@@ -228,6 +237,7 @@ def BrowserMaster_(T):
             stick_dead_zone=0.15,
             period=0.01,
             initial_activation=0.05,
+            key_speed=KEY_SPEED,
             converter=None,
         ):
             LeafSystem_[T].__init__(self, converter)
@@ -235,7 +245,7 @@ def BrowserMaster_(T):
                 source=source, p_MS_initial=p_MS_initial, workspace_size=workspace_size,
                 hand_stiffness=hand_stiffness, hand_damping=hand_damping,
                 max_hand_force=max_hand_force, speed=speed, stick_dead_zone=stick_dead_zone,
-                period=period, initial_activation=initial_activation,
+                period=period, initial_activation=initial_activation, key_speed=key_speed,
             )  # fmt: skip
             if not callable(getattr(source, "read", None)):
                 raise ValueError(
@@ -260,6 +270,8 @@ def BrowserMaster_(T):
             if self.stick_dead_zone >= 1.0:
                 raise ValueError(f"stick_dead_zone must be in [0, 1), got {stick_dead_zone}")
             self.period = as_scalar("period", period)
+            self.key_speed = as_scalar("key_speed", key_speed)
+            self.key_limit = self.key_speed * self.period
             initial_activation = as_scalar("initial_activation", initial_activation,
                                            strict=False)  # fmt: skip
             if initial_activation > 1.0:
@@ -272,9 +284,9 @@ def BrowserMaster_(T):
             self.DeclareVectorInputPort("feedback_force", 3)
             # Discrete state: target p_T (3), its velocity v_T (3), gamepad displacement g
             # (3), activation (1), first keyboard slider values (3) and a "sampled" flag (1).
-            initial = [*self.p_MS_initial, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, initial_activation,
-                       0.0, 0.0, 0.0, 0.0]  # fmt: skip
-            self._state_index = self.DeclareDiscreteState(initial)
+            self.initial_state = [*self.p_MS_initial, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                                  initial_activation, 0.0, 0.0, 0.0, 0.0]  # fmt: skip
+            self._state_index = self.DeclareDiscreteState(self.initial_state)
             self._samples_index = self.DeclareAbstractState(AbstractValue.Make(NO_SAMPLES))
             self.DeclarePeriodicUnrestrictedUpdateEvent(
                 period_sec=self.period, offset_sec=0.0, update=self._sample
@@ -321,7 +333,10 @@ def BrowserMaster_(T):
                     continue
                 if not math.isfinite(_value(first[i])):  # re-anchor the zero where the target is
                     first[i] = value - 1e3 * (s_old - p0)
-                s.append(p0 + 1e-3 * (value - first[i]))
+                # The slider's set-point, reached at no more than key_speed: a stall of the
+                # simulation (keys moved on in wall time) never becomes a jump.
+                step = p0 + 1e-3 * (value - first[i]) - s_old
+                s.append(s_old + min(max(step, -self.key_limit), self.key_limit))
             dz = self.stick_dead_zone
             if row[col["gamepad_index"]] >= 0:
                 ax = [row[col[f"axis_{i}"]] for i in range(N_AXES)]
@@ -344,6 +359,16 @@ def BrowserMaster_(T):
             slider = slider if math.isfinite(slider) else 0.0
             activation = min(max(slider, trigger, 0.0), 1.0)
             return [*p_T, *v_T, *g, activation, *first, 1.0]
+
+        def targets(self, rows):
+            """The target p_T (m) and activation after each row of ``rows`` (an inputs
+            log's), by :meth:`step` from the initial state: arrays (N, 3) and (N,)."""
+            state, p_T, activation = list(self.initial_state), [], []
+            for row in np.asarray(rows, dtype=float).tolist():
+                state = self.step(row, state)
+                p_T.append(state[0:3])
+                activation.append(state[9])
+            return np.array(p_T, dtype=float).reshape(-1, 3), np.array(activation, dtype=float)
 
         def hand_force_floats(self, p_T, v_T, p_MS, v_MS):
             """The virtual hand's force (N, in M, list of 3 scalars)."""

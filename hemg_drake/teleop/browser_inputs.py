@@ -4,8 +4,8 @@ Each source gives one raw row (:data:`COLUMNS`) and the wall time of the reading
 ``read(t)``, and changes nothing by it: the master keeps what it sampled in its Context, so
 a source is a read-only handle that clones of the master may share:
 
-- :class:`MeshcatInputs`: the live page. Keyboard through Meshcat sliders with key bindings
-  (:data:`KEYS`), limited to the Touch X's 160 x 120 x 120 mm workspace, and two keys for the
+- :class:`MeshcatInputs`: the live page. Keyboard through Meshcat sliders that the teleop
+  page's keys move (:data:`KEYS`, :mod:`hemg_drake.teleop.browser_server`), limited to the Touch X's 160 x 120 x 120 mm workspace, and two keys for the
   muscle activation; a gamepad through ``Meshcat.GetGamepad()``; the "End take" button
   (Escape) and the number of open pages.
 - :class:`LoggedInputs`: the same rows read back from an inputs log (:func:`save_inputs`),
@@ -40,9 +40,17 @@ KEYS = {
     SLIDER_ACTIVATION: ("KeyZ", "KeyX"),  # relax / tense
 }
 END_KEY = "Escape"
-# One key press moves the target this far (mm); held keys repeat at the browser's rate.
-KEY_STEP_MM = 2.0
-ACTIVATION_STEP = 0.05
+# The keys move the stylus target through the page's script (browser_server): a tap moves
+# it TAP_MM, a key held longer than HOLD_DELAY (s) moves it at HOLD_MM_S in wall-clock time;
+# with Shift, FINE of both. At the tool that is the workspace map's scale (2) times as much.
+TAP_MM, HOLD_MM_S, HOLD_DELAY, FINE = 0.5, 10.0, 0.25, 0.25
+# The activation: a tap of X / Z, and its speed while held (per s).
+ACTIVATION_TAP, ACTIVATION_HOLD_S = 0.05, 1.0
+# The sliders' resolution (mm; activation: 1).
+SLIDER_STEP_MM, ACTIVATION_STEP = 0.01, 0.01
+# The fastest the keyboard's target moves (m/s, at the stylus), sample by sample: above any
+# held key's speed, so a stall of the simulation never turns into a jump.
+KEY_SPEED = 0.025
 
 # Columns of one raw input row, as logged.
 N_AXES, N_BUTTONS = 4, 17  # the W3C standard gamepad mapping
@@ -81,16 +89,14 @@ class MeshcatInputs:
         half_mm = 500.0 * as_vector("workspace_size", workspace_size, 3)
         start_mm = 1000.0 * as_vector("p_MS_initial", p_MS_initial, 3)
         existing = set(meshcat.GetSliderNames())
-        sliders = [(name, -h, h, KEY_STEP_MM, p)
+        sliders = [(name, -h, h, SLIDER_STEP_MM, p)
                    for name, h, p in zip((SLIDER_X, SLIDER_Y, SLIDER_Z), half_mm, start_mm)]
         sliders.append((SLIDER_ACTIVATION, 0.0, 1.0, ACTIVATION_STEP, activation))
         for name, low, high, step, value in sliders:
             if name in existing:  # a second take on the same page: back to the start
                 meshcat.SetSliderValue(name, value)
-            else:
-                down, up = KEYS[name]
-                meshcat.AddSlider(name, low, high, step, value, decrement_keycode=down,
-                                  increment_keycode=up)  # fmt: skip
+            else:  # the page's script moves them (KEYS): no Meshcat key bindings
+                meshcat.AddSlider(name, low, high, step, value)
         meshcat.AddButton(END_BUTTON, keycode=END_KEY)  # (again: resets its clicks)
 
     def read(self, t):

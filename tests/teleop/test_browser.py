@@ -78,7 +78,8 @@ def test_keyboard_and_gamepad_target_and_hand_force_by_hand():
         row((14.0, 0.0, -6.0), **pad),
     ]
     p_MS, v_MS = [0.0, 0.0, 0.0], [0.01, 0.0, -0.02]
-    _, _, force, activation = master_after(rows, p_MS, v_MS)
+    # (key_speed above any step here: the keyboard's speed limit is tested on its own.)
+    _, _, force, activation = master_after(rows, p_MS, v_MS, key_speed=10.0)
     # Target: start + keyboard offset + three gamepad samples of T * v.
     p_T = [0.01 + 0.004 + 3 * 0.01 * 0.05, -0.02 + 3 * 0.01 * 0.1, 0.03 - 0.006]
     v_T = [0.05, 0.1, 0.0]
@@ -120,13 +121,25 @@ def test_missing_or_nan_gamepad_moves_nothing_and_is_reported():
 def test_nan_slider_holds_its_axis():
     rows = [row((4.0, 0.0, 0.0)), row((8.0, math.nan, 0.0)), row((math.nan, 2.0, 0.0)),
             row((math.nan, 2.0, 0.0))]  # fmt: skip
-    _, _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0])
+    _, _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0], key_speed=10.0)
     # x holds its last finite offset (+4 mm), y moved +2 mm, z did not move.
     np.testing.assert_allclose(force, [K_H * 0.004, K_H * 0.002, 0.0], rtol=1e-9, atol=1e-12)
     # A first sample that is NaN: the zero is taken where the target is when it turns finite.
     rows = [row((math.nan, 0.0, 0.0)), row((30.0, 0.0, 0.0)), row((36.0, 0.0, 0.0))]
-    _, _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0])
+    _, _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0], key_speed=10.0)
     np.testing.assert_allclose(force, [K_H * 0.006, 0.0, 0.0], rtol=1e-9, atol=1e-12)
+
+
+def test_keyboard_target_moves_at_no_more_than_key_speed():
+    """A slider that jumps (keys moved on while the simulation stalled) is followed at
+    key_speed, sample by sample: 0.025 m/s is 0.25 mm per 10 ms sample, per axis."""
+    rows = [row((0.0, 0.0, 0.0)), row((10.0, -0.1, 0.0))] + [row((10.0, -0.1, 0.0))] * 3
+    # Four samples after the jump: x has moved 4 x 0.25 mm = 1 mm of its 10, y its 0.1 mm.
+    _, _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0], key_speed=0.025)
+    np.testing.assert_allclose(force, [K_H * 0.001, -K_H * 0.0001, 0.0], rtol=1e-9, atol=1e-12)
+    rows += [row((10.0, -0.1, 0.0))] * 40  # and it gets there, then stays
+    _, _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0], key_speed=0.025)
+    np.testing.assert_allclose(force, [K_H * 0.010, -K_H * 0.0001, 0.0], rtol=1e-9, atol=1e-12)
 
 
 def test_two_contexts_hold_independent_logs_and_a_clone_samples_the_same():

@@ -92,7 +92,7 @@ def make_base(root):
     run(["demonstrate", "cotter_pin", "--out", "run", "--seed", "3", *SMALL], cwd=root)
     run(["learn", "run", "--set", "learning.num_states=4"], cwd=root)
     run(["reproduce", "run", "--no-replay"], cwd=root)
-    run(["teleop", "cotter_pin", "--out", "live", "--port", "0", "--no-replay",
+    run(["teleop", "cotter_pin", "--out", "live", "--port", "0", "--no-replay", "--no-wait",
          "--duration", "0.3"], cwd=root)  # fmt: skip
     run(["teleop", "cotter_pin", "--out", "takes", "--no-replay",
          "--replay-inputs", "live/inputs_1.npz"], cwd=root)  # fmt: skip

@@ -91,10 +91,16 @@ class HeadlessPage:
         """Call a DevTools method on the page (e.g. ``Runtime.evaluate``)."""
         return self._call(method, session=self._session, **params)
 
-    def press(self, code):
+    def press(self, code, *, shift=False):
         """Press and release the key ``code`` (a KeyboardEvent.code, e.g. "ArrowRight")."""
         for kind in ("keyDown", "keyUp"):
-            self.page("Input.dispatchKeyEvent", type=kind, code=code, key=code)
+            self.key(kind, code, shift=shift)
+
+    def key(self, kind, code, *, shift=False):
+        """One key event: ``kind`` "keyDown" or "keyUp" (a key held between the two)."""
+        key = code[3:].lower() if code.startswith("Key") else code
+        self.page("Input.dispatchKeyEvent", type=kind, code=code, key=key,
+                  modifiers=8 if shift else 0)  # fmt: skip
 
     def evaluate(self, expression):
         """The value of a javascript expression in the page."""

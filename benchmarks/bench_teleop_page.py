@@ -1,0 +1,194 @@
+"""The teleop page as a person uses it, measured (issue 24 section 4).
+
+``hemg-drake teleop TASK`` runs in a process of its own while another process keeps one
+core busy; its printed page is opened in headless Chromium (software WebGL, on the same two
+cores) and driven with real key events (DevTools): Enter starts the take, taps of the arrow
+keys at irregular moments, then a key held for a few seconds, Escape, K. Printed:
+
+- real-time factor of the take (simulated seconds over wall seconds, from the command's
+  own line; goal >= 1.0);
+- key press to first visible motion: from the page's keydown event to the first animation
+  frame in which the stylus target (the blue cross) has moved (median, 90th percentile,
+  max; goal median <= 50 ms);
+- the largest per-step jump of the stylus target: the take's inputs log re-driving a
+  BrowserMaster alone, the target's largest change per 10 ms sample against what
+  ``KEY_SPEED`` allows (0.25 mm per sample per axis), and the reference sent to the
+  slave (p_WE_desired, scale 2) per logged step;
+- the held key's speed in wall-clock time (the slider's change over the wall time it was
+  held), against ``HOLD_MM_S``.
+
+``--screenshot PNG`` also writes a picture of the page mid-take (docs/img/teleop_page.png).
+
+    .venv/bin/python benchmarks/bench_teleop_page.py [--task cotter_pin] [--taps 20]
+"""
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from hemg_drake.fileio import write_bytes_atomic
+from hemg_drake.learning.demos import load_dataset
+from hemg_drake.teleop.browser import BrowserMaster
+from hemg_drake.teleop.browser_inputs import (
+    COLUMNS,
+    HOLD_DELAY,
+    HOLD_MM_S,
+    KEY_SPEED,
+    LoggedInputs,
+    load_inputs,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+from tooling.headless_page import HeadlessPage  # noqa: E402  (test tooling, not runtime)
+
+# Injected into the page: the wall time from each arrow keydown to the first animation
+# frame in which the stylus target's position differs.
+WATCHER = """
+(function() {
+  window.hemgLatency = []; let down = null, last = null;
+  window.addEventListener("keydown", (e) => {
+    if (e.code.startsWith("Arrow") && !e.repeat) down = performance.now();
+  }, true);
+  function watch() {
+    const node = viewer.scene_tree.find(["teleop", "target"]);
+    const p = node.object.position, key = p.x + "," + p.y + "," + p.z;
+    if (down !== null && last !== null && key !== last) {
+      window.hemgLatency.push(performance.now() - down); down = null;
+    }
+    last = key;
+    requestAnimationFrame(watch);
+  }
+  requestAnimationFrame(watch);
+})();
+"""
+
+
+def state(page):
+    return page.evaluate("document.getElementById('hemg-state').textContent") or ""
+
+
+def controls_ready(page, timeout=300.0):
+    """Wait until Meshcat has given the page its buttons and sliders."""
+    deadline = time.monotonic() + timeout
+    while not page.evaluate("!!(window.viewer && viewer.gui_controllers['Start take'] && "
+                            "viewer.gui_controllers['stylus x (mm)'])"):  # fmt: skip
+        if time.monotonic() > deadline:
+            raise RuntimeError("the page never got its controls")
+        time.sleep(0.05)
+
+
+def wait_for(page, text, timeout=300.0):
+    deadline = time.monotonic() + timeout
+    while text not in state(page):
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"the page never said {text!r} (it says {state(page)!r})")
+        time.sleep(0.05)
+
+
+def target_steps(log):
+    """The stylus target per 10 ms sample, the inputs log re-driving a BrowserMaster alone."""
+    master = BrowserMaster(source=LoggedInputs(log.time, log.rows), p_MS_initial=[0, -0.025, 0])
+    return master.targets(log.rows)[0]
+
+
+def run(task, taps, hold, screenshot, seed):
+    rng = np.random.default_rng(seed)
+    loader = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    out_dir = Path(tempfile.mkdtemp(prefix="bench-teleop-page-")) / "run"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    command = subprocess.Popen(
+        [sys.executable, "-m", "hemg_drake.cli", "teleop", task, "--out", str(out_dir),
+         "--port", "0", "--no-replay"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+    )  # fmt: skip
+    try:
+        url = command.stdout.readline().split()[2]
+        with HeadlessPage(url, size=(1280, 800)) as page:
+            wait_for(page, "waiting")
+            controls_ready(page)
+            page.evaluate(WATCHER)
+            for _ in range(10):  # as a person would, press again if nothing happened
+                page.press("Enter")
+                try:
+                    wait_for(page, "recording", timeout=10.0)
+                    break
+                except RuntimeError:
+                    print("Enter again", file=sys.stderr)
+            time.sleep(1.0)
+            for k in range(taps):
+                page.press("ArrowRight" if k % 2 == 0 else "ArrowLeft")
+                time.sleep(float(rng.uniform(0.3, 0.6)))
+            page.key("keyDown", "KeyX")
+            time.sleep(0.5)
+            page.key("keyUp", "KeyX")
+            page.key("keyDown", "ArrowUp")
+            held_from = time.monotonic()
+            time.sleep(hold)
+            page.key("keyUp", "ArrowUp")
+            held = time.monotonic() - held_from
+            page.key("keyDown", "KeyW")  # pull
+            time.sleep(2.0)
+            if screenshot:
+                write_bytes_atomic(screenshot, page.screenshot())
+            page.key("keyUp", "KeyW")
+            time.sleep(1.0)
+            latencies = np.array(page.evaluate("window.hemgLatency") or [])
+            page.press("Escape")
+            wait_for(page, "ended")
+            page.press("KeyK")
+            out, _ = command.communicate(timeout=600)
+    except BaseException:
+        if command.poll() is None:
+            command.terminate()
+        print(command.communicate(timeout=60)[0], file=sys.stderr)
+        raise
+    finally:
+        loader.kill()
+        loader.wait()
+    line = next(x for x in out.splitlines() if " input samples, in " in x)
+    simulated = float(line.split(": ")[1].split(" s ")[0])
+    wall = float(line.split(" in ")[1].split(" s ")[0])
+    log = load_inputs(out_dir / "inputs_1.npz")
+    targets = target_steps(log)
+    step = np.abs(np.diff(targets, axis=0)).max()
+    demos, _ = load_dataset(out_dir / "dataset.npz")
+    reference = np.linalg.norm(np.diff(demos[0].p_WE_desired, axis=0), axis=1).max()
+    z = log.rows[:, COLUMNS.index("slider_z_mm")]
+    held_mm = abs(z[-1] - z[0])
+    print(f"{task}: real-time factor {simulated / wall:.2f} ({simulated:.2f} s in {wall:.2f} s, "
+          "one core loaded, page in headless Chromium)")  # fmt: skip
+    if len(latencies):
+        print(f"  key press to first visible motion of the target: median "
+              f"{np.median(latencies):.0f} ms, 90th percentile {np.percentile(latencies, 90):.0f} "
+              f"ms, max {latencies.max():.0f} ms ({len(latencies)} of {taps} taps)")  # fmt: skip
+    bound = KEY_SPEED * 0.01
+    print(f"  largest per-sample step of the target {1e3 * step:.3f} mm per axis (KEY_SPEED "
+          f"allows {1e3 * bound:.3f}); of the slave's reference {1e3 * reference:.3f} mm per "
+          f"10 ms")  # fmt: skip
+    speed = held_mm / max(held - HOLD_DELAY, 1e-9)
+    print(f"  held key: {held_mm:.2f} mm of slider in {held:.2f} s wall ({speed:.1f} mm/s after "
+          f"the {HOLD_DELAY} s hold delay; set {HOLD_MM_S} mm/s)")  # fmt: skip
+    return simulated / wall, latencies, step
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--task", default="cotter_pin", choices=["cotter_pin", "drawing"])
+    parser.add_argument("--taps", type=int, default=20)
+    parser.add_argument("--hold", type=float, default=2.0,
+                        help="seconds ArrowUp is held (under 5.5 s: the workspace's edge)")
+    parser.add_argument("--seed", type=int, default=24)
+    parser.add_argument("--screenshot", help="write a PNG of the page mid-take there")
+    args = parser.parse_args()
+    run(args.task, args.taps, args.hold, args.screenshot, args.seed)
+
+
+if __name__ == "__main__":
+    main()

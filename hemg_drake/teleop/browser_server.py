@@ -1,0 +1,275 @@
+"""The teleop page a person opens: Drake's Meshcat page with the controls open, a key legend,
+the take's state and read-outs, and keys that move at a set wall-clock speed.
+
+Drake 1.51's Meshcat serves one fixed page (``meshcat.html``) and offers no way to add HTML
+to it: ``SetProperty`` reaches three.js objects only, and its controls panel starts closed.
+So :class:`TeleopPageServer` serves, on its own loopback port, Drake's page itself (as the
+Meshcat server serves it) with its script and websocket pointed at the Meshcat server
+and an overlay added (:data:`OVERLAY`): the legend, a state line (waiting / recording /
+ended / saved) with the take's time, bars for K, the activation and the force at the tool,
+and a warning when the simulation runs below 0.8x real time. The overlay reads
+``/state`` (JSON, :meth:`TeleopPageServer.update`) 20 times a second.
+
+Keys: the overlay's script moves the keyboard sliders of
+:class:`~hemg_drake.teleop.browser_inputs.MeshcatInputs` (through Meshcat's own slider
+controls, so a slider message goes to Drake as when one is dragged): a tap moves
+:data:`~hemg_drake.teleop.browser_inputs.TAP_MM`, a key held longer than ``HOLD_DELAY``
+moves at :data:`~hemg_drake.teleop.browser_inputs.HOLD_MM_S` in wall-clock time (Shift:
+``FINE`` of both), whatever the browser's key repeat. The buttons (Start, End, Keep,
+Discard) keep Meshcat's own key bindings.
+"""
+
+import http.server
+import json
+import re
+import threading
+
+from hemg_drake.teleop.browser_inputs import (
+    ACTIVATION_HOLD_S,
+    ACTIVATION_TAP,
+    FINE,
+    HOLD_DELAY,
+    HOLD_MM_S,
+    KEYS,
+    SLIDER_ACTIVATION,
+    TAP_MM,
+)
+
+# Below this real-time factor the page says the simulation is slow.
+SLOW_RATE = 0.8
+
+
+def drake_page(meshcat):
+    """The page ``meshcat``'s server serves (Drake's ``meshcat.html``, its script at a
+    content-addressed path ``cas-v1/<sha256>`` on that server)."""
+    import urllib.request
+
+    with urllib.request.urlopen(f"http://localhost:{meshcat.port()}/", timeout=30) as reply:
+        return reply.read().decode("utf-8")
+
+
+OVERLAY = r"""
+<style>
+  #hemg-panel { position: fixed; left: 8px; top: 56px; width: 330px; z-index: 10;
+    font: 13px/1.35 sans-serif; color: #111; background: rgba(255,255,255,0.88);
+    border-radius: 6px; padding: 8px 10px; box-shadow: 0 1px 4px rgba(0,0,0,0.3); }
+  #hemg-state { font-size: 18px; font-weight: bold; margin-bottom: 4px; }
+  #hemg-state.recording { color: #c00; } #hemg-state.saved { color: #070; }
+  #hemg-task { margin: 4px 0; padding: 4px 6px; background: #ffd; border-left: 3px solid #e90; }
+  #hemg-slow { display: none; color: #fff; background: #c00; padding: 2px 6px; margin: 4px 0; }
+  .hemg-bar { height: 10px; background: #ddd; margin: 1px 0 4px 0; }
+  .hemg-bar div { height: 100%; width: 0; }
+  #hemg-panel table { border-collapse: collapse; width: 100%; }
+  #hemg-panel td { padding: 0 4px 0 0; vertical-align: top; }
+  #hemg-panel kbd { font: 12px monospace; background: #eee; border: 1px solid #aaa;
+    border-radius: 3px; padding: 0 3px; }
+</style>
+<div id="hemg-panel">
+  <div id="hemg-state">connecting...</div>
+  <div id="hemg-hint"></div>
+  <div id="hemg-slow"></div>
+  <div id="hemg-task"></div>
+  <div>K <span id="hemg-k"></span></div><div class="hemg-bar"><div id="hemg-kbar" style="background:#36c"></div></div>
+  <div>activation <span id="hemg-a"></span></div><div class="hemg-bar"><div id="hemg-abar" style="background:#c3c"></div></div>
+  <div>force at the tool <span id="hemg-f"></span> (orange arrow)</div><div class="hemg-bar"><div id="hemg-fbar" style="background:#e80"></div></div>
+  <table id="hemg-legend"></table>
+</div>
+<script>
+(function() {
+  const config = __CONFIG__;
+  const legend = document.getElementById("hemg-legend");
+  for (const [keys, what] of config.legend) {
+    const tr = document.createElement("tr");
+    tr.innerHTML = "<td>" + keys.map(k => "<kbd>" + k + "</kbd>").join(" ") + "</td><td>" + what + "</td>";
+    legend.appendChild(tr);
+  }
+  document.getElementById("hemg-task").textContent = config.task;
+  // Open Meshcat's controls panel (it starts closed) once the viewer exists.
+  const openControls = () => {
+    if (!(window.viewer && viewer.gui)) { setTimeout(openControls, 100); return; }
+    viewer.gui.open();
+    const scene = viewer.gui.__folders && viewer.gui.__folders["Scene"];
+    if (scene) scene.close();  // the take's buttons and sliders show without scrolling
+  };
+  openControls();
+  // Held keys: a tap moves one step; held past HOLD_DELAY, a set speed in wall-clock time.
+  const axes = {};
+  for (const [name, [down, up]] of Object.entries(config.keys)) {
+    const tap = name == config.activation ? config.activation_tap : config.tap_mm;
+    const speed = name == config.activation ? config.activation_hold : config.hold_mm_s;
+    axes[down] = {name, sign: -1, tap, speed}; axes[up] = {name, sign: 1, tap, speed};
+  }
+  const held = {};
+  function nudge(axis, amount) {
+    const c = window.viewer && viewer.gui_controllers[axis.name];
+    if (!c) return;
+    const value = Math.min(Math.max(c.getValue() + axis.sign * amount, c.__min), c.__max);
+    c.setValue(value);  // Meshcat's onChange sends the slider to Drake
+  }
+  window.addEventListener("keydown", (e) => {
+    const axis = axes[e.code];
+    if (!axis) return;
+    e.preventDefault();
+    if (e.repeat || held[e.code]) return;  // the browser's key repeat is not used
+    const now = performance.now();
+    held[e.code] = {axis, since: now, last: now};
+    nudge(axis, axis.tap * (e.shiftKey ? config.fine : 1));
+  }, true);
+  window.addEventListener("keyup", (e) => { delete held[e.code]; }, true);
+  window.addEventListener("blur", () => { for (const k in held) delete held[k]; });
+  let shift = false;
+  window.addEventListener("keydown", (e) => { shift = e.shiftKey; }, true);
+  window.addEventListener("keyup", (e) => { shift = e.shiftKey; }, true);
+  function tick() {
+    const now = performance.now();
+    for (const h of Object.values(held)) {
+      const from = Math.max(h.last, h.since + 1000 * config.hold_delay);
+      if (now > from) nudge(h.axis, h.axis.speed * (shift ? config.fine : 1) * (now - from) / 1000);
+      h.last = now;
+    }
+    requestAnimationFrame(tick);
+  }
+  requestAnimationFrame(tick);
+  // The state and read-outs, from the server that served this page.
+  const el = (id) => document.getElementById(id);
+  function bar(id, fraction) { el(id).style.width = (100 * Math.min(Math.max(fraction, 0), 1)) + "%"; }
+  async function poll() {
+    try {
+      const s = await (await fetch("state", {cache: "no-store"})).json();
+      const state = el("hemg-state");
+      state.textContent = s.headline; state.className = s.state;
+      el("hemg-hint").textContent = s.hint;
+      el("hemg-k").textContent = s.K.toFixed(0) + " N/m";
+      bar("hemg-kbar", (s.K - s.K_min) / (s.K_max - s.K_min));
+      el("hemg-a").textContent = s.activation.toFixed(2);
+      bar("hemg-abar", s.activation);
+      el("hemg-f").textContent = s.force.toFixed(1) + " N";
+      bar("hemg-fbar", s.force / s.force_max);
+      const slow = el("hemg-slow");
+      slow.style.display = s.slow ? "block" : "none";
+      slow.textContent = s.slow;
+    } catch (e) { el("hemg-state").textContent = "the teleop command is not running"; }
+    setTimeout(poll, 50);
+  }
+  poll();
+})();
+</script>
+"""
+
+
+def page_html(html, meshcat_port, config):
+    """Drake's Meshcat page ``html``, its script and websocket pointed at ``meshcat_port``,
+    with the overlay (``config``: the legend and key speeds, as JSON) added."""
+    base = f"http://localhost:{meshcat_port}"
+    replaced, scripts = re.subn(r'src="(cas-v1/[0-9a-f]+|meshcat\.js)"', rf'src="{base}/\1"', html)
+    ws = f'url = "ws://localhost:{meshcat_port}/";'
+    replaced = replaced.replace("url = location.toString();", ws)
+    overlay = OVERLAY.replace("__CONFIG__", json.dumps(config))
+    replaced = replaced.replace("</body>", overlay + "</body>")
+    if scripts != 1 or ws not in replaced or overlay not in replaced:
+        raise RuntimeError("Drake's meshcat.html changed: the teleop page cannot point it at Meshcat")
+    return replaced
+
+
+def legend(task, scale):
+    """The legend's rows (keys, what they do) and the task's line; ``scale``: tool motion per
+    stylus motion (the workspace map's), so the steps are stated at the tool."""
+    tool = lambda mm: f"{scale * mm:g}"  # noqa: E731
+    rows = [
+        (["Enter"], "start a take"), (["Esc"], "end the take"),
+        (["K"], "keep the ended take"), (["D"], "discard it"),
+        (["\u2190", "\u2192"], "tool left / right"), (["W", "S"], "tool up / down"),
+        (["\u2191", "\u2193"], "tool away from / towards you"),
+        (["X", "Z"], "squeeze (stiffen) / relax"),
+        (["Shift"], f"fine: {FINE:g} of each step and speed"),
+        ([], f"a tap moves the tool {tool(TAP_MM)} mm, a held key {tool(HOLD_MM_S)} mm/s "
+             f"(Shift: {tool(TAP_MM * FINE)} mm, {tool(HOLD_MM_S * FINE)} mm/s)"),
+    ]  # fmt: skip
+    tasks = {
+        "cotter_pin": "Cotter pin: squeeze (hold X until K is high) to stiffen, then pull the "
+        "pin up (hold W) about 10 cm until it is out.",
+        "drawing": "Drawing: lower the pen (S) onto the sheet and press it 2-3 mm into the "
+        "paper, draw the three faint template strokes (ink shows as you draw), lift it (W) "
+        "between strokes.",
+    }
+    return rows, tasks.get(task, task)
+
+
+class TeleopPageServer:
+    """Serves the teleop page on ``localhost:port`` (0: a free port) in a daemon thread.
+
+    Parameters
+    ----------
+    meshcat : Meshcat, the server the page connects to.
+    task : str, the scenario's task (its line of the legend).
+    scale : float, the workspace map's scale.
+    port : int
+    """
+
+    def __init__(self, meshcat, *, task, scale, port=0):
+        rows, task_line = legend(task, scale)
+        config = dict(
+            legend=rows, task=task_line, keys={n: list(k) for n, k in KEYS.items()},
+            activation=SLIDER_ACTIVATION, tap_mm=TAP_MM, hold_mm_s=HOLD_MM_S, fine=FINE,
+            hold_delay=HOLD_DELAY, activation_tap=ACTIVATION_TAP,
+            activation_hold=ACTIVATION_HOLD_S,
+        )  # fmt: skip
+        self._html = page_html(drake_page(meshcat), meshcat.port(), config).encode("utf-8")
+        self._lock = threading.Lock()
+        self._state = dict(state="waiting", headline="waiting", hint="", K=0.0, K_min=0.0,
+                           K_max=1.0, activation=0.0, force=0.0, force_max=60.0, slow="")  # fmt: skip
+        server = self
+
+        class Handler(http.server.BaseHTTPRequestHandler):
+            def do_GET(self):
+                if self.path.split("?")[0] in ("/", "/index.html"):
+                    body, kind = server._html, "text/html; charset=utf-8"
+                elif self.path.split("?")[0] == "/state":
+                    with server._lock:
+                        body = json.dumps(server._state).encode()
+                    kind = "application/json"
+                else:
+                    self.send_error(404)
+                    return
+                try:
+                    self.send_response(200)
+                    self.send_header("Content-Type", kind)
+                    self.send_header("Content-Length", str(len(body)))
+                    self.send_header("Cache-Control", "no-store")
+                    self.end_headers()
+                    self.wfile.write(body)
+                except (BrokenPipeError, ConnectionResetError):
+                    pass  # the page went away mid-reply (a closed tab)
+
+            def log_message(self, *args):
+                pass
+
+        port = int(port)
+        if not 0 <= port <= 65535:
+            raise ValueError(f"--port must be in 0..65535, got {port}")
+        try:
+            self._httpd = http.server.ThreadingHTTPServer(("localhost", port), Handler)
+        except OSError as error:
+            raise ValueError(
+                f"cannot listen on localhost:{port} ({error.strerror}): the port is in use; "
+                "give another --port, or --port 0 for a free one"
+            ) from None
+        self._httpd.daemon_threads = True
+        self._thread = threading.Thread(target=self._httpd.serve_forever, daemon=True)
+        self._thread.start()
+
+    def port(self):
+        return self._httpd.server_address[1]
+
+    def url(self):
+        return f"http://localhost:{self.port()}/"
+
+    def update(self, **values):
+        """Set some of the page's read-outs: state ("waiting", "recording", "ended",
+        "saved"), headline, hint, K, K_min, K_max, activation, force, force_max, slow."""
+        with self._lock:
+            self._state.update(values)
+
+    def close(self):
+        self._httpd.shutdown()
+        self._httpd.server_close()

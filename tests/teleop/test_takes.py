@@ -1,0 +1,215 @@
+"""Takes under the person's control: Start, End, Keep or Discard at the page; idle lead-in
+and lead-out trimmed; ``hemg-drake takes`` lists and removes takes consistently."""
+
+import dataclasses as dc
+import hashlib
+import math
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from hemg_drake.cli import main
+from hemg_drake.learning.demos import load_dataset
+from hemg_drake.run_folder import RunFolder
+from hemg_drake.teleop.browser import BrowserMaster
+from hemg_drake.teleop.browser_inputs import COLUMNS, END_BUTTON, LoggedInputs, load_inputs
+from hemg_drake.teleop.browser_page import DISCARD_BUTTON, KEEP_BUTTON, START_BUTTON
+from hemg_drake.teleop_session import TakeNotKept, teleop
+from hemg_drake.teleop_takes import active_samples, active_span, trim_demonstration
+
+websocket = pytest.importorskip("websocket", reason="websocket-client is in the dev extra")
+msgpack = pytest.importorskip("msgpack")
+
+
+def row(x=0.0, activation=0.05, axes=None, trigger=math.nan):
+    values = dict(zip(COLUMNS, [math.nan] * len(COLUMNS)))
+    values.update(slider_x_mm=x, slider_y_mm=0.0, slider_z_mm=0.0, slider_activation=activation)
+    values["gamepad_index"] = -1.0 if axes is None else 0.0
+    for i, a in enumerate(axes or []):
+        values[f"axis_{i}"] = a
+    values["button_7"] = trigger
+    return [values[c] for c in COLUMNS]
+
+
+def test_active_samples_and_span_by_hand():
+    rows = [row(), row(), row(0.5), row(0.5), row(0.5),
+            row(0.5, activation=0.1), row(0.5),  # the activation up, and back: both move
+            row(0.5, axes=[0.1, 0, 0, 0]),  # inside the dead zone: idle
+            row(0.5, axes=[0.5, 0, 0, 0]), row(0.5, axes=[0, 0, 0, 0], trigger=0.01),
+            row(0.5, axes=[0, 0, 0, 0], trigger=0.3), row(0.5)]  # fmt: skip
+    master = BrowserMaster(source=LoggedInputs(0.01 * np.arange(len(rows)), rows),
+                           p_MS_initial=[0.0, 0.0, 0.0])  # fmt: skip
+    # +0.5 mm at the keyboard's 0.25 mm per sample: samples 2 and 3; the trigger's 0.01 is
+    # under the slider's 0.05 (the larger counts); the trigger let go at 11 moves it back.
+    expected = [False, False, True, True, False, True, True, False, True, False, True, True]
+    assert active_samples(master, rows).tolist() == expected
+    times = 0.5 * np.arange(len(rows))
+    # First active at 1.0 s, last at 5.5 s: 0.2 s before, 1.0 s after (within the end).
+    assert active_span(master, times, rows, 6.0) == pytest.approx((0.8, 6.0))
+    assert active_span(master, times, rows, 9.0) == pytest.approx((0.8, 6.5))
+    assert active_span(master, times, [row()] * 5, 2.0) is None
+
+
+def _demo(n=101, emg_per=2):
+    from hemg_drake.learning.demos import Demonstration
+
+    t = 0.01 * np.arange(n)
+    ramp = np.linspace(0, 1, n)
+    e = n * emg_per - 1
+    return Demonstration(
+        seed=1, time=t, p_WE=np.column_stack([ramp, 2 * ramp, 3 * ramp]), v_WE=np.zeros((n, 3)),
+        p_MS=np.zeros((n, 3)), envelope=ramp, activation=ramp, gain=ramp, f_WE=np.zeros((n, 3)),
+        p_WE_desired=np.zeros((n, 3)), emg_time=0.005 * np.arange(e),
+        emg=np.arange(e * 8, dtype=float).reshape(e, 8), muscle_activation=np.arange(e) / e,
+    )  # fmt: skip
+
+
+def test_trim_keeps_the_span_and_restarts_the_clock():
+    demo = _demo()
+    cut = trim_demonstration(demo, 0.204, 0.5, emg_period=0.005)
+    # Log samples 0.21 .. 0.50 s (30), their clock from 0; sEMG samples 42 .. 100.
+    assert len(cut) == 30 and cut.time[0] == 0.0
+    np.testing.assert_allclose(cut.time, 0.01 * np.arange(30), atol=1e-12)
+    np.testing.assert_array_equal(cut.p_WE, demo.p_WE[21:51])
+    np.testing.assert_array_equal(cut.emg, demo.emg[42:101])
+    np.testing.assert_allclose(cut.emg_time, 0.005 * np.arange(59), atol=1e-12)
+    np.testing.assert_array_equal(cut.muscle_activation, demo.muscle_activation[42:101])
+
+
+class Clicker:
+    """Clicks a page button over the websocket every 0.1 s (wall) while ``when()`` holds:
+    a person pressing a key until the page reacts."""
+
+    def __init__(self, meshcat):
+        self.ws = websocket.create_connection(meshcat.ws_url(), timeout=5)
+        self.plan, self.stop = [], threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self):
+        while not self.stop.is_set():
+            for name, when in self.plan:
+                if when():
+                    self.ws.send_binary(msgpack.packb({"type": "button", "name": name}))
+            time.sleep(0.1)
+
+    def __enter__(self):
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.stop.set()
+        self.thread.join()
+        self.ws.close()
+
+
+def _hash(path):
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@pytest.mark.parametrize("answer", ["keep", "discard"])
+def test_a_take_waits_for_start_and_is_saved_only_when_kept(scenario, meshcat, visualization,
+                                                            tmp_path, answer):  # fmt: skip
+    from hemg_drake.teleop.browser_inputs import SLIDER_X
+
+    started, ended = [], []
+
+    def on_step(t):
+        if not started:
+            started.append(time.monotonic())
+        if t >= 0.4:
+            meshcat.SetSliderValue(SLIDER_X, 6.0)  # the person moves, then waits
+        if t >= 2.0 and not ended:
+            ended.append(t)
+
+    lines = []
+    with Clicker(meshcat) as clicker:
+        began = time.monotonic()
+        clicker.plan = [
+            (START_BUTTON, lambda: time.monotonic() - began > 1.0 and not started),
+            (END_BUTTON, lambda: bool(ended)),
+            (KEEP_BUTTON if answer == "keep" else DISCARD_BUTTON, lambda: bool(ended)),
+        ]
+        run = lambda: teleop(scenario, tmp_path, visualization=visualization, duration=20.0,  # noqa: E731
+                             replays=False, realtime=False, wait=True, progress=lines.append,
+                             on_step=on_step)  # fmt: skip
+        if answer == "discard":
+            with pytest.raises(TakeNotKept, match="discarded"):
+                run()
+            assert not (tmp_path / "dataset.npz").exists() and not list(tmp_path.iterdir())
+            return
+        try:
+            run()
+        except TakeNotKept:
+            print(lines)
+            raise
+    # Nothing happened before Start (clicked after a wall-clock second of waiting).
+    assert started[0] - began > 0.9
+    demos, _ = load_dataset(tmp_path / "dataset.npz")
+    log = load_inputs(tmp_path / "inputs_1.npz")
+    assert log.end_reason == "button" and log.time[0] == 0.0, lines
+    # The slider jumped 6 mm at 0.40 s and nothing after it; the target followed at
+    # 0.25 mm per sample, its last step at 0.40 + 0.23 s: kept 0.20 .. 1.63 s.
+    first = log.time[np.flatnonzero(log.rows[:, COLUMNS.index("slider_x_mm")] == 6.0)[0]]
+    assert first == pytest.approx(0.40, abs=0.011)
+    assert demos[0].time[-1] == pytest.approx(1.43, abs=0.011)
+    assert any("trimmed" in line and "lead-in" in line for line in lines), lines
+
+
+def test_a_take_where_nothing_moved_or_the_page_closed_is_not_kept(scenario, meshcat,
+                                                                  visualization, tmp_path):  # fmt: skip
+    with Clicker(meshcat) as clicker:
+        clicker.plan = [(START_BUTTON, lambda: True), (END_BUTTON, lambda: True)]
+        with pytest.raises(TakeNotKept, match="empty"):
+            teleop(scenario, tmp_path, visualization=visualization, duration=20.0, replays=False,
+                   realtime=False, wait=True, progress=lambda line: None)  # fmt: skip
+    # The only page closes while the person is asked to start: nothing kept, nothing waits on.
+    ws = websocket.create_connection(meshcat.ws_url(), timeout=5)
+    threading.Timer(0.5, ws.close).start()
+    with pytest.raises(TakeNotKept, match="page closed"):
+        teleop(scenario, tmp_path, visualization=visualization, duration=20.0, replays=False,
+               realtime=False, wait=True, progress=lambda line: None)  # fmt: skip
+    assert not list(tmp_path.iterdir())
+
+
+def test_takes_lists_and_removes_a_take_keeping_the_folder_consistent(tmp_path, capsys):
+    out = tmp_path / "run"
+    base = ["teleop", "cotter_pin", "--out", str(out), "--port", "0", "--no-replay", "--no-wait"]
+    for duration in ("0.1", "0.2", "0.3"):
+        assert main([*base, "--duration", duration]) == 0
+    assert main(["learn", str(out), "--set", "learning.num_states=2"]) == 0
+    third = _hash(out / "inputs_3.npz")
+    before, _ = load_dataset(out / "dataset.npz")
+    capsys.readouterr()
+    assert main(["takes", str(out)]) == 0
+    listed = capsys.readouterr().out.splitlines()
+    assert [line.split()[0] for line in listed] == ["1", "2", "3"]
+    assert "inputs_2.npz" in listed[1] and "browser" in listed[1]
+    assert main(["takes", str(out), "--remove", "2"]) == 0
+    after, metadata = load_dataset(out / "dataset.npz")
+    assert [len(d) for d in after] == [len(before[0]), len(before[2])]
+    for field in dc.fields(after[1]):
+        a, b = getattr(after[1], field.name), getattr(before[2], field.name)
+        assert (a is None and b is None) or np.array_equal(a, b)
+    assert metadata["operators"] == ["browser", "browser"]
+    assert _hash(out / "inputs_2.npz") == third and not (out / "inputs_3.npz").exists()
+    assert not (out / "model.npz").exists()  # made from the older dataset: gone with it
+    folder = RunFolder(out)
+    for name in ("dataset.npz", "inputs_1.npz", "inputs_2.npz", "demonstrations.png"):
+        folder.check("demonstrate", out / name, run_hint="x")
+    assert folder.takes()
+    # Bad input: one line, nothing changed.
+    snapshot = {p.name: _hash(p) for p in out.iterdir() if p.is_file()}
+    for argv, said in ((["takes", str(out), "--remove", "5"], "holds takes 1..2"),
+                       (["takes", str(tmp_path / "none")], "not found"),
+                       (["takes", str(out), "--remove", "0"], "--remove")):  # fmt: skip
+        capsys.readouterr()
+        try:
+            code = main(argv)
+        except SystemExit as exit:  # argparse's own one-line error
+            code = exit.code
+        assert code == 2
+        err = capsys.readouterr().err.strip()
+        assert said in err and len(err.splitlines()) == 1, err
+    assert {p.name: _hash(p) for p in out.iterdir() if p.is_file()} == snapshot

@@ -1,0 +1,183 @@
+"""The teleop page as a person uses it: ``hemg-drake teleop`` in a process of its own, the
+printed URL opened in headless Chromium, real key events (DevTools ``Input.dispatchKeyEvent``)
+and what the page shows read back from it."""
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+
+from hemg_drake.learning.demos import load_dataset
+from hemg_drake.teleop.browser import BrowserMaster
+from hemg_drake.teleop.browser_inputs import COLUMNS, TAP_MM, LoggedInputs, load_inputs
+from tooling.headless_page import HeadlessPage  # tests/tooling: test tooling, not runtime
+
+pytestmark = pytest.mark.browser
+ROOT = Path(__file__).resolve().parents[2]
+
+
+class Command:
+    """``hemg-drake teleop`` running, its output read line by line."""
+
+    def __init__(self, *args):
+        env = dict(os.environ, PYTHONPATH=str(ROOT))
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "hemg_drake.cli", "teleop", *args], stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT, text=True, env=env,
+        )  # fmt: skip
+        self.first = self.process.stdout.readline()
+        assert self.first.startswith("Teleop page: http://localhost:"), self.first
+        self.url = self.first.split()[2]
+
+    def finish(self, timeout=300):
+        out, _ = self.process.communicate(timeout=timeout)
+        return self.process.returncode, out
+
+    def stop(self):
+        if self.process.poll() is None:
+            self.process.terminate()
+            self.process.communicate(timeout=30)
+
+
+def state(page):
+    return page.evaluate("document.getElementById('hemg-state').textContent") or ""
+
+
+def controls_ready(page, timeout=300.0):
+    """Wait until Meshcat has given the page its buttons and sliders."""
+    deadline = time.monotonic() + timeout
+    while not page.evaluate("!!(window.viewer && viewer.gui_controllers['Start take'] && "
+                            "viewer.gui_controllers['stylus x (mm)'])"):  # fmt: skip
+        if time.monotonic() > deadline:
+            raise RuntimeError("the page never got its controls")
+        time.sleep(0.05)
+
+
+def wait_for(page, text, timeout=120.0):
+    deadline = time.monotonic() + timeout
+    while text not in state(page):
+        if time.monotonic() > deadline:
+            raise AssertionError(f"the page never said {text!r} (it says {state(page)!r})")
+        time.sleep(0.05)
+
+
+def test_takes_start_end_discard_keep_in_the_real_page(chromium, tmp_path):
+    run = tmp_path / "run"
+    command = Command("cotter_pin", "--out", str(run), "--port", "0", "--no-replay")
+    try:
+        with HeadlessPage(command.url, size=(1280, 800)) as page:
+            wait_for(page, "waiting")
+            controls_ready(page)
+            # On load: the legend, the task's line and Meshcat's controls open.
+            text = page.evaluate("document.getElementById('hemg-panel').innerText")
+            for said in ("start a take", "end the take", "keep", "discard", "squeeze",
+                         "a tap moves the tool 1 mm"):  # fmt: skip
+                assert said in text, text
+            assert page.evaluate("viewer.gui.closed") is False
+            box = page.evaluate("JSON.stringify(document.getElementById('hemg-panel')"
+                                ".getBoundingClientRect())")  # fmt: skip
+            assert '"x":8' in box
+            (tmp_path / "page.png").write_bytes(page.screenshot())
+            time.sleep(2.0)
+            assert "waiting" in state(page)  # a take never starts by itself
+            # Take 1: started, moved, ended, discarded.
+            page.press("Enter")
+            wait_for(page, "recording")
+            page.key("keyDown", "KeyX")
+            time.sleep(0.8)
+            page.key("keyUp", "KeyX")
+            page.press("Escape")
+            wait_for(page, "ended")
+            page.press("KeyD")
+            wait_for(page, "discarded")
+            assert not (run / "dataset.npz").exists()
+            time.sleep(2.0)
+            assert "recording" not in state(page)  # the next does not start by itself
+            # Take 1 again: four taps to the right, ended, kept.
+            page.press("Enter")
+            wait_for(page, "recording")
+            for _ in range(4):
+                page.press("ArrowRight")
+                time.sleep(0.15)
+            time.sleep(0.5)
+            page.press("Escape")
+            wait_for(page, "ended")
+            page.press("KeyK")
+            code, out = command.finish()
+    finally:
+        command.stop()
+    assert code == 0, out
+    assert "take not kept (discarded); nothing written" in out and "1 take kept" in out
+    demos, metadata = load_dataset(run / "dataset.npz")
+    assert len(demos) == 1 and metadata["operators"] == ["browser"]
+    log = load_inputs(run / "inputs_1.npz")
+    slider = log.rows[:, COLUMNS.index("slider_x_mm")]
+    assert slider[-1] - slider[0] == pytest.approx(4 * TAP_MM, abs=1e-9)
+    # The log re-driving a master alone: its target moved exactly the four taps.
+    p0 = np.array([0.0, -0.025, 0.0])
+    master = BrowserMaster(source=LoggedInputs(log.time, log.rows), p_MS_initial=p0)
+    simulator = Simulator(master)
+    simulator.AdvanceTo(log.end_time)
+    target = master.GetOutputPort("p_MT").Eval(simulator.get_context())
+    assert target[0] - p0[0] == pytest.approx(4e-3 * TAP_MM, abs=1e-12)
+    # Trimmed: the demonstration starts 0.2 s before the first tap.
+    first = log.time[np.flatnonzero(np.diff(slider))[0] + 1]
+    assert demos[0].time[-1] < log.end_time - first + 0.2
+
+
+def test_closing_the_page_saves_nothing(chromium, tmp_path):
+    run = tmp_path / "run"
+    command = Command("cotter_pin", "--out", str(run), "--port", "0", "--no-replay")
+    try:
+        with HeadlessPage(command.url) as page:
+            wait_for(page, "waiting")
+            controls_ready(page)
+            page.press("Enter")
+            wait_for(page, "recording")
+            page.key("keyDown", "KeyW")
+            time.sleep(0.5)
+        # The browser is gone mid-take, the key still held.
+        code, out = command.finish()
+    finally:
+        command.stop()
+    assert code == 0, out
+    assert "the page was closed: not saved" in out and "0 takes kept" in out
+    assert not run.exists() or not any(run.iterdir())
+
+
+def test_a_drawing_take_shows_ink_on_the_template_as_it_is_drawn(chromium, tmp_path):
+    command = Command("drawing", "--out", str(tmp_path / "run"), "--port", "0", "--no-replay")
+    children = "Object.keys(viewer.scene_tree.find(['teleop', '{}']).children).length"
+    try:
+        with HeadlessPage(command.url) as page:
+            wait_for(page, "waiting")
+            controls_ready(page)
+            assert page.evaluate(children.format("template")) == 3  # the three strokes
+            page.press("Enter")
+            wait_for(page, "recording")
+            page.key("keyDown", "KeyS")  # the pen down onto the sheet: 30 mm at 20 mm/s
+            time.sleep(2.2)
+            page.key("keyUp", "KeyS")
+            page.key("keyDown", "ArrowRight")  # and along it
+            time.sleep(1.5)
+            page.key("keyUp", "ArrowRight")
+            deadline = time.monotonic() + 120
+            while not page.evaluate(children.format("ink")):
+                panel = page.evaluate("document.getElementById('hemg-panel').innerText")
+                sliders = page.evaluate("JSON.stringify(Object.fromEntries(Object.entries("
+                                        "viewer.gui_controllers).map(([k, c]) => [k, c.getValue()])))")  # fmt: skip
+                assert time.monotonic() < deadline, f"no ink appeared: {panel[:300]} {sliders}"
+                time.sleep(0.2)
+            (tmp_path / "drawing.png").write_bytes(page.screenshot())
+            page.press("Escape")
+            wait_for(page, "ended")
+            page.press("KeyK")
+            code, out = command.finish()
+    finally:
+        command.stop()
+    assert code == 0 and "1 take kept" in out, out
