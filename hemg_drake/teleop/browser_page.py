@@ -193,12 +193,15 @@ class TakeControls:
     def __init__(self, meshcat, *, poll=0.02, clock=time.monotonic, sleep=time.sleep):
         self.meshcat = meshcat
         self.poll, self.clock, self.sleep = poll, clock, sleep
-        self._marked = {}  # clicks counted from a mark (mark), by button
         existing = set(meshcat.GetButtonNames())
         for name, key in ((START_BUTTON, START_KEY), (KEEP_BUTTON, KEEP_KEY),
                           (DISCARD_BUTTON, DISCARD_KEY)):  # fmt: skip
             if name not in existing:
                 meshcat.AddButton(name, keycode=key)
+        # Clicks counted from a mark, by button. The first Start counts from the button's
+        # creation: a person who presses Enter while the scene is still being built (the
+        # button is on the page already) has started the take.
+        self._marked = {START_BUTTON: meshcat.GetButtonClicks(START_BUTTON)}
 
     def _wait(self, names, on_wait, opened):
         """The first of ``names`` clicked from now on, or None once the page was closed for
@@ -226,7 +229,8 @@ class TakeControls:
         self._marked = {name: self.meshcat.GetButtonClicks(name) for name in names}
 
     def mark_start(self):
-        self.mark(START_BUTTON)
+        if START_BUTTON not in self._marked:  # the first take's mark stands (__init__)
+            self.mark(START_BUTTON)
 
     def mark_keep(self):
         self.mark(KEEP_BUTTON, DISCARD_BUTTON)

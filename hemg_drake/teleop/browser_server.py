@@ -216,7 +216,7 @@ class TeleopPageServer:
         )  # fmt: skip
         self._html = page_html(drake_page(meshcat), meshcat.port(), config).encode("utf-8")
         self._lock = threading.Lock()
-        self._state = dict(state="waiting", headline="waiting", hint="", K=0.0, K_min=0.0,
+        self._state = dict(state="starting", headline="getting the scene ready", hint="", K=0.0, K_min=0.0,
                            K_max=1.0, activation=0.0, force=0.0, force_max=60.0, slow="")  # fmt: skip
         server = self
 
