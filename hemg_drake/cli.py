@@ -362,6 +362,10 @@ class Terminated(BaseException):
 # retries pending.
 SIGNAL_RETRY = 0.02
 _RETRIES = []
+# The exception each handled signal raised. pybind11 turns an exception raised while it
+# converts a C++ call's arguments (numpy calls back into Python, where the handler runs)
+# into a TypeError "incompatible function arguments": main() reads the signal from here.
+_RAISED = []
 
 
 def _in_llvm(frame):
@@ -390,6 +394,7 @@ def _raising(exception):
             retry.start()
             _RETRIES.append(retry)  # cancelled if the command ends first
             return
+        _RAISED.append(exception)
         raise exception()
 
     return handle
@@ -429,10 +434,16 @@ def main(argv=None):
     def one_line_warning(message, category, *_):  # a warning, like an error, in one line
         print(f"hemg-drake {args.command}: warning: {_one_line(message)}", file=sys.stderr)
 
+    _RAISED.clear()
     try:
         with warnings.catch_warnings():
             warnings.showwarning = one_line_warning
-            status = args.func(args)
+            try:
+                status = args.func(args)
+            except Exception as error:
+                if _RAISED:  # the signal, reported by pybind11 as another error
+                    raise _RAISED[-1]() from error
+                raise
     except KeyboardInterrupt as error:
         # A command may say what it kept (sweep: its finished trials) in the error's args.
         kept = str(error) or "no partial output kept"

@@ -164,6 +164,36 @@ def test_ctrl_c_is_one_line_and_exit_130(tmp_path, run_cli, monkeypatch, command
     assert err == f"hemg-drake {command[0]}: interrupted; no partial output kept\n"
 
 
+@pytest.mark.parametrize("signum, code, said", [("SIGINT", 130, "interrupted"),
+                                                ("SIGTERM", 143, "terminated")])
+def test_a_signal_that_pybind11_reports_as_a_type_error_is_still_one_line(
+    tmp_path, run_cli, monkeypatch, signum, code, said
+):
+    """Ctrl-C while pybind11 converts a C++ call's numpy arguments: the handler's exception
+    comes back as pybind11's TypeError "incompatible function arguments" (seen in a
+    demonstration's PD output); it is still the signal: one line and its exit status."""
+    import signal
+
+    def signalled_inside_a_call(*args, **kwargs):
+        try:
+            signal.raise_signal(getattr(signal, signum))  # main()'s handler raises here
+        except BaseException:
+            raise TypeError("SetFromVector(): incompatible function arguments") from None
+
+    monkeypatch.setattr(pipeline, "learn", signalled_inside_a_call)
+    result, _, err = run_cli(["learn", str(tmp_path)])
+    assert result == code and err == f"hemg-drake learn: {said}; no partial output kept\n"
+
+
+def test_a_type_error_without_a_signal_is_not_taken_for_one(tmp_path, run_cli, monkeypatch):
+    def failing(*args, **kwargs):
+        raise TypeError("a bug")
+
+    monkeypatch.setattr(pipeline, "learn", failing)
+    with pytest.raises(TypeError, match="a bug"):
+        run_cli(["learn", str(tmp_path)])
+
+
 def test_demonstrate_options_become_overrides(tmp_path, run_cli, monkeypatch):
     calls = []
 
