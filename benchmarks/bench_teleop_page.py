@@ -47,6 +47,7 @@ from hemg_drake.teleop.browser_inputs import (
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 from tooling.headless_page import HeadlessPage  # noqa: E402  (test tooling, not runtime)
+from tooling.teleop_page import controls_ready, wait_for  # noqa: E402
 
 # Injected into the page: the wall time from each arrow keydown to the first animation
 # frame in which the stylus target's position differs.
@@ -70,28 +71,6 @@ WATCHER = """
 """
 
 
-def state(page):
-    return page.evaluate("document.getElementById('hemg-state').textContent") or ""
-
-
-def controls_ready(page, timeout=300.0):
-    """Wait until Meshcat has given the page its buttons and sliders."""
-    deadline = time.monotonic() + timeout
-    while not page.evaluate("!!(window.viewer && viewer.gui_controllers['Start take'] && "
-                            "viewer.gui_controllers['stylus x (mm)'])"):  # fmt: skip
-        if time.monotonic() > deadline:
-            raise RuntimeError("the page never got its controls")
-        time.sleep(0.05)
-
-
-def wait_for(page, text, timeout=300.0):
-    deadline = time.monotonic() + timeout
-    while text not in state(page):
-        if time.monotonic() > deadline:
-            raise RuntimeError(f"the page never said {text!r} (it says {state(page)!r})")
-        time.sleep(0.05)
-
-
 def target_steps(log):
     """The stylus target per 10 ms sample, the inputs log re-driving a BrowserMaster alone."""
     master = BrowserMaster(source=LoggedInputs(log.time, log.rows), p_MS_initial=[0, -0.025, 0])
@@ -111,7 +90,7 @@ def run(task, taps, hold, screenshot, seed):
     try:
         url = command.stdout.readline().split()[2]
         with HeadlessPage(url, size=(1280, 800)) as page:
-            wait_for(page, "waiting")
+            wait_for(page, "waiting", timeout=300.0)
             controls_ready(page)
             page.evaluate(WATCHER)
             for _ in range(10):  # as a person would, press again if nothing happened
@@ -141,7 +120,7 @@ def run(task, taps, hold, screenshot, seed):
             time.sleep(1.0)
             latencies = np.array(page.evaluate("window.hemgLatency") or [])
             page.press("Escape")
-            wait_for(page, "ended")
+            wait_for(page, "ended", timeout=300.0)
             page.press("KeyK")
             out, _ = command.communicate(timeout=600)
     except BaseException:

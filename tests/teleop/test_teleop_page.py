@@ -16,6 +16,7 @@ from hemg_drake.learning.demos import load_dataset
 from hemg_drake.teleop.browser import BrowserMaster
 from hemg_drake.teleop.browser_inputs import COLUMNS, TAP_MM, LoggedInputs, load_inputs
 from tooling.headless_page import HeadlessPage  # tests/tooling: test tooling, not runtime
+from tooling.teleop_page import controls_ready, state, wait_for
 
 pytestmark = pytest.mark.browser
 ROOT = Path(__file__).resolve().parents[2]
@@ -42,28 +43,6 @@ class Command:
         if self.process.poll() is None:
             self.process.terminate()
             self.process.communicate(timeout=30)
-
-
-def state(page):
-    return page.evaluate("document.getElementById('hemg-state').textContent") or ""
-
-
-def controls_ready(page, timeout=300.0):
-    """Wait until Meshcat has given the page its buttons and sliders."""
-    deadline = time.monotonic() + timeout
-    while not page.evaluate("!!(window.viewer && viewer.gui_controllers['Start take'] && "
-                            "viewer.gui_controllers['stylus x (mm)'])"):  # fmt: skip
-        if time.monotonic() > deadline:
-            raise RuntimeError("the page never got its controls")
-        time.sleep(0.05)
-
-
-def wait_for(page, text, timeout=120.0):
-    deadline = time.monotonic() + timeout
-    while text not in state(page):
-        if time.monotonic() > deadline:
-            raise AssertionError(f"the page never said {text!r} (it says {state(page)!r})")
-        time.sleep(0.05)
 
 
 def test_takes_start_end_discard_keep_in_the_real_page(chromium, tmp_path):

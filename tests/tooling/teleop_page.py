@@ -1,0 +1,29 @@
+"""Reading the teleop page (``hemg-drake teleop``'s served page) as a person does: its state
+line, and waiting for its controls or for a state. Shared by the page's tests and
+benchmarks/bench_teleop_page.py."""
+
+import time
+
+
+def state(page):
+    """The page's state line (waiting, recording, ...), "" before it has one."""
+    return page.evaluate("document.getElementById('hemg-state').textContent") or ""
+
+
+def controls_ready(page, timeout=300.0):
+    """Wait until Meshcat has given the page its buttons and sliders."""
+    deadline = time.monotonic() + timeout
+    while not page.evaluate("!!(window.viewer && viewer.gui_controllers['Start take'] && "
+                            "viewer.gui_controllers['stylus x (mm)'])"):  # fmt: skip
+        if time.monotonic() > deadline:
+            raise TimeoutError("the page never got its controls")
+        time.sleep(0.05)
+
+
+def wait_for(page, text, timeout=120.0):
+    """Wait until the state line says ``text``."""
+    deadline = time.monotonic() + timeout
+    while text not in state(page):
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"the page never said {text!r} (it says {state(page)!r})")
+        time.sleep(0.05)
