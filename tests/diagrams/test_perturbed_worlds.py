@@ -10,7 +10,6 @@ from pydrake.systems.primitives import ConstantVectorSource
 
 from hemg_drake.diagrams.reproduction import build_reproduction_diagram, run_reproduction
 from hemg_drake.diagrams.station import make_slave_station
-from hemg_drake.learning.hsmm import HSMM
 from hemg_drake.scenario import Scenario, load_scenario, shipped_scenario
 from hemg_drake.tasks.cotter_pin import DEFAULT_POSITION
 
@@ -93,20 +92,6 @@ def test_the_fixture_offset_stretches_the_grasp_by_that_offset():
     # Hand value: the bushing (5000 N/m) stretched 8 mm across: 40 N pulling the tool +y.
     f_WE = diagram.GetOutputPort("f_WE").Eval(context)
     np.testing.assert_allclose(f_WE, [0.0, 40.0, 0.0], atol=0.05)
-
-
-@pytest.fixture(scope="module")
-def model():
-    """Three noisy 5 cm lifts along z with a rising stiffness (test_reproduction_spd's)."""
-    rng = np.random.default_rng(0)
-    demos = []
-    for _ in range(3):
-        t = np.linspace(0.0, 1.0, 101)
-        s = t**3 * (10 - 15 * t + 6 * t**2)
-        x = START + np.outer(0.05 * s, [0.0, 0.0, 1.0]) + rng.normal(0, 5e-4, (101, 3))
-        k = 20.0 + 130.0 * s + rng.normal(0, 2.0, 101)
-        demos.append(np.column_stack([x, np.gradient(x, 0.01, axis=0), k]))
-    return HSMM(3, init="time", reg_covar=0.1, n_iter=10, random_state=0).fit(demos)
 
 
 def _scenario(*changes):

@@ -23,21 +23,6 @@ START = np.array(DEFAULT_POSITION)  # the ring, where the default cotter-pin pla
 
 
 @pytest.fixture(scope="module")
-def model():
-    """An HSMM over [x, xdot, k] of three noisy 5 cm lifts with a stiffness that rises."""
-    rng = np.random.default_rng(0)
-    demos = []
-    for _ in range(3):
-        t = np.linspace(0.0, 1.0, 101)
-        s = t**3 * (10 - 15 * t + 6 * t**2)
-        x = START + np.outer(0.05 * s, [0.0, 0.0, 1.0]) + rng.normal(0, 5e-4, (101, 3))
-        v = np.gradient(x, DT, axis=0)
-        k = 20.0 + 130.0 * s + rng.normal(0, 2.0, 101)
-        demos.append(np.column_stack([x, v, k]))
-    return HSMM(3, init="time", reg_covar=0.1, n_iter=10, random_state=0).fit(demos)
-
-
-@pytest.fixture(scope="module")
 def scenario():
     return Scenario().replaced(
         ["task=cotter_pin", "duration=1.0", "reproduction.weighting=temporal"]

@@ -8,26 +8,10 @@ from pydrake.systems.analysis import Simulator
 from hemg_drake.control.impedance import CartesianImpedancePd
 from hemg_drake.control.pd import VariableGainPd
 from hemg_drake.diagrams.reproduction import build_reproduction_diagram, run_reproduction
-from hemg_drake.learning.hsmm import HSMM
 from hemg_drake.scenario import Scenario
 from hemg_drake.tasks.cotter_pin import DEFAULT_POSITION
 
 START = np.array(DEFAULT_POSITION)
-
-
-@pytest.fixture(scope="module")
-def model():
-    """Three noisy 5 cm lifts along z with a rising stiffness (tests/diagrams/
-    test_reproduction.py's)."""
-    rng = np.random.default_rng(0)
-    demos = []
-    for _ in range(3):
-        t = np.linspace(0.0, 1.0, 101)
-        s = t**3 * (10 - 15 * t + 6 * t**2)
-        x = START + np.outer(0.05 * s, [0.0, 0.0, 1.0]) + rng.normal(0, 5e-4, (101, 3))
-        k = 20.0 + 130.0 * s + rng.normal(0, 2.0, 101)
-        demos.append(np.column_stack([x, np.gradient(x, 0.01, axis=0), k]))
-    return HSMM(3, init="time", reg_covar=0.1, n_iter=10, random_state=0).fit(demos)
 
 
 def scenario(*changes):
