@@ -331,6 +331,14 @@ def test_missing_file():
         ("scene: {cotter_pin: {detent_length: 0.06}}", ["scene.cotter_pin.detent_length", "0.05"]),
         ("plan: {times: [0, 1], points: [[0, 0, 0]], kinds: [free]}", ["plan", "points"]),
         ("plan: {times: [0, 1], points: [[0, 0, 0], [1, 1, 1]], kinds: [fly]}", ["plan", "kinds"]),
+        # This round's keys: natural takes, shared control, stiffness policies.
+        ("learning: {align: diagonal}", ["learning.align", "diagonal", "trim"]),
+        ("operator: {style: robot}", ["operator.style", "robot", "human"]),
+        ("operator: {human: {pause_probability: 2}}",
+         ["operator.human.pause_probability", "[0, 1]"]),
+        ("assist: {mode: bogus}", ["assist.mode", "bogus", "emg"]),
+        ("reproduction: {stiffness: tensor}", ["reproduction.stiffness", "tensor", "spd"]),
+        ("reproduction: {gain_source: guess}", ["reproduction.gain_source", "guess", "learnt"]),
     ],
 )
 def test_bad_scenarios_name_the_file_and_key(tmp_path, text, words):
