@@ -308,7 +308,7 @@ def teleop(scenario, out_dir, *, port=7000, duration=None, replay_inputs=None, r
     take it; an older model and reproduction are replaced (they no longer match). Takes
     already there are kept. The folder is locked for the take and changes only when it is
     saved (:meth:`~hemg_drake.run_folder.RunFolder.transaction`). The demonstration keeps
-    the take's active part (:func:`~hemg_drake.teleop_takes.active_span`: idle lead-in and
+    the take's active part (:func:`~hemg_drake.teleop_takes.input_span`: idle lead-in and
     lead-out trimmed, the trim said); the inputs log and replay keep the whole take.
 
     Live (``replay_inputs`` None): without a ``visualization``, one is started, with the
@@ -368,7 +368,7 @@ def _take(scenario, folder, out_dir, duration, replay_inputs, replays, progress,
     )
     from hemg_drake.run_folder import RunFolder
     from hemg_drake.teleop.browser_page import TakeControls
-    from hemg_drake.teleop_takes import active_span, describe_trim, trim_demonstration
+    from hemg_drake.teleop_takes import describe_trim, input_span, trim_demonstration
     from hemg_drake.viz.figures import plot_demonstrations, plot_emg_envelopes, save_figure
 
     demos, metadata = existing_takes(scenario, out_dir)
@@ -419,7 +419,7 @@ def _take(scenario, folder, out_dir, duration, replay_inputs, replays, progress,
         f"take {c}: {log.end_time:.2f} s ({log.end_reason}), "
         f"{len(log.time)} input samples, in {take.wall_seconds:.1f} s of wall time"
     )
-    span = active_span(take.master, log.time, log.rows, log.end_time)
+    span = input_span(take.master, log.time, log.rows, log.end_time)
     if replay_inputs is None:
         if log.end_reason == "page closed":
             raise TakeNotKept("page closed")

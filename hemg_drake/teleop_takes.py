@@ -45,7 +45,7 @@ def active_samples(master, rows):
     return active
 
 
-def active_span(master, times, rows, end_time):
+def input_span(master, times, rows, end_time):
     """The part of a take to keep: (t_start, t_end) in s, from ``LEAD_IN`` before the first
     active input sample to ``LEAD_OUT`` after the last (within [0, end_time]); None when no
     input ever moved anything (an empty take)."""

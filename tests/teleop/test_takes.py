@@ -17,7 +17,7 @@ from hemg_drake.teleop.browser import BrowserMaster
 from hemg_drake.teleop.browser_inputs import COLUMNS, END_BUTTON, LoggedInputs, load_inputs
 from hemg_drake.teleop.browser_page import DISCARD_BUTTON, KEEP_BUTTON, START_BUTTON
 from hemg_drake.teleop_session import TakeNotKept, teleop
-from hemg_drake.teleop_takes import active_samples, active_span, trim_demonstration
+from hemg_drake.teleop_takes import active_samples, input_span, trim_demonstration
 
 websocket = pytest.importorskip("websocket", reason="websocket-client is in the dev extra")
 msgpack = pytest.importorskip("msgpack")
@@ -47,9 +47,9 @@ def test_active_samples_and_span_by_hand():
     assert active_samples(master, rows).tolist() == expected
     times = 0.5 * np.arange(len(rows))
     # First active at 1.0 s, last at 5.5 s: 0.2 s before, 1.0 s after (within the end).
-    assert active_span(master, times, rows, 6.0) == pytest.approx((0.8, 6.0))
-    assert active_span(master, times, rows, 9.0) == pytest.approx((0.8, 6.5))
-    assert active_span(master, times, [row()] * 5, 2.0) is None
+    assert input_span(master, times, rows, 6.0) == pytest.approx((0.8, 6.0))
+    assert input_span(master, times, rows, 9.0) == pytest.approx((0.8, 6.5))
+    assert input_span(master, times, [row()] * 5, 2.0) is None
 
 
 def _demo(n=101, emg_per=2):
