@@ -53,9 +53,12 @@ from tooling.teleop_page import controls_ready, wait_for  # noqa: E402
 # frame in which the stylus target's position differs.
 WATCHER = """
 (function() {
-  window.hemgLatency = []; let down = null, last = null;
+  window.hemgLatency = []; window.hemgRobot = [];
+  let down = null, last = null, robotDown = null, robotFrom = null;
   window.addEventListener("keydown", (e) => {
-    if (e.code.startsWith("Arrow") && !e.repeat) down = performance.now();
+    if (e.code.startsWith("Arrow") && !e.repeat) {
+      down = robotDown = performance.now(); robotFrom = null;
+    }
   }, true);
   function watch() {
     const node = viewer.scene_tree.find(["teleop", "target"]);
@@ -64,11 +67,41 @@ WATCHER = """
       window.hemgLatency.push(performance.now() - down); down = null;
     }
     last = key;
+    // The robot: its hand body, as the page shows it, ROBOT_MM from where it was.
+    const hand = viewer.scene_tree.find(["drake", "illustration", "baxter_right_arm",
+                                         "right_hand"]).object.position;
+    if (robotDown !== null) {
+      if (robotFrom === null) robotFrom = hand.clone();
+      else if (hand.distanceTo(robotFrom) > ROBOT_MM * 1e-3) {
+        window.hemgRobot.push(performance.now() - robotDown); robotDown = null;
+      }
+    }
     requestAnimationFrame(watch);
   }
   requestAnimationFrame(watch);
 })();
 """
+# The robot has moved when its hand body is this far (mm) from where it was at the key
+# press: a tap moves the tool 1 mm (0.5 mm at the stylus, scale 2).
+ROBOT_MM = 0.2
+
+
+def cpu_seconds(pid, group=False):
+    """User + system CPU seconds of process ``pid`` (its threads), or of its process group."""
+    pgid = os.getpgid(pid)
+    total = 0.0
+    for entry in os.listdir("/proc") if group else [str(pid)]:
+        if not entry.isdigit():
+            continue
+        try:
+            if group and os.getpgid(int(entry)) != pgid:
+                continue
+            with open(f"/proc/{entry}/stat") as stat:
+                fields = stat.read().rsplit(")", 1)[1].split()
+            total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+        except (OSError, ValueError, IndexError):
+            continue
+    return total
 
 
 def target_steps(log):
@@ -92,7 +125,7 @@ def run(task, taps, hold, screenshot, seed):
         with HeadlessPage(url, size=(1280, 800)) as page:
             wait_for(page, "waiting", timeout=300.0)
             controls_ready(page)
-            page.evaluate(WATCHER)
+            page.evaluate(WATCHER.replace("ROBOT_MM", str(ROBOT_MM)))
             for _ in range(10):  # as a person would, press again if nothing happened
                 page.press("Enter")
                 try:
@@ -100,6 +133,8 @@ def run(task, taps, hold, screenshot, seed):
                     break
                 except RuntimeError:
                     print("Enter again", file=sys.stderr)
+            cpu_from = (cpu_seconds(command.pid), cpu_seconds(page.process.pid, group=True))
+            load = [os.getloadavg()[0]]
             time.sleep(1.0)
             for k in range(taps):
                 page.press("ArrowRight" if k % 2 == 0 else "ArrowLeft")
@@ -119,8 +154,12 @@ def run(task, taps, hold, screenshot, seed):
             page.key("keyUp", "KeyW")
             time.sleep(1.0)
             latencies = np.array(page.evaluate("window.hemgLatency") or [])
+            robot = np.array(page.evaluate("window.hemgRobot") or [])
             page.press("Escape")
             wait_for(page, "ended", timeout=300.0)
+            cpu = (cpu_seconds(command.pid) - cpu_from[0],
+                   cpu_seconds(page.process.pid, group=True) - cpu_from[1])  # fmt: skip
+            load.append(os.getloadavg()[0])
             page.press("KeyK")
             out, _ = command.communicate(timeout=600)
     except BaseException:
@@ -143,10 +182,15 @@ def run(task, taps, hold, screenshot, seed):
     held_mm = abs(z[-1] - z[0])
     print(f"{task}: real-time factor {simulated / wall:.2f} ({simulated:.2f} s in {wall:.2f} s, "
           "one core loaded, page in headless Chromium)")  # fmt: skip
-    if len(latencies):
-        print(f"  key press to first visible motion of the target: median "
-              f"{np.median(latencies):.0f} ms, 90th percentile {np.percentile(latencies, 90):.0f} "
-              f"ms, max {latencies.max():.0f} ms ({len(latencies)} of {taps} taps)")  # fmt: skip
+    print(f"  CPU per simulated second: the teleop command {cpu[0] / simulated:.2f} s, "
+          f"Chromium {cpu[1] / simulated:.2f} s (load average {load[0]:.1f} at the take's "
+          f"start, {load[1]:.1f} at its end, 2 cores)")  # fmt: skip
+    for name, values in (("the target (the page's local echo of the keys)", latencies),
+                         (f"the robot (its hand {ROBOT_MM} mm on the page)", robot)):
+        if len(values):
+            print(f"  key press to first visible motion of {name}: median "
+                  f"{np.median(values):.0f} ms, 90th percentile {np.percentile(values, 90):.0f} "
+                  f"ms, max {values.max():.0f} ms ({len(values)} of {taps} taps)")  # fmt: skip
     bound = KEY_SPEED * 0.01
     print(f"  largest per-sample step of the target {1e3 * step:.3f} mm per axis (KEY_SPEED "
           f"allows {1e3 * bound:.3f}); of the slave's reference {1e3 * reference:.3f} mm per "
@@ -154,7 +198,7 @@ def run(task, taps, hold, screenshot, seed):
     speed = held_mm / max(held - HOLD_DELAY, 1e-9)
     print(f"  held key: {held_mm:.2f} mm of slider in {held:.2f} s wall ({speed:.1f} mm/s after "
           f"the {HOLD_DELAY} s hold delay; set {HOLD_MM_S} mm/s)")  # fmt: skip
-    return simulated / wall, latencies, step
+    return simulated / wall, latencies, robot, step
 
 
 def main():

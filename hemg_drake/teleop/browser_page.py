@@ -74,11 +74,12 @@ class TeleopPage:
             meshcat.SetObject(f"{self.PATH}/target/{axis}", Box(*size), blue)
         # The page's local echo (browser_server): the cross moves with the page's own
         # sliders at once, from the newest command (update's p_WC) by ``echo_map`` (3 x 3,
-        # m in W per m of the stylus: the workspace map's linear part).
-        meshcat.SetProperty(f"{self.PATH}/target", "userData.hemg_echo", [])
-        if echo_map is not None:
-            meshcat.SetProperty(f"{self.PATH}/target", "userData.hemg_map",
-                                np.asarray(echo_map, dtype=float).reshape(9).tolist())  # fmt: skip
+        # m in W per m of the stylus: the workspace map's linear part), the target's
+        # userData [p_WC (3), sliders (3, mm), echo_map (9, row-major)].
+        # (Meshcat's set_property sets only properties that exist: the whole userData.)
+        meshcat.SetProperty(f"{self.PATH}/target", "userData", [])
+        self._echo_map = (None if echo_map is None
+                          else np.asarray(echo_map, dtype=float).reshape(9).tolist())  # fmt: skip
         self._echo = self._target = self._force_visible = None
         meshcat.SetProperty(f"{self.PATH}/force", "visible", False)
         meshcat.SetProperty("/Axes", "visible", False)  # the world axes hide the arm's base
@@ -159,10 +160,11 @@ class TeleopPage:
             m.SetTransform(f"{self.PATH}/force/shaft", RigidTransform(R, p_WE))
             m.SetProperty(f"{self.PATH}/force/shaft", "scale", [1.0, 1.0, length])
             m.SetTransform(f"{self.PATH}/force/head", head)
-        if echo is not None:
-            values = [*np.asarray(echo[0], dtype=float).tolist(), *map(float, echo[1])]
+        if echo is not None and self._echo_map is not None:
+            values = [*np.asarray(echo[0], dtype=float).tolist(), *map(float, echo[1]),
+                      *self._echo_map]  # fmt: skip
             if values != self._echo:  # sent before the transform: both reach the same frame
-                m.SetProperty(f"{self.PATH}/target", "userData.hemg_echo", values)
+                m.SetProperty(f"{self.PATH}/target", "userData", values)
                 self._echo = values
         if p_WT is not None and list(map(float, p_WT)) != self._target:
             self._target = list(map(float, p_WT))

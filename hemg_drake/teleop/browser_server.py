@@ -111,17 +111,16 @@ OVERLAY = r"""
     if (echo()) viewer.set_dirty();  // the cross moves in this frame (local echo)
   }
   // Local echo: the stylus target (the blue cross) is drawn where the keys send it at
-  // once, as a hand sees itself: the newest command the server published (userData
-  // hemg_echo: where its latest sample sends the target, in W, and that sample's
-  // sliders, mm) moved by the sliders sent since (userData hemg_map: m in W per m of
-  // the stylus). The server's next sample reconciles it; the arm follows at the
-  // simulation's pace.
+  // once, as a hand sees itself: the newest command the server published (the target's
+  // userData: where its latest sample sends the target, in W, that sample's sliders, mm,
+  // and the workspace map, m in W per m of the stylus) moved by the sliders sent since.
+  // The server's next sample reconciles it; the arm follows at the simulation's pace.
   let echoed = null;
   function echo() {
     const node = window.viewer && viewer.scene_tree.find(["teleop", "target"]);
-    const data = node && node.object.userData;
-    if (!data || !data.hemg_echo || data.hemg_echo.length != 6 || !data.hemg_map) return false;
-    const e = data.hemg_echo, M = data.hemg_map, d = [];
+    const e = node && node.object.userData;  // [p_WC (3), sliders (3), map (9)]
+    if (!Array.isArray(e) || e.length != 15) return false;
+    const M = e.slice(6), d = [];
     for (let i = 0; i < 3; i++) {
       const c = viewer.gui_controllers[config.stylus[i]];
       d.push(c ? 1e-3 * (c.getValue() - e[3 + i]) : 0);
