@@ -7,9 +7,17 @@ keys at irregular moments, then a key held for a few seconds, Escape, K. Printed
 
 - real-time factor of the take (simulated seconds over wall seconds, from the command's
   own line; goal >= 1.0);
-- key press to first visible motion: from the page's keydown event to the first animation
-  frame in which the stylus target (the blue cross) has moved (median, 90th percentile,
-  max; goal median <= 50 ms);
+- CPU seconds per simulated second of the teleop command (its process, all threads) and of
+  headless Chromium (its process group) over the take, with the load average beside them
+  (less sensitive to other jobs than the real-time factor on a shared machine);
+- key press to first visible motion of the target: from the page's keydown event to the
+  first animation frame in which the stylus target (the blue cross) has moved (median, 90th
+  percentile, max; goal median <= 50 ms). The cross is the page's local echo of the keys
+  (docs/teleop_browser.md): its script draws it at once, so this measures the page's own
+  frame, not the simulation;
+- key press to first visible motion of the ROBOT: to the first frame in which the arm's hand
+  body, as the page shows it, is ``ROBOT_MM`` (0.2 mm) from where it was (a tap moves the tool
+  1 mm): the next 10 ms sample, the simulation, the next 32 Hz publish, the render;
 - the largest per-step jump of the stylus target: the take's inputs log re-driving a
   BrowserMaster alone, the target's largest change per 10 ms sample against what
   ``KEY_SPEED`` allows (0.25 mm per sample per axis), and the reference sent to the

@@ -8,7 +8,12 @@ Meshcat server serves it) with its script and websocket pointed at the Meshcat s
 and an overlay added (:data:`OVERLAY`): the legend, a state line (waiting / recording /
 ended / saved) with the take's time, bars for K, the activation and the force at the tool,
 and a warning when the simulation runs below 0.8x real time. The overlay reads
-``/state`` (JSON, :meth:`TeleopPageServer.update`) 20 times a second.
+``/state`` (JSON, :meth:`TeleopPageServer.update`) 10 times a second and writes only what
+changed, in the frames Meshcat renders anyway (a software-rendered page pays a whole frame for
+any change: 20 writes a second cost headless Chromium 0.6 of a core with nothing moving).
+The stylus target is echoed locally: the page's script moves the blue cross with the sliders
+it sends, from the newest command the server published (the target's ``userData``, written
+by :class:`~hemg_drake.teleop.browser_page.TeleopPage`).
 
 Keys: the overlay's script moves the keyboard sliders of
 :class:`~hemg_drake.teleop.browser_inputs.MeshcatInputs` (through Meshcat's own slider
