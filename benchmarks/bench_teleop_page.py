@@ -65,7 +65,9 @@ WATCHER = """
   let down = null, last = null, robotDown = null, robotFrom = null;
   window.addEventListener("keydown", (e) => {
     if (e.code.startsWith("Arrow") && !e.repeat) {
-      down = robotDown = performance.now(); robotFrom = null;
+      down = performance.now();
+      // A press the robot has not answered yet keeps its clock (later presses wait).
+      if (robotDown === null) { robotDown = down; robotFrom = null; }
     }
   }, true);
   function watch() {

@@ -113,7 +113,7 @@ OVERLAY = r"""
     if (!c) return;
     const value = Math.min(Math.max(c.getValue() + axis.sign * amount, c.__min), c.__max);
     c.setValue(value);  // Meshcat's onChange sends the slider to Drake
-    if (echo()) viewer.set_dirty();  // the cross moves in this frame (local echo)
+    if (echo()) { urgent = true; viewer.set_dirty(); }  // the cross moves at once (local echo)
   }
   // Local echo: the stylus target (the blue cross) is drawn where the keys send it at
   // once, as a hand sees itself: the newest command the server published (the target's
@@ -202,10 +202,29 @@ OVERLAY = r"""
   }
   poll();
   // Each frame Meshcat renders: the echo over the server's transform, the overlay's writes.
+  // A software renderer (no GPU: SwiftShader, llvmpipe) spends tens of ms of CPU on each
+  // frame, taken from the simulation on the same cores: there the scene is rendered at
+  // most SOFTWARE_FPS times a second (a frame asked for sooner waits: needs_render stays
+  // set), except at once when a key moved the cross.
+  const SOFTWARE_FPS = 15;
+  let urgent = false, lastRender = -1e9;
   const hook = () => {
-    if (!(window.viewer && viewer.render)) { setTimeout(hook, 100); return; }
+    if (!(window.viewer && viewer.render && viewer.renderer)) { setTimeout(hook, 100); return; }
     const render = viewer.render.bind(viewer);
-    viewer.render = function() { echo(); flush(); render(); };
+    let software = false;
+    try {
+      const gl = viewer.renderer.getContext();
+      const info = gl.getExtension("WEBGL_debug_renderer_info");
+      const name = info ? gl.getParameter(info.UNMASKED_RENDERER_WEBGL) : "";
+      software = /swiftshader|llvmpipe|software/i.test(name);
+    } catch (e) {}
+    window.hemgSoftwareRendering = software;
+    viewer.render = function() {
+      const now = performance.now();
+      if (software && !urgent && now - lastRender < 1000 / SOFTWARE_FPS) return;
+      urgent = false; lastRender = now;
+      echo(); flush(); render();
+    };
   };
   hook();
 })();
