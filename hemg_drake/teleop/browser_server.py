@@ -13,7 +13,8 @@ changed, in the frames Meshcat renders anyway (a software-rendered page pays a w
 any change: 20 writes a second cost headless Chromium 0.6 of a core with nothing moving).
 The stylus target is echoed locally: the page's script moves the blue cross with the sliders
 it sends, from the newest command the server published (the target's ``userData``, written
-by :class:`~hemg_drake.teleop.browser_page.TeleopPage`).
+by :class:`~hemg_drake.teleop.browser_page.TeleopPage`). On a software renderer (SwiftShader,
+llvmpipe) the scene is rendered at most 15 times a second, at once when a key moves the cross.
 
 Keys: the overlay's script moves the keyboard sliders of
 :class:`~hemg_drake.teleop.browser_inputs.MeshcatInputs` (through Meshcat's own slider
@@ -108,12 +109,14 @@ OVERLAY = r"""
     axes[down] = {name, sign: -1, tap, speed}; axes[up] = {name, sign: 1, tap, speed};
   }
   const held = {};
-  function nudge(axis, amount) {
+  function nudge(axis, amount, pressed = false) {
     const c = window.viewer && viewer.gui_controllers[axis.name];
     if (!c) return;
     const value = Math.min(Math.max(c.getValue() + axis.sign * amount, c.__min), c.__max);
     c.setValue(value);  // Meshcat's onChange sends the slider to Drake
-    if (echo()) { urgent = true; viewer.set_dirty(); }  // the cross moves at once (local echo)
+    // The cross moves (local echo): at once for a key going down; a held key's motion
+    // waits for the next frame the renderer's rate allows.
+    if (echo()) { urgent = urgent || pressed; viewer.set_dirty(); }
   }
   // Local echo: the stylus target (the blue cross) is drawn where the keys send it at
   // once, as a hand sees itself: the newest command the server published (the target's
@@ -144,7 +147,7 @@ OVERLAY = r"""
     if (e.repeat || held[e.code]) return;  // the browser's key repeat is not used
     const now = performance.now();
     held[e.code] = {axis, since: now, last: now};
-    nudge(axis, axis.tap * (e.shiftKey ? config.fine : 1));
+    nudge(axis, axis.tap * (e.shiftKey ? config.fine : 1), true);
   }, true);
   window.addEventListener("keyup", (e) => { delete held[e.code]; }, true);
   window.addEventListener("blur", () => { for (const k in held) delete held[k]; });
