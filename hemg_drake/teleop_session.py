@@ -143,9 +143,10 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
         meshcat.SetTransform("/Grid", RigidTransform([0.0, 0.0, FLOOR_Z]))
         to_W = built.mapping.master_to_slave
         right_W = to_W(np.array([1.0, 0.0, 0.0])) - to_W(np.zeros(3))
+        echo_map = np.column_stack([to_W(e) - to_W(np.zeros(3)) for e in np.eye(3)])
         page = TeleopPage(meshcat, k_min=scenario.emg.k_min, k_max=scenario.emg.k_max,
                           server=server, take=take_number,
-                          right_W=right_W / np.linalg.norm(right_W))  # fmt: skip
+                          right_W=right_W / np.linalg.norm(right_W), echo_map=echo_map)  # fmt: skip
         if scenario.task == "drawing" and built.scene is not None:
             from hemg_drake.analysis.contact import CONTACT_THRESHOLD
 
@@ -193,6 +194,9 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
             station_context = station.GetMyContextFromRoot(context)
             p_WT = built.mapping.master_to_slave(
                 master.GetOutputPort("p_MT").Eval(master_context))
+            command = master.command(master_context)  # the page's local echo
+            echo = None if command is None else (
+                built.mapping.master_to_slave(np.array(command[0])), command[1])
             now = time.perf_counter()
             paced.append((t, now))
             while len(paced) > 2 and now - paced[1][1] >= 1.0:
@@ -207,6 +211,7 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
                 p_WT,
                 activation=activation_port.Eval(master_context)[0],
                 rate=rate if realtime else None,
+                echo=echo,
             )  # fmt: skip
         if on_step is not None:
             on_step(t)

@@ -30,6 +30,8 @@ from hemg_drake._validate import as_scalar, as_vector
 from hemg_drake.teleop.browser_inputs import (
     COLUMN_INDEX,
     COLUMNS,
+    FINE,
+    FINE_BUTTON,
     KEY_SPEED,
     N_AXES,
     TRIGGER_BUTTON,
@@ -187,7 +189,8 @@ def BrowserMaster_(T):
           no more than ``key_speed`` per axis (a non-finite slider value holds that axis);
         - gamepad: displacement g_k = clip(s_k + g_(k-1) + T v_pad, box) - s_k with
           v_pad = speed [dz(axis 0), -dz(axis 3), dz(axis 1)] (dz: :func:`dead_zone`; sticks
-          up are negative), so p_T = s + g stays in the workspace box and v_T = (g_k -
+          up are negative; ``speed`` times ``FINE``, a quarter, while the left bumper,
+          button 4, is held), so p_T = s + g stays in the workspace box and v_T = (g_k -
           g_(k-1)) / T;
         - a = clip(max(activation slider, trigger), 0, 1) (the trigger is button 7).
 
@@ -320,30 +323,24 @@ def BrowserMaster_(T):
             """The state after one sample of ``row`` (both lists of floats): the update's
             maths."""
             col = COLUMN_INDEX
-            sliders = [row[col["slider_x_mm"]], row[col["slider_y_mm"]],
-                       row[col["slider_z_mm"]]]  # fmt: skip
-            # The first sample's slider values are the keyboard's zero.
-            first = sliders if state[13] == 0.0 else state[10:13]
-            g_old = state[6:9]
+            first, setpoints, s_olds = self.setpoints(row, state)
             s = []
-            for i, (p0, value) in enumerate(zip(self.p_MS_initial, sliders)):
-                s_old = state[i] - g_old[i]  # the keyboard's part of the last target
-                if not math.isfinite(value):  # a bogus slider message: hold that axis
-                    s.append(s_old)
-                    continue
-                if not math.isfinite(_value(first[i])):  # re-anchor the zero where the target is
-                    first[i] = value - 1e3 * (s_old - p0)
+            for s_old, setpoint in zip(s_olds, setpoints):
                 # The slider's set-point, reached at no more than key_speed: a stall of the
                 # simulation (keys moved on in wall time) never becomes a jump.
-                step = p0 + 1e-3 * (value - first[i]) - s_old
+                step = setpoint - s_old
                 s.append(s_old + min(max(step, -self.key_limit), self.key_limit))
+            g_old = state[6:9]
             dz = self.stick_dead_zone
             if row[col["gamepad_index"]] >= 0:
                 ax = [row[col[f"axis_{i}"]] for i in range(N_AXES)]
+                # The left bumper held: fine motion, as Shift on the keyboard.
+                fine = row[col[f"button_{FINE_BUTTON}"]]
+                speed = self.speed * (FINE if math.isfinite(fine) and fine > 0.5 else 1.0)
                 v_pad = [
-                    self.speed * dead_zone(ax[0], dz),
-                    -self.speed * dead_zone(ax[3], dz),
-                    self.speed * dead_zone(ax[1], dz),
+                    speed * dead_zone(ax[0], dz),
+                    -speed * dead_zone(ax[3], dz),
+                    speed * dead_zone(ax[1], dz),
                 ]
                 trigger = row[col[f"button_{TRIGGER_BUTTON}"]]
                 trigger = trigger if math.isfinite(trigger) else 0.0
@@ -359,6 +356,45 @@ def BrowserMaster_(T):
             slider = slider if math.isfinite(slider) else 0.0
             activation = min(max(slider, trigger, 0.0), 1.0)
             return [*p_T, *v_T, *g, activation, *first, 1.0]
+
+        def setpoints(self, row, state):
+            """The keyboard's zero, set-point and last position after ``state`` for ``row``
+            (lists of 3): s* = p_MS_initial + (slider - slider at the first sample) (mm to
+            m); a non-finite slider holds that axis (s* = the last position)."""
+            col = COLUMN_INDEX
+            sliders = [row[col["slider_x_mm"]], row[col["slider_y_mm"]],
+                       row[col["slider_z_mm"]]]  # fmt: skip
+            # The first sample's slider values are the keyboard's zero.
+            first = list(sliders if state[13] == 0.0 else state[10:13])
+            setpoints, s_olds = [], []
+            for i, (p0, value) in enumerate(zip(self.p_MS_initial, sliders)):
+                s_old = state[i] - state[6 + i]  # the keyboard's part of the last target
+                s_olds.append(s_old)
+                if not math.isfinite(value):  # a bogus slider message: hold that axis
+                    setpoints.append(s_old)
+                    continue
+                if not math.isfinite(_value(first[i])):  # re-anchor the zero where the target is
+                    first[i] = value - 1e3 * (s_old - p0)
+                setpoints.append(p0 + 1e-3 * (value - first[i]))
+            return first, setpoints, s_olds
+
+        def command(self, context):
+            """Where the newest sample sends the target, and that sample's keyboard sliders:
+            (p_MC, 3 floats, m, in M; sliders, 3 floats, mm), or None before any sample.
+            p_MC is the keyboard's set-point plus the gamepad's part, in the workspace box:
+            the target reaches it at no more than ``key_speed`` (the page draws the stylus
+            target there, and moves it at once with the sliders it has sent since)."""
+            samples = self.samples(context)
+            if samples.count == 0:
+                return None
+            state = [_value(x) for x in self._state(context)]
+            row = list(samples.row)
+            _, setpoints, _ = self.setpoints(row, state)
+            p_MC = [min(max(s + g, -h), h)
+                    for s, g, h in zip(setpoints, state[6:9], self.half_size)]  # fmt: skip
+            col = COLUMN_INDEX
+            sliders = [row[col[f"slider_{a}_mm"]] for a in "xyz"]
+            return p_MC, sliders
 
         def targets(self, rows):
             """The target p_T (m) and activation after each row of ``rows`` (an inputs

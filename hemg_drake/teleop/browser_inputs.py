@@ -55,6 +55,8 @@ KEY_SPEED = 0.025
 # Columns of one raw input row, as logged.
 N_AXES, N_BUTTONS = 4, 17  # the W3C standard gamepad mapping
 TRIGGER_BUTTON = 7
+# The left bumper held: the sticks at FINE of their speed (fine motion, as Shift).
+FINE_BUTTON = 4
 COLUMNS = (
     "slider_x_mm", "slider_y_mm", "slider_z_mm", "slider_activation", "gamepad_index",
     *(f"axis_{i}" for i in range(N_AXES)), *(f"button_{i}" for i in range(N_BUTTONS)),

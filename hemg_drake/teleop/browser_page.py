@@ -53,7 +53,8 @@ class TeleopPage:
     PATH = "/teleop"
     ARROW_SCALE = 0.01  # m per N
 
-    def __init__(self, meshcat, *, k_min, k_max, server=None, take=None, right_W=(0, -1, 0)):
+    def __init__(self, meshcat, *, k_min, k_max, server=None, take=None, right_W=(0, -1, 0),
+                 echo_map=None):  # fmt: skip
         self.meshcat = meshcat
         # The arrow starts beside the tool, to the operator's right, not inside the arm.
         self.arrow_offset = 0.06 * np.asarray(right_W, dtype=float)
@@ -71,6 +72,15 @@ class TeleopPage:
         for axis, size in (("x", [0.06, 0.003, 0.003]), ("y", [0.003, 0.06, 0.003]),
                            ("z", [0.003, 0.003, 0.06])):  # fmt: skip
             meshcat.SetObject(f"{self.PATH}/target/{axis}", Box(*size), blue)
+        # The page's local echo (browser_server): the cross moves with the page's own
+        # sliders at once, from the newest command (update's p_WC) by ``echo_map`` (3 x 3,
+        # m in W per m of the stylus: the workspace map's linear part), the target's
+        # userData [p_WC (3), sliders (3, mm), echo_map (9, row-major)].
+        # (Meshcat's set_property sets only properties that exist: the whole userData.)
+        meshcat.SetProperty(f"{self.PATH}/target", "userData", [])
+        self._echo_map = (None if echo_map is None
+                          else np.asarray(echo_map, dtype=float).reshape(9).tolist())  # fmt: skip
+        self._echo = self._target = self._force_visible = None
         meshcat.SetProperty(f"{self.PATH}/force", "visible", False)
         meshcat.SetProperty("/Axes", "visible", False)  # the world axes hide the arm's base
         self.updates = 0
@@ -127,13 +137,19 @@ class TeleopPage:
         }.get(state, (f"{c}: {state}", ""))
         self.server.update(state=state, headline=headline, hint=default if hint is None else hint)
 
-    def update(self, t, p_WE, f_WE, gain, recording, p_WT=None, activation=None, rate=None):
+    def update(self, t, p_WE, f_WE, gain, recording, p_WT=None, activation=None, rate=None,
+               echo=None):  # fmt: skip
+        """Refresh the marks and read-outs; ``echo`` = (p_WC, sliders): where the newest
+        sample sends the target (m, in W) and its sliders (mm), for the page's local echo
+        (:meth:`BrowserMaster.command <hemg_drake.teleop.browser.BrowserMaster_.command>`)."""
         m = self.meshcat
         f = -np.asarray(f_WE, dtype=float)  # the force the tool applies to the task
         magnitude = float(np.linalg.norm(f))
         length = self.ARROW_SCALE * magnitude
         visible = length > 1e-3
-        m.SetProperty(f"{self.PATH}/force", "visible", visible)
+        if visible != self._force_visible:  # unchanged: nothing to send (nor to render)
+            m.SetProperty(f"{self.PATH}/force", "visible", visible)
+            self._force_visible = visible
         if visible:
             p_WE = np.asarray(p_WE, dtype=float) + self.arrow_offset
             R = _rotation_z_to(f / magnitude)
@@ -144,7 +160,14 @@ class TeleopPage:
             m.SetTransform(f"{self.PATH}/force/shaft", RigidTransform(R, p_WE))
             m.SetProperty(f"{self.PATH}/force/shaft", "scale", [1.0, 1.0, length])
             m.SetTransform(f"{self.PATH}/force/head", head)
-        if p_WT is not None:
+        if echo is not None and self._echo_map is not None:
+            values = [*np.asarray(echo[0], dtype=float).tolist(), *map(float, echo[1]),
+                      *self._echo_map]  # fmt: skip
+            if values != self._echo:  # sent before the transform: both reach the same frame
+                m.SetProperty(f"{self.PATH}/target", "userData", values)
+                self._echo = values
+        if p_WT is not None and list(map(float, p_WT)) != self._target:
+            self._target = list(map(float, p_WT))
             m.SetTransform(f"{self.PATH}/target", RigidTransform(np.asarray(p_WT, float)))
         if self.ink_height is not None and recording:
             self._ink(np.asarray(p_WE, dtype=float), f_WE)

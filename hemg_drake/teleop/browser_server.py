@@ -8,7 +8,13 @@ Meshcat server serves it) with its script and websocket pointed at the Meshcat s
 and an overlay added (:data:`OVERLAY`): the legend, a state line (waiting / recording /
 ended / saved) with the take's time, bars for K, the activation and the force at the tool,
 and a warning when the simulation runs below 0.8x real time. The overlay reads
-``/state`` (JSON, :meth:`TeleopPageServer.update`) 20 times a second.
+``/state`` (JSON, :meth:`TeleopPageServer.update`) 10 times a second and writes only what
+changed, in the frames Meshcat renders anyway (a software-rendered page pays a whole frame for
+any change: 20 writes a second cost headless Chromium 0.6 of a core with nothing moving).
+The stylus target is echoed locally: the page's script moves the blue cross with the sliders
+it sends, from the newest command the server published (the target's ``userData``, written
+by :class:`~hemg_drake.teleop.browser_page.TeleopPage`). On a software renderer (SwiftShader,
+llvmpipe) the scene is rendered at most 15 times a second, at once when a key moves the cross.
 
 Keys: the overlay's script moves the keyboard sliders of
 :class:`~hemg_drake.teleop.browser_inputs.MeshcatInputs` (through Meshcat's own slider
@@ -32,6 +38,9 @@ from hemg_drake.teleop.browser_inputs import (
     HOLD_MM_S,
     KEYS,
     SLIDER_ACTIVATION,
+    SLIDER_X,
+    SLIDER_Y,
+    SLIDER_Z,
     TAP_MM,
 )
 
@@ -100,11 +109,36 @@ OVERLAY = r"""
     axes[down] = {name, sign: -1, tap, speed}; axes[up] = {name, sign: 1, tap, speed};
   }
   const held = {};
-  function nudge(axis, amount) {
+  function nudge(axis, amount, pressed = false) {
     const c = window.viewer && viewer.gui_controllers[axis.name];
     if (!c) return;
     const value = Math.min(Math.max(c.getValue() + axis.sign * amount, c.__min), c.__max);
     c.setValue(value);  // Meshcat's onChange sends the slider to Drake
+    // The cross moves (local echo): at once for a key going down; a held key's motion
+    // waits for the next frame the renderer's rate allows.
+    if (echo()) { urgent = urgent || pressed; viewer.set_dirty(); }
+  }
+  // Local echo: the stylus target (the blue cross) is drawn where the keys send it at
+  // once, as a hand sees itself: the newest command the server published (the target's
+  // userData: where its latest sample sends the target, in W, that sample's sliders, mm,
+  // and the workspace map, m in W per m of the stylus) moved by the sliders sent since.
+  // The server's next sample reconciles it; the arm follows at the simulation's pace.
+  let echoed = null;
+  function echo() {
+    const node = window.viewer && viewer.scene_tree.find(["teleop", "target"]);
+    const e = node && node.object.userData;  // [p_WC (3), sliders (3), map (9)]
+    if (!Array.isArray(e) || e.length != 15) return false;
+    const M = e.slice(6), d = [];
+    for (let i = 0; i < 3; i++) {
+      const c = viewer.gui_controllers[config.stylus[i]];
+      d.push(c ? 1e-3 * (c.getValue() - e[3 + i]) : 0);
+    }
+    const p = [0, 1, 2].map(i => e[i] + M[3 * i] * d[0] + M[3 * i + 1] * d[1] + M[3 * i + 2] * d[2]);
+    const key = p.join(",");
+    node.object.position.set(p[0], p[1], p[2]);  // also over the server's transform
+    if (key === echoed) return false;
+    echoed = key;
+    return true;
   }
   window.addEventListener("keydown", (e) => {
     const axis = axes[e.code];
@@ -113,7 +147,7 @@ OVERLAY = r"""
     if (e.repeat || held[e.code]) return;  // the browser's key repeat is not used
     const now = performance.now();
     held[e.code] = {axis, since: now, last: now};
-    nudge(axis, axis.tap * (e.shiftKey ? config.fine : 1));
+    nudge(axis, axis.tap * (e.shiftKey ? config.fine : 1), true);
   }, true);
   window.addEventListener("keyup", (e) => { delete held[e.code]; }, true);
   window.addEventListener("blur", () => { for (const k in held) delete held[k]; });
@@ -130,28 +164,72 @@ OVERLAY = r"""
     requestAnimationFrame(tick);
   }
   requestAnimationFrame(tick);
-  // The state and read-outs, from the server that served this page.
+  // The state and read-outs, from the server that served this page. Software-rendered
+  // pages pay a whole frame for any change of the overlay, so an element is written only
+  // when its text or bar changes, and the writes wait for the next frame Meshcat renders
+  // anyway (at most FLUSH_MS: a still scene still shows the state).
+  const POLL_MS = 100, FLUSH_MS = 150;
   const el = (id) => document.getElementById(id);
-  function bar(id, fraction) { el(id).style.width = (100 * Math.min(Math.max(fraction, 0), 1)) + "%"; }
+  const shown = {}, pending = {};
+  let lastFlush = 0;
+  function text(id, value) { if (shown[id] !== value) pending[id] = value; else delete pending[id]; }
+  function bar(id, fraction) {
+    text("width:" + id, Math.round(1000 * Math.min(Math.max(fraction, 0), 1)) / 10 + "%");
+  }
+  function flush() {
+    for (const [key, value] of Object.entries(pending)) {
+      if (key.startsWith("width:")) el(key.slice(6)).style.width = value;
+      else if (key.startsWith("class:")) el(key.slice(6)).className = value;
+      else if (key.startsWith("display:")) el(key.slice(8)).style.display = value;
+      else el(key).textContent = value;
+      shown[key] = value; delete pending[key];
+    }
+    lastFlush = performance.now();
+  }
   async function poll() {
     try {
       const s = await (await fetch("state", {cache: "no-store"})).json();
-      const state = el("hemg-state");
-      state.textContent = s.headline; state.className = s.state;
-      el("hemg-hint").textContent = s.hint;
-      el("hemg-k").textContent = s.K.toFixed(0) + " N/m";
+      text("hemg-state", s.headline); text("class:hemg-state", s.state);
+      text("hemg-hint", s.hint);
+      text("hemg-k", s.K.toFixed(0) + " N/m");
       bar("hemg-kbar", (s.K - s.K_min) / (s.K_max - s.K_min));
-      el("hemg-a").textContent = s.activation.toFixed(2);
+      text("hemg-a", s.activation.toFixed(2));
       bar("hemg-abar", s.activation);
-      el("hemg-f").textContent = s.force.toFixed(1) + " N";
+      text("hemg-f", s.force.toFixed(1) + " N");
       bar("hemg-fbar", s.force / s.force_max);
-      const slow = el("hemg-slow");
-      slow.style.display = s.slow ? "block" : "none";
-      slow.textContent = s.slow;
-    } catch (e) { el("hemg-state").textContent = "the teleop command is not running"; }
-    setTimeout(poll, 50);
+      text("display:hemg-slow", s.slow ? "block" : "none");
+      text("hemg-slow", s.slow);
+    } catch (e) { text("hemg-state", "the teleop command is not running"); }
+    if (Object.keys(pending).length && performance.now() - lastFlush > FLUSH_MS) flush();
+    setTimeout(poll, POLL_MS);
   }
   poll();
+  // Each frame Meshcat renders: the echo over the server's transform, the overlay's writes.
+  // A software renderer (no GPU: SwiftShader, llvmpipe) spends tens of ms of CPU on each
+  // frame, taken from the simulation on the same cores: there the scene is rendered at
+  // most SOFTWARE_FPS times a second (a frame asked for sooner waits: needs_render stays
+  // set), except at once when a key moved the cross.
+  const SOFTWARE_FPS = 15;
+  let urgent = false, lastRender = -1e9;
+  const hook = () => {
+    if (!(window.viewer && viewer.render && viewer.renderer)) { setTimeout(hook, 100); return; }
+    const render = viewer.render.bind(viewer);
+    let software = false;
+    try {
+      const gl = viewer.renderer.getContext();
+      const info = gl.getExtension("WEBGL_debug_renderer_info");
+      const name = info ? gl.getParameter(info.UNMASKED_RENDERER_WEBGL) : "";
+      software = /swiftshader|llvmpipe|software/i.test(name);
+    } catch (e) {}
+    window.hemgSoftwareRendering = software;
+    viewer.render = function() {
+      const now = performance.now();
+      if (software && !urgent && now - lastRender < 1000 / SOFTWARE_FPS) return;
+      urgent = false; lastRender = now;
+      echo(); flush(); render();
+    };
+  };
+  hook();
 })();
 </script>
 """
@@ -182,6 +260,7 @@ def legend(task, scale):
         (["\u2191", "\u2193"], "tool away from / towards you"),
         (["X", "Z"], "squeeze (stiffen) / relax"),
         (["Shift"], f"fine: {FINE:g} of each step and speed"),
+        (["pad"], f"sticks move the tool, RT squeezes, LB held: fine ({FINE:g} of the speed)"),
         ([], f"a tap moves the tool {tool(TAP_MM)} mm, a held key {tool(HOLD_MM_S)} mm/s "
              f"(Shift: {tool(TAP_MM * FINE)} mm, {tool(HOLD_MM_S * FINE)} mm/s)"),
     ]  # fmt: skip
@@ -210,6 +289,7 @@ class TeleopPageServer:
         rows, task_line = legend(task, scale)
         config = dict(
             legend=rows, task=task_line, keys={n: list(k) for n, k in KEYS.items()},
+            stylus=[SLIDER_X, SLIDER_Y, SLIDER_Z],
             activation=SLIDER_ACTIVATION, tap_mm=TAP_MM, hold_mm_s=HOLD_MM_S, fine=FINE,
             hold_delay=HOLD_DELAY, activation_tap=ACTIVATION_TAP,
             activation_hold=ACTIVATION_HOLD_S,

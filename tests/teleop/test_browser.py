@@ -142,6 +142,40 @@ def test_keyboard_target_moves_at_no_more_than_key_speed():
     np.testing.assert_allclose(force, [K_H * 0.010, -K_H * 0.0001, 0.0], rtol=1e-9, atol=1e-12)
 
 
+def test_left_bumper_moves_the_sticks_at_a_quarter_speed():
+    """The gamepad's fine motion, as Shift: button 4 held (> 0.5) scales the sticks' speed
+    by 0.25; 0.5 or NaN does not."""
+    pad = dict(axes=[1.0, 0.0, 0.0, -1.0], buttons=[0.0] * 4 + [1.0] + [0.0] * 3)
+    rows = [row()] + [row(**pad)] * 4
+    _, _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0], max_hand_force=1000.0)
+    # Four samples of 10 ms at 0.25 x 0.1 m/s in x and y: 1 mm each; v_T = 0.025 m/s.
+    expected = [K_H * 0.001 + D_H * 0.025, K_H * 0.001 + D_H * 0.025, 0.0]
+    np.testing.assert_allclose(force, expected, rtol=1e-9, atol=1e-12)
+    for held in (0.5, math.nan):
+        pad["buttons"][4] = held
+        rows = [row()] + [row(**pad)] * 4
+        _, _, force, _ = master_after(rows, P0, [0.0, 0.0, 0.0], max_hand_force=1000.0)
+        np.testing.assert_allclose(force, [K_H * 0.004 + D_H * 0.1] * 2 + [0.0], rtol=1e-9)
+
+
+def test_command_is_where_the_newest_sample_sends_the_target():
+    """The page's local echo starts from ``command``: the keyboard's set-point plus the
+    gamepad's part, the newest sample's sliders, while the target is still on its way (at
+    key_speed, 0.25 mm per sample)."""
+    rows = [row((10.0, 0.0, 0.0)), row((13.0, 0.0, -1.0)),
+            row((13.0, 0.0, -1.0), axes=[1.0, 0.0, 0.0, 0.0], buttons=[0.0] * 8)]  # fmt: skip
+    master, context, _, _ = master_after(rows, P0, [0.0, 0.0, 0.0])
+    p_MC, sliders = master.command(context)
+    # Set-point: P0 + (3, 0, -1) mm; gamepad: one sample of 0.1 m/s in x (1 mm).
+    np.testing.assert_allclose(p_MC, [P0[0] + 0.003 + 0.001, P0[1], P0[2] - 0.001], atol=1e-15)
+    assert sliders == [13.0, 0.0, -1.0]
+    # The target itself: two samples of at most 0.25 mm on x's keyboard part (+ 1 mm pad).
+    p_T = master.GetOutputPort("p_MT").Eval(context)
+    np.testing.assert_allclose(p_T, [P0[0] + 0.0005 + 0.001, P0[1], P0[2] - 0.0005], atol=1e-15)
+    fresh = BrowserMaster(source=LoggedInputs([0.0], [row()]), p_MS_initial=P0)
+    assert fresh.command(fresh.CreateDefaultContext()) is None  # nothing sampled yet
+
+
 def test_two_contexts_hold_independent_logs_and_a_clone_samples_the_same():
     """Everything the master samples lives in its Context: two contexts of one diagram (and
     a Clone() of the diagram, or of a context) run apart without sharing a sample."""
