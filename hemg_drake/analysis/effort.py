@@ -48,6 +48,49 @@ def phase_lags(time, online, offline):
     return np.array(lags, dtype=float)
 
 
+def viterbi_free_durations(log_emission, log_start, log_transitions):
+    """The most likely state path with the transitions' probabilities between states and a
+    free stay in a state (log self-transition 0, whatever the matrix says).
+
+    Parameters
+    ----------
+    log_emission : (T, N); log_start : (N,); log_transitions : (N, N), row i to column j.
+
+    Returns
+    -------
+    array of int (T,)
+    """
+    log_emission = np.asarray(log_emission, float)
+    moves = np.array(log_transitions, float)
+    np.fill_diagonal(moves, 0.0)
+    T, N = log_emission.shape
+    score = np.asarray(log_start, float) + log_emission[0]
+    back = np.zeros((T, N), dtype=int)
+    for t in range(1, T):
+        candidates = score[:, None] + moves  # from i (rows) to j (columns)
+        back[t] = np.argmax(candidates, axis=0)
+        score = candidates[back[t], np.arange(N)] + log_emission[t]
+    path = np.zeros(T, dtype=int)
+    path[-1] = int(np.argmax(score))
+    for t in range(T - 1, 0, -1):
+        path[t - 1] = back[t, path[t]]
+    return path
+
+
+def offline_states(model, observations):
+    """The model's state sequence of a recorded motion (its ``[x, xdot, k]`` observations),
+    with the operator's own durations: :func:`viterbi_free_durations` on the model's
+    emissions, start and transition probabilities. (The HSMM's smoothed posterior cannot
+    explain an operator who waits longer than the demonstrations it learnt from.)"""
+    from hemg_drake.learning.gmr import gaussian_log_pdf
+
+    with np.errstate(divide="ignore"):
+        return viterbi_free_durations(
+            gaussian_log_pdf(np.asarray(observations), model.means_, model.covariances_),
+            np.log(model.startprob_), np.log(model.transmat_),
+        )
+
+
 def interaction_metrics(signals, demo, model=None):
     """The study's measures of one demonstration.
 
@@ -86,10 +129,7 @@ def interaction_metrics(signals, demo, model=None):
     if "assist.phase" in signals and model is not None:
         from hemg_drake.learning.demos import observations
 
-        try:
-            offline = np.asarray(model.predict_states(observations([demo])[0]))
-        except ValueError:  # the model cannot explain this motion at all: no offline phases
-            return {**result, "phase_lag_s": float("nan"), "phase_missed": float("nan")}
+        offline = offline_states(model, observations([demo])[0])
         online = signals["assist.phase"][:, 0].astype(int)[: len(offline)]
         lags = phase_lags(demo.time, online, offline[: len(online)])
         if len(lags):
