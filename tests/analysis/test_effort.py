@@ -73,7 +73,8 @@ def test_viterbi_free_durations_against_brute_force():
     rng = np.random.default_rng(4)
     log_emission = rng.normal(size=(5, 3))
     log_start = np.log([0.6, 0.3, 0.1])
-    log_a = np.log([[0.5, 0.4, 0.1], [0.2, 0.5, 0.3], [0.1, 0.1, 0.8]])
+    # Self-transitions unlikely in the matrix: only a free stay keeps a state.
+    log_a = np.log([[0.01, 0.9, 0.09], [0.05, 0.01, 0.94], [0.5, 0.49, 0.01]])
 
     def score(path):
         total = log_start[path[0]] + log_emission[0, path[0]]
@@ -83,4 +84,5 @@ def test_viterbi_free_durations_against_brute_force():
         return total
 
     best = max(itertools.product(range(3), repeat=5), key=score)
+    assert any(a == b for a, b in zip(best, best[1:]))  # a stay: the free durations matter
     np.testing.assert_array_equal(viterbi_free_durations(log_emission, log_start, log_a), best)
