@@ -148,7 +148,8 @@ def plot(studies, path):
                 if xs:  # the mean and its 95 % t interval, the modes side by side
                     shift = 6.0 * (MODES.index(mode) - 1.5)
                     ax.errorbar(np.array(xs) + shift, ys, yerr=np.nan_to_num(errors),
-                                marker="o", ms=3, capsize=2, label=mode)  # fmt: skip
+                                marker="o", ms=3, capsize=2, label=mode,
+                                color=f"C{MODES.index(mode)}")  # one colour per mode, every panel  # fmt: skip
             ax.set_title(f"{task}: {MEASURES[measure]}", fontsize=8)
             ax.set_xlabel("one-way delay (ms)", fontsize=8)
             ax.tick_params(labelsize=7)
