@@ -69,7 +69,8 @@ def main():
     names = ["swings", "correction_mm", "held_at_s", "w_mean", "w_working"]
     print("| delay (ms) | mode | n | " + " | ".join(names) + " |")
     print("|---" * (3 + len(names)) + "|")
-    for (delay, mode), rows in sorted(cells.items(), key=lambda kv: (kv[0][0], "nfce".index(kv[0][1][0]))):
+    order = {"none": 0, "fixed": 1, "confidence": 2, "emg": 3}
+    for (delay, mode), rows in sorted(cells.items(), key=lambda kv: (kv[0][0], order[kv[0][1]])):
         values = []
         for name in names:
             found = [r[name] for r in rows if name in r and np.isfinite(r[name])]

@@ -125,7 +125,9 @@ def interaction_metrics(signals, demo, model=None):
         result["held_s"] = float(time[-1] - last[S])
     if "assist.x_policy" in signals:
         n = min(len(demo.time), len(signals["assist.x_policy"]))
-        result["disagreement_m"] = disagreement(demo.p_WE_desired[:n], signals["assist.x_policy"][:n])
+        result["disagreement_m"] = disagreement(
+            demo.p_WE_desired[:n], signals["assist.x_policy"][:n]
+        )
     if "assist.phase" in signals and model is not None:
         from hemg_drake.learning.demos import observations
 
