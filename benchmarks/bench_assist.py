@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 
+from hemg_drake.analysis.effort import phase_lags
 from hemg_drake.diagrams.assist import ASSIST_LOGGED
 from hemg_drake.diagrams.built import make_simulator
 from hemg_drake.diagrams.demonstration import (
@@ -26,20 +27,6 @@ from hemg_drake.diagrams.log import split_log
 from hemg_drake.learning.demos import observations
 from hemg_drake.learning.tphsmm import load_model
 from hemg_drake.scenario import load_scenario, shipped_scenario
-
-
-def phase_lags(time, online, offline):
-    """For each change of the offline state to s at t_off: t_on - t_off, t_on when the
-    online phase first became s after the previous offline change (s; negative: the
-    estimate was early; NaN: never before the next change)."""
-    lags = []
-    changes = np.flatnonzero(np.diff(offline)) + 1
-    for k, start in enumerate(changes):
-        since = changes[k - 1] if k else 0
-        end = changes[k + 1] if k + 1 < len(changes) else len(offline)
-        hits = np.flatnonzero(online[since:end] == offline[start])
-        lags.append(time[since + hits[0]] - time[start] if len(hits) else np.nan)
-    return np.array(lags)
 
 
 def run(scenario, seed):

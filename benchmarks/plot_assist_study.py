@@ -19,10 +19,16 @@ import numpy as np
 MODES = ("none", "fixed", "confidence", "emg")
 MEASURES = {
     "success": "task success (fraction)",
+    "completed": "pin out, operator did not give up",
     "demonstration.completion_s": "pin out after (s)",
+    "demonstration.hand_impulse_n_s": "hand force integral (N s)",
+    "demonstration.hand_work_j": "hand work on the master (J)",
     "demonstration.muscle_effort": "muscle activation (mean)",
     "demonstration.contact_force_peak_n": "peak contact force (N)",
-    "demonstration.tracking_error_m": "slave - master error (m)",
+    "demonstration.gave_up": "operator gave up (fraction)",
+    "demonstration.disagreement_m": "operator - policy (m)",
+    "demonstration.phase_lag_s": "phase right, lag (s)",
+    "demonstration.passivity_energy_min_j": "observer energy, least (J)",
 }
 SUCCESS = {"cotter_pin": "demonstration.pin_out", "drawing": "demonstration.three_strokes"}
 
@@ -38,6 +44,8 @@ def trials(folder):
         task = "cotter_pin" if "demonstration.pin_out" in metrics else "drawing"
         row = {**record["labels"], "seed": record["seed"], **metrics}
         row["success"] = metrics[SUCCESS[task]]
+        if "demonstration.gave_up" in metrics:  # the visual operator: it finished its plan
+            row["completed"] = float(row["success"] and not metrics["demonstration.gave_up"])
         rows.append(row)
     return task, rows
 
@@ -74,6 +82,26 @@ def delays(rows):
     return sorted({int(row["delay_ms"]) for row in rows})
 
 
+def means(task, rows):
+    """Markdown: per delay and mode, each measure's mean (n trials)."""
+    present = [m for m in MEASURES if any(row.get(m) is not None for row in rows)]
+    lines = [f"**{task}** (mean over the trials; n per cell in the first column)", "",
+             "| delay (ms) | mode | n | " + " | ".join(MEASURES[m] for m in present) + " |",
+             "|---" * (3 + len(present)) + "|"]  # fmt: skip
+    for delay in delays(rows):
+        for mode in MODES:
+            cell = [row for row in rows if row["mode"] == mode and int(row["delay_ms"]) == delay]
+            if not cell:
+                continue
+            values = []
+            for measure in present:
+                found = [float(r[measure]) for r in cell
+                         if r.get(measure) is not None and np.isfinite(float(r[measure]))]  # fmt: skip
+                values.append(f"{np.mean(found):.3g}" if found else "-")
+            lines.append(f"| {delay} | {mode} | {len(cell)} | " + " | ".join(values) + " |")
+    return "\n".join(lines)
+
+
 def table(task, rows):
     """Markdown: per delay and measure, emg - none and emg - fixed."""
     lines = [f"**{task}** (emg minus the baseline, mean [95 % CI], n pairs)", "",
@@ -82,7 +110,8 @@ def table(task, rows):
         for measure, name in MEASURES.items():
             cells = []
             for baseline in ("none", "fixed"):
-                mean, half, n = interval(paired(rows, measure, "emg", baseline, delay))
+                diffs = paired(rows, measure, "emg", baseline, delay)
+                mean, half, n = interval(diffs)
                 cells.append("-" if n == 0 else f"{mean:+.3g} [{mean - half:+.3g}, {mean + half:+.3g}] ({n})")
             if cells != ["-", "-"]:
                 lines.append(f"| {delay} | {name} | {cells[0]} | {cells[1]} |")
@@ -95,13 +124,18 @@ def plot(studies, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    measures = list(MEASURES)
-    figure, axes = plt.subplots(len(studies), len(measures), figsize=(3.2 * len(measures), 2.8 * len(studies)), squeeze=False)  # fmt: skip
+    measures = [m for m in MEASURES if any(row.get(m) is not None for _, rows in studies for row in rows)]
+    columns = 4
+    per_task = -(-len(measures) // columns)
+    figure, axes = plt.subplots(len(studies) * per_task, columns, figsize=(3.4 * columns, 2.6 * per_task * len(studies)), squeeze=False)  # fmt: skip
+    for ax in axes.flat:
+        ax.set_visible(False)
     for r, (task, rows) in enumerate(studies):
         for c, measure in enumerate(measures):
-            ax = axes[r, c]
+            ax = axes[r * per_task + c // columns, c % columns]
+            ax.set_visible(True)
             for mode in MODES:
-                xs, ys = [], []
+                xs, ys, errors = [], [], []
                 for delay in delays(rows):
                     values = [float(row[measure]) for row in rows
                               if row["mode"] == mode and int(row["delay_ms"]) == delay
@@ -109,7 +143,13 @@ def plot(studies, path):
                     if values:
                         xs.append(delay)
                         ys.append(np.mean(values))
-                ax.plot(xs, ys, marker="o", label=mode)
+                        spread = np.array(values) - np.mean(values)
+                        errors.append(interval(spread)[1] if len(values) > 1 else 0.0)
+                if xs:  # the mean and its 95 % t interval, the modes side by side
+                    shift = 6.0 * (MODES.index(mode) - 1.5)
+                    ax.errorbar(np.array(xs) + shift, ys, yerr=np.nan_to_num(errors),
+                                marker="o", ms=3, capsize=2, label=mode,
+                                color=f"C{MODES.index(mode)}")  # one colour per mode, every panel  # fmt: skip
             ax.set_title(f"{task}: {MEASURES[measure]}", fontsize=8)
             ax.set_xlabel("one-way delay (ms)", fontsize=8)
             ax.tick_params(labelsize=7)
@@ -123,9 +163,15 @@ def main():
     parser.add_argument("folders", nargs="+")
     parser.add_argument("-o", "--out", default="study_assist.png")
     args = parser.parse_args()
-    studies = [trials(folder) for folder in args.folders]
-    studies = [(task, rows) for task, rows in studies if rows]
+    merged = {}  # one study per task, its folders' trials together (one per operator)
+    for folder in args.folders:
+        task, rows = trials(folder)
+        if rows:
+            merged.setdefault(task, []).extend(rows)
+    studies = list(merged.items())
     for task, rows in studies:
+        print(means(task, rows))
+        print()
         print(table(task, rows))
         print()
     plot(studies, args.out)

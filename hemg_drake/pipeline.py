@@ -27,6 +27,8 @@ from hemg_drake.run_folder import DATASET, MODEL, RunFolder
 TASKS = ("cotter_pin", "drawing")
 # The sub-folder of a run that holds its fresh demonstrations (demonstrate_heldout).
 HELDOUT = "heldout"
+# The demonstrations' interaction signals (hand force, stylus velocity, the assist's): the studies'.
+INTERACTION_FILE = "interaction.npz"
 
 
 def _demonstrate_hint(folder):
@@ -34,15 +36,23 @@ def _demonstrate_hint(folder):
     return "hemg-drake demonstrate SCENARIO --out NEW_FOLDER for a new run"
 
 
-def demonstrate_seed(built, seed, *, replay_path=None, title=None):
+def demonstrate_seed(built, seed, *, replay_path=None, title=None, signals=None):
     """Run demonstration ``seed`` on a built diagram; with ``replay_path`` (the diagram built
-    with a Visualization), recorded into an HTML replay titled ``title``."""
-    from hemg_drake.diagrams.demonstration import run_demonstration
+    with a Visualization), recorded into an HTML replay titled ``title``. With a list
+    ``signals``, the run's interaction signals are appended to it
+    (:func:`~hemg_drake.diagrams.demonstration.interaction_signals`)."""
+    from hemg_drake.diagrams.demonstration import run_demonstration_logged
     from hemg_drake.viz.recording import record_run
 
+    def run(b):
+        demo, logged = run_demonstration_logged(b, seed)
+        if signals is not None:
+            signals.append(logged)
+        return demo
+
     if replay_path is None:
-        return run_demonstration(built, seed)
-    return record_run(built, lambda b: run_demonstration(b, seed), replay_path, title=title)
+        return run(built)
+    return record_run(built, run, replay_path, title=title)
 
 
 def check_enough_data(observations, n_states):
@@ -168,7 +178,7 @@ def _demonstrate(scenario, folder, replays, progress, placed):
     from hemg_drake.learning.demos import save_dataset
     from hemg_drake.viz.run_figures import write_demonstration_figures
 
-    demos, replay_files = [], []
+    demos, replay_files, signals = [], [], []
     visualization = Visualization() if replays else None  # one server for every replay
     # One diagram per placement (the seeds live in the Context): without placements, one.
     diagrams = {}
@@ -179,7 +189,9 @@ def _demonstrate(scenario, folder, replays, progress, placed):
         key = here.to_yaml()
         if key not in diagrams:
             diagrams[key] = build_demonstration_diagram(here, visualization=visualization)
-        demos.append(demonstrate_seed(diagrams[key], seed, replay_path=replay, title=title))
+        demos.append(demonstrate_seed(
+            diagrams[key], seed, replay_path=replay, title=title, signals=signals
+        ))  # fmt: skip
         if has_placements(scenario):
             progress(f"demonstration {c}: {describe_placement(here)}")
         if replay is not None:
@@ -199,8 +211,16 @@ def _demonstrate(scenario, folder, replays, progress, placed):
     demos = [dc.replace(d, frame_A=A, frame_b=b) for d, (A, b) in zip(demos, frames, strict=True)]
     metadata = dict(scenario=scenario.to_yaml(), task=scenario.task, log_period=scenario.log_period)
     save_dataset(folder.dataset, demos, metadata)
+    written = [folder.dataset]
+    if len(signals) == len(demos):  # the operator's effort, the assist's signals: the studies'
+        interaction = folder / INTERACTION_FILE
+        save_npz_atomic(interaction, **{
+            f"demo{c}.{name}": value for c, logged in enumerate(signals)
+            for name, value in logged.items()
+        })  # fmt: skip
+        written.append(interaction)
     figures = write_demonstration_figures(demos, scenario, folder.path)
-    written = [folder.dataset, *replay_files, *figures]
+    written += [*replay_files, *figures]
     folder.finish("demonstrate", written)
     return written
 

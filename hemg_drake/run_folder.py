@@ -2,7 +2,8 @@
 
 ``runs/NAME/`` holds the outputs of three stages, each made from the one before::
 
-    demonstrate   dataset.npz, replay_<c>.html, demonstrations.png, fig6_emg.png
+    demonstrate   dataset.npz, replay_<c>.html, demonstrations.png, fig6_emg.png,
+                  interaction.npz
     learn         model.npz, state_activations.png              (from dataset.npz)
     reproduce     reproduction.html/.npz, metrics.json, figures (from model.npz)
 
@@ -57,6 +58,7 @@ _STOPS = {signal.SIGINT, signal.SIGTERM}
 OUTPUTS = {
     "demonstrate": (
         DATASET, "replay_*.html", "inputs_*.npz", "demonstrations.png", "fig6_emg.png",
+        "interaction.npz",
     ),
     # The diagrams (run_demo) are drawn with the model.
     "learn": (MODEL, "state_activations.png", "demonstration_diagram.svg",

@@ -17,7 +17,8 @@ from hemg_drake.assist.arbitration import Arbitration
 from hemg_drake.assist.intent import IntentEstimator
 from hemg_drake.learning.systems import HsmmLqrReproducer
 
-ASSIST_LOGGED = {"weight": 1, "confidence": 1, "phase": 1, "link_lost": 1, "guidance_force": 3}
+ASSIST_LOGGED = {"weight": 1, "confidence": 1, "phase": 1, "link_lost": 1, "guidance_force": 3,
+                 "x_policy": 3}
 
 
 def assist_model(scenario):
@@ -109,5 +110,6 @@ def add_assist(builder, scenario, *, model, start, command, p_WE, f_WE, activati
         "phase": intent.GetOutputPort("phase"),
         "link_lost": arbitration.GetOutputPort("link_lost"),
         "guidance_force": arbitration.GetOutputPort("guidance_force"),
+        "x_policy": policy.GetOutputPort("x_star"),
     }
     return arbitration.GetOutputPort("p_WE_reference"), fed_back, sources

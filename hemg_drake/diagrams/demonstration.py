@@ -73,6 +73,11 @@ class DemonstrationDiagram(StationDiagram):
     assist_logger : VectorLogSink or None
         With ``assist.mode`` other than none: the assist's signals
         (:data:`~hemg_drake.diagrams.assist.ASSIST_LOGGED`) every ``scenario.log_period``.
+    interaction_logger : VectorLogSink
+        The operator's hand force and the stylus velocity (the operator's effort), the
+        passivity observer's energy (with a delay or tdpa) and the visual operator's state
+        (``operator.visual``), every ``scenario.log_period``; ``interaction_widths``: their
+        names and widths, in order.
     """
 
     scenario: object
@@ -80,6 +85,8 @@ class DemonstrationDiagram(StationDiagram):
     logger: object
     emg_logger: object
     assist_logger: object = None
+    interaction_logger: object = None
+    interaction_widths: dict = None
 
 
 def operator_plan(scenario, seed):
@@ -172,7 +179,9 @@ def build_demonstration_diagram(
 
     if operator_factory is None:
         operator_system = SimulatedOperator(
-            plan=scenario.task_plan(), mapping=mapping, config=scenario.operator
+            plan=scenario.task_plan(), mapping=mapping, config=scenario.operator,
+            # The visual operator sees the slave through the channel's slave-to-master half.
+            video_delay=scenario.feedback.delay_steps * scenario.master.period,
         )
     else:
         operator_system = operator_factory(
@@ -210,6 +219,8 @@ def build_demonstration_diagram(
     for name in ("p_MS", "v_MS"):
         connect(master.GetOutputPort(name), operator.GetInputPort(name))
         connect(master.GetOutputPort(name), workspace_map.GetInputPort(name))
+    if operator.HasInputPort("p_WE_seen"):  # the visual operator watches the tool
+        connect(slave.GetOutputPort("p_WE"), operator.GetInputPort("p_WE_seen"))
     p_WE_desired = workspace_map.GetOutputPort("p_WE_desired")
     connect(variable_gain.get_gain_output_port(), slave.GetInputPort("gain"))
 
@@ -259,6 +270,17 @@ def build_demonstration_diagram(
         "muscle_activation": operator.GetOutputPort("activation"),
     }
     emg_logger = add_logger(builder, emg_sources, MYO_PERIOD, name="emg_logger")
+    interaction_sources = {
+        "hand_force": operator.GetOutputPort("hand_force"),
+        "v_MS": master.GetOutputPort("v_MS"),
+    }
+    if force_feedback.HasOutputPort("energy"):
+        interaction_sources["passivity_energy"] = force_feedback.GetOutputPort("energy")
+    if operator.HasOutputPort("visual_state"):
+        interaction_sources["visual_state"] = operator.GetOutputPort("visual_state")
+    interaction_logger = add_logger(
+        builder, interaction_sources, scenario.log_period, name="interaction_logger"
+    )
     assist_logger = None
     if assist_sources is not None:
         assist_logger = add_logger(
@@ -274,6 +296,8 @@ def build_demonstration_diagram(
         logger=logger,
         emg_logger=emg_logger,
         assist_logger=assist_logger,
+        interaction_logger=interaction_logger,
+        interaction_widths={name: port.size() for name, port in interaction_sources.items()},
     )
 
 
@@ -333,6 +357,26 @@ def initial_context(built, seed, *, diagram=None):
 
 
 def run_demonstration(built, seed, *, duration=None):
+    """:func:`run_demonstration_logged`'s demonstration alone."""
+    return run_demonstration_logged(built, seed, duration=duration)[0]
+
+
+def interaction_signals(built, context):
+    """The run's signals beside the demonstration, name -> array (T, width): ``time`` and
+    the interaction logger's (hand force, v_MS, ...), and with the assist
+    ``assist.<name>`` (:data:`~hemg_drake.diagrams.assist.ASSIST_LOGGED`)."""
+    log = built.interaction_logger.FindLog(context)
+    signals = {"time": log.sample_times()[:, None]}
+    signals.update(split_log(log, built.interaction_widths))
+    if built.assist_logger is not None:
+        from hemg_drake.diagrams.assist import ASSIST_LOGGED
+
+        assist = split_log(built.assist_logger.FindLog(context), ASSIST_LOGGED)
+        signals.update({f"assist.{name}": value for name, value in assist.items()})
+    return signals
+
+
+def run_demonstration_logged(built, seed, *, duration=None):
     """Simulate demonstration ``seed`` on a built diagram (a fresh context each call) and
     read its logs.
 
@@ -346,16 +390,17 @@ def run_demonstration(built, seed, *, duration=None):
 
     Returns
     -------
-    Demonstration
+    (Demonstration, dict): the demonstration and :func:`interaction_signals`.
     """
     simulator, duration = make_simulator(built, duration)
     simulator.reset_context(initial_context(built, seed))
     simulator.Initialize()
     simulator.AdvanceTo(duration)
     context = simulator.get_context()
-    return demonstration_from_logs(
+    demo = demonstration_from_logs(
         built.logger.FindLog(context), built.emg_logger.FindLog(context), as_seed(seed)
     )
+    return demo, interaction_signals(built, context)
 
 
 def record_demonstration(scenario, seed, *, scene=True):

@@ -32,12 +32,15 @@ _INTERACTION = ["contact_force_peak_n", "contact_force_mean_n", "impulse_n_s", "
                 "block_force_peak_n", "block_impulse_n_s", "environment_force_peak_n"]  # fmt: skip
 # Recorded only by a trial that has it (a push: reproduction.push): allowed in a sweep's
 # metrics, not expected of every trial.
-OPTIONAL = {"reproduce": ["push.start_s", "push.release_s", "push.deviation_before_m",
+OPTIONAL = {"demonstrate": ["passivity_energy_min_j", "gave_up", "held_s", "disagreement_m",
+                            "phase_lag_s", "phase_missed"],
+            "reproduce": ["push.start_s", "push.release_s", "push.deviation_before_m",
                           "push.deviation_peak_m", "push.return_time_s", "push.returned"]}  # fmt: skip
 METRICS = {
     "demonstrate": {
         "*": ["tracking_error_m", "master_oscillation_mm", "master_energy_peak_mj",
-              "master_hit_wall", "gain_lag_s", "contact_force_peak_n", "muscle_effort"],
+              "master_hit_wall", "gain_lag_s", "contact_force_peak_n", "muscle_effort",
+              "hand_impulse_n_s", "hand_work_j"],
         "cotter_pin": ["pin_out", "completion_s"],
         "drawing": ["strokes", "three_strokes"],
     },

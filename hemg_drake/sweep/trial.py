@@ -102,6 +102,39 @@ def demonstration_metrics(scenario, demos):
     return {name: float(np.mean(values)) for name, values in record.items()}
 
 
+def study_metrics(scenario, demos, path):
+    """The shared-control study's measures (:func:`~hemg_drake.analysis.effort.
+    interaction_metrics`), mean over the demonstrations, from the interaction log at
+    ``path`` (none if the run has no such file): ``hand_impulse_n_s``, ``hand_work_j``,
+    ``passivity_energy_min_j`` (the least over them), and as logged ``gave_up``, ``held_s``,
+    ``disagreement_m``, ``phase_lag_s``, ``phase_missed``."""
+    import numpy as np
+
+    from hemg_drake.analysis.effort import interaction_metrics
+    from hemg_drake.fileio import load_npz
+
+    if not Path(path).is_file():
+        return {}
+    arrays = load_npz(path, kind="interaction log")
+    model = None
+    if any(name.endswith(".assist.phase") for name in arrays):
+        from hemg_drake.diagrams.assist import assist_model
+
+        model = assist_model(scenario)
+    records = []
+    for c, demo in enumerate(demos):
+        prefix = f"demo{c}."
+        signals = {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)}
+        records.append(interaction_metrics(signals, demo, model))
+    result = {}
+    for name in records[0]:
+        values = np.array([record.get(name, np.nan) for record in records], dtype=float)
+        least = name == "passivity_energy_min_j"
+        result[name] = float(np.nanmin(values) if least else np.nanmean(values)) \
+            if np.isfinite(values).any() else float("nan")
+    return result
+
+
 def _lag(time_a, a, time_b, b, max_lag=0.5):
     """Delay of ``b`` behind ``a`` (s) at the peak of their cross-correlation, on b's grid."""
     import numpy as np
@@ -202,7 +235,9 @@ def _trial_metrics(task, run):
     if "demonstrate" in steps:
         _cached_demonstrations(task, scenario, run)
         demos, _ = pipeline.load_demonstrations(run / "dataset.npz")
-        result.update(flatten("demonstration", demonstration_metrics(scenario, demos)))
+        measured = demonstration_metrics(scenario, demos)
+        measured.update(study_metrics(scenario, demos, run / pipeline.INTERACTION_FILE))
+        result.update(flatten("demonstration", measured))
     if "learn" in steps:
         model = pipeline.learn(run, overrides=overrides, progress=_quiet)
         result["learn.n_iter"] = int(model.n_iter_)

@@ -99,6 +99,48 @@ class HumanStyleConfig:
 
 
 @dc.dataclass
+class VisualConfig:
+    """An operator who acts on what it sees (``operator.visual``;
+    :mod:`~hemg_drake.teleop.visual`): it sees the slave's tool through the channel's
+    slave-to-master delay plus its own reaction time, moves on to the plan's next segment
+    only when it sees the previous one reached and settled (move and wait, Ferrell 1965),
+    corrects toward the error it sees with an integral gain (the crossover model's
+    operator: the loop L(s) = w_c e^{-s tau} / s, McRuer & Jex 1967), gives up and lets go
+    when a waypoint is not reached within its patience, and trembles at 8-12 Hz."""
+
+    enabled: bool = False
+    # Visuomotor reaction time (s): ~0.2 s for a visual stimulus (e.g. Welford 1980), on top
+    # of the channel's slave-to-master delay.
+    reaction_time: float = checked(0.2)
+    # Crossover frequency w_c (rad/s) of the visual correction, the gain of the integral of
+    # the seen error: 4 rad/s, the human's crossover on a position task with ~0.2 s
+    # effective delay (phase margin about 45 deg without the channel's delay); the operator
+    # does not lower it for the channel's delay (a first session).
+    gain: float = checked(4.0)
+    # The smallest error the operator sees (m, in M): errors below it are not corrected,
+    # and a waypoint counts as reached within it.
+    tolerance: float = checked(0.003, positive=True)
+    # A waypoint counts as reached when seen within the tolerance for this long (s).
+    dwell: float = checked(0.2)
+    # Bound of the correction's norm (m, in M): how far beyond its plan the hand reaches.
+    max_correction: float = checked(0.03)
+    # Seconds held at a waypoint not seen reached before the operator lets go for good.
+    patience: float = checked(3.0, positive=True)
+    # Tremor: a sinusoid on the hand's target, amplitude (m) per axis, frequency (Hz)
+    # uniform in the range, phase per axis uniform (physiological tremor 8-12 Hz).
+    tremor_amplitude: float = checked(0.0)
+    tremor_frequency: list[float] = checked([8.0, 12.0], positive=True, size=2)
+
+    def check(self, key=""):
+        low, high = self.tremor_frequency
+        if low > high:
+            raise ValueError(
+                f"key '{key_path(key, 'tremor_frequency')}' must be [low, high] with "
+                f"low <= high, got {[low, high]}"
+            )
+
+
+@dc.dataclass
 class OperatorConfig:
     """The simulated operator (:class:`~hemg_drake.teleop.operator.SimulatedOperator`) and
     its seeded variability between demonstrations."""
@@ -131,11 +173,13 @@ class OperatorConfig:
     # timing of `human` (per-phase tempo, pauses, overshoot then correction, idle start).
     style: str = checked("scripted", choices=OPERATOR_STYLES)
     human: HumanStyleConfig = dc.field(default_factory=HumanStyleConfig)
+    # An operator who acts on what it sees (off: the plan in time, whatever it sees).
+    visual: VisualConfig = dc.field(default_factory=VisualConfig)
 
     def model_parameters(self):
         """Keyword arguments of ``SimulatedOperator`` (all fields but the variability)."""
         data = dc.asdict(self)
-        for name in ("timing_std", "path_std", "effort_std", "style", "human"):
+        for name in ("timing_std", "path_std", "effort_std", "style", "human", "visual"):
             del data[name]
         return data
 

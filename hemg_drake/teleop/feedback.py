@@ -122,6 +122,10 @@ def FeedbackLaw_(T):
             self.DeclareVectorOutputPort(
                 "motor_force", 3, self._calc_motor_force, prerequisites_of_calc=prerequisites
             )
+            if self.stateful:  # the passivity observer's E (J), for the logs
+                self.DeclareVectorOutputPort(
+                    "energy", 1, self._calc_energy, prerequisites_of_calc={self.xd_ticket()}
+                )
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(
@@ -211,6 +215,9 @@ def FeedbackLaw_(T):
 
         def _calc_motor_force(self, context, output):
             output.SetFromVector(np.array(self._passive_force(context)[0]))
+
+        def _calc_energy(self, context, output):
+            output.SetAtIndex(0, self._state_values(context)[-1])
 
     return Impl
 
@@ -321,6 +328,8 @@ class ForceFeedback(Diagram):
             builder.Connect(join.get_output_port(), delay.get_input_port())
             builder.Connect(delay.get_output_port(), law.GetInputPort("delayed"))
         builder.ExportOutput(law.GetOutputPort("motor_force"), "motor_force")
+        if law.HasOutputPort("energy"):
+            builder.ExportOutput(law.GetOutputPort("energy"), "energy")
         builder.BuildInto(self)
 
     def set_gains(self, context, *, gain=None, stiffness=None, damping=None, peak_force=None):

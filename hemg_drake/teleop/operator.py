@@ -16,6 +16,7 @@ from hemg_drake.teleop.config import OperatorConfig
 from hemg_drake.teleop.human_style import human_draw_count, human_draws, humanised
 from hemg_drake.teleop.mapping import WorkspaceMapping
 from hemg_drake.teleop.master import saturate_norm
+from hemg_drake.teleop import visual as vis
 
 # The hand's impedance and force limit are OperatorConfig's; these names are for the
 # browser's virtual hand, which takes the same.
@@ -100,7 +101,7 @@ def OperatorLaw_(T):
         a function of time only, so the hand force is differentiable in p_MS, v_MS).
         """
 
-        def _construct(self, *, plan, mapping, config, converter=None):
+        def _construct(self, *, plan, mapping, config, video_delay=0.0, converter=None):
             LeafSystem_[T].__init__(self, converter)
             if not isinstance(plan, TaskPlan):
                 raise ValueError(f"plan must be a TaskPlan, got {type(plan).__name__}")
@@ -109,6 +110,7 @@ def OperatorLaw_(T):
                     f"mapping must be a WorkspaceMapping, got {type(mapping).__name__}"
                 )
             self._plan, self._mapping, self._config = plan, mapping, config
+            self._video_delay = float(video_delay)
             values = _checked(config)
             self._values = values
             self._path_std = list(config.path_std)
@@ -125,7 +127,17 @@ def OperatorLaw_(T):
             if config.style == "human":
                 human = np.full(human_draw_count(plan), 0.5)
                 self._human_input = self.DeclareVectorInputPort("human", human.size)
-            nominal = self._plans(np.zeros(n_normals), np.zeros(n_uniforms), human)
+            self._visual = config.visual if config.visual.enabled else None
+            draws = np.full(vis.DRAW_COUNT, 0.5)
+            if self._visual is not None:
+                # What the operator sees: the tool point in W, delayed by the channel's
+                # slave-to-master delay and the reaction time (a shift register here).
+                self._seen_input = self.DeclareVectorInputPort("p_WE_seen", 3)
+                self._visual_draws_input = self.DeclareVectorInputPort("visual", vis.DRAW_COUNT)
+                self._n_seen = vis.delay_samples(self._visual, self._video_delay, values["period"])
+                self._visual_index = self.DeclareDiscreteState(vis.initial_state())
+                self._seen_index = self.DeclareDiscreteState(np.zeros(3 * self._n_seen))
+            nominal = (*self._plans(np.zeros(n_normals), np.zeros(n_uniforms), human), draws)
             self._plans_index = self.DeclareAbstractState(AbstractValue.Make(nominal))
             self.DeclareInitializationUnrestrictedUpdateEvent(self._draw)
             self._activation_index = self.DeclareDiscreteState([values["rest"]])
@@ -137,14 +149,17 @@ def OperatorLaw_(T):
                 prerequisites_of_calc={
                     self.time_ticket(), self._p_MS_input.ticket(), self._v_MS_input.ticket(),
                     self.abstract_state_ticket(self._plans_index),
+                    *([] if self._visual is None else [self.all_state_ticket()]),
                 },
             )  # fmt: skip
             self.DeclareStateOutputPort("activation", self._activation_index)
+            if self._visual is not None:
+                self.DeclareStateOutputPort("visual_state", self._visual_index)
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(
                 self, plan=other._plan, mapping=other._mapping, config=other._config,
-                converter=converter,
+                video_delay=other._video_delay, converter=converter,
             )  # fmt: skip
 
         def _plans(self, normals, uniforms, human=None):
@@ -168,7 +183,18 @@ def OperatorLaw_(T):
                 uniforms = np.array([x.value() for x in uniforms])
                 if human is not None:
                     human = np.array([x.value() for x in human])
-            plans = self._plans(normals, uniforms, human)
+            draws = np.full(vis.DRAW_COUNT, 0.5)
+            if self._visual is not None:
+                draws = _floats(self._visual_draws_input.Eval(context))
+                # Before the first update the operator sees the tool where it starts.
+                seen = _floats(self._seen_input.Eval(context))
+                state.get_mutable_discrete_state(self._seen_index).SetFromVector(
+                    np.tile(seen, self._n_seen)
+                )
+                state.get_mutable_discrete_state(self._visual_index).SetFromVector(
+                    vis.initial_state(_float(context.get_time()))
+                )
+            plans = (*self._plans(normals, uniforms, human), draws)
             state.get_mutable_abstract_state(self._plans_index).set_value(plans)
 
         def plan(self, context):
@@ -184,11 +210,18 @@ def OperatorLaw_(T):
         def _calc_hand_force(self, context, output):
             p_MS = self._input(context, "p_MS", self._p_MS_input)
             v_MS = self._input(context, "v_MS", self._v_MS_input)
-            plan_M = context.get_abstract_state(self._plans_index).get_value()[1]
-            t = context.get_time()
-            p_target, v_target = plan_M.position_velocity_floats(
-                t if isinstance(t, float) else t.value()
-            )
+            plans = context.get_abstract_state(self._plans_index).get_value()
+            plan_M = plans[1]
+            t = _float(context.get_time())
+            if self._visual is None:
+                p_target, v_target = plan_M.position_velocity_floats(t)
+            else:
+                state = _floats(context.get_discrete_state(self._visual_index).value())
+                aim = vis.visual_target(state, t, plan_M, plans[2], self._visual)
+                if aim is None:  # let go: no force on the stylus
+                    output.SetFromVector(np.zeros(3))
+                    return
+                p_target, v_target = aim
             values = self._values
             output.SetFromVector(np.array(hand_impedance_force(
                 p_target, v_target, p_MS, v_MS, stiffness=values["hand_stiffness"],
@@ -196,10 +229,16 @@ def OperatorLaw_(T):
             )))  # fmt: skip
 
         def activation_target(self, context, t, feedback_force):
-            """a* = clip(a_rest + effort (a_level - a_rest) + g_cc |f_felt|, 0, 1)."""
+            """a* = clip(a_rest + effort (a_level - a_rest) + g_cc |f_felt|, 0, 1); the
+            visual operator's segment is its plan clock's, and it rests once it let go."""
             values = self._values
             plan = self.plan(context)
             rest = values["rest"]
+            if self._visual is not None:
+                state = context.get_discrete_state(self._visual_index).value()
+                if _float(state[vis.GAVE_UP]):
+                    return rest
+                t = _float(state[vis.S])
             if plan.start_time <= t <= plan.end_time:
                 segment = plan.segment(t)
                 level = rest + segment.effort * (values[segment.kind] - rest)
@@ -220,11 +259,44 @@ def OperatorLaw_(T):
             discrete_state.get_mutable_vector(self._activation_index).SetAtIndex(
                 0, target + (activation - target) * self._decay
             )
+            if self._visual is not None:
+                self._update_visual(context, discrete_state)
+
+        def _update_visual(self, context, discrete_state):
+            """Shift what the operator sees by one period, then step the visual law."""
+            seen = _floats(context.get_discrete_state(self._seen_index).value())
+            now = _floats(self._input(context, "p_WE_seen", self._seen_input))
+            discrete_state.get_mutable_vector(self._seen_index).SetFromVector(
+                np.concatenate([seen[3:], now])
+            )
+            seen_M = self._mapping.slave_to_master(seen[:3])
+            plan_M = context.get_abstract_state(self._plans_index).get_value()[1]
+            state = _floats(context.get_discrete_state(self._visual_index).value())
+            discrete_state.get_mutable_vector(self._visual_index).SetFromVector(
+                vis.visual_step(state, seen_M, plan_M, self._visual, self._values["period"])
+            )
+
+        def visual_state(self, context):
+            """The visual operator's state (:mod:`~hemg_drake.teleop.visual`), floats."""
+            return _floats(context.get_discrete_state(self._visual_index).value())
 
     return Impl
 
 
 OperatorLaw = OperatorLaw_[None]
+
+
+def _float(x):
+    return x if isinstance(x, float) else float(x.value())
+
+
+def _floats(values):
+    """A vector of floats or AutoDiffXd as floats (the visual law runs on values: what
+    the operator sees is not differentiated through)."""
+    array = np.asarray(values)
+    if array.dtype == object:
+        return np.array([_float(x) for x in array])
+    return np.array(array, dtype=float)
 
 
 class SimulatedOperator(Diagram):
@@ -259,6 +331,13 @@ class SimulatedOperator(Diagram):
     ``config.period`` (5 ms) by the exact discretisation of the first-order muscle lag,
     from the rest level. NaN inputs raise ValueError.
 
+    With ``config.visual.enabled`` the operator acts on what it sees
+    (:mod:`~hemg_drake.teleop.visual`): an input ``p_WE_seen`` (3, m, in W) takes the slave's
+    tool point; the law delays it by ``video_delay`` (s, the channel's slave-to-master delay)
+    plus the reaction time, and the hand heads for the plan at its own clock (held at a
+    waypoint until seen reached) plus the seen error's integral and a tremor; a fourth
+    RandomSource (``visual``) holds the tremor's draws.
+
     Variability in the Context: the operator follows ``plan.perturbed_by(draws)``
     (timing, path offset, effort; spreads ``config.timing_std``, ``path_std``,
     ``effort_std``), the draws held by two Drake ``RandomSource`` systems (standard normal
@@ -283,11 +362,11 @@ class SimulatedOperator(Diagram):
         gain (1/N), time constant (s), period (s), and the variability's spreads.
     """
 
-    def __init__(self, *, plan, mapping, config=OperatorConfig()):
+    def __init__(self, *, plan, mapping, config=OperatorConfig(), video_delay=0.0):
         Diagram.__init__(self)
         builder = DiagramBuilder()
         law = builder.AddNamedSystem(
-            "law", OperatorLaw(plan=plan, mapping=mapping, config=config)
+            "law", OperatorLaw(plan=plan, mapping=mapping, config=config, video_delay=video_delay)
         )
         self._law = law
         self.plan_nominal = plan
@@ -304,6 +383,13 @@ class SimulatedOperator(Diagram):
                 RandomDistribution.kUniform, human_draw_count(plan), _DRAW_INTERVAL
             ))  # fmt: skip
             builder.Connect(human.get_output_port(), law.GetInputPort("human"))
+        if config.visual.enabled:
+            visual = builder.AddNamedSystem("visual", RandomSource(
+                RandomDistribution.kUniform, vis.DRAW_COUNT, _DRAW_INTERVAL
+            ))  # fmt: skip
+            builder.Connect(visual.get_output_port(), law.GetInputPort("visual"))
+            builder.ExportInput(law.GetInputPort("p_WE_seen"), "p_WE_seen")
+            builder.ExportOutput(law.GetOutputPort("visual_state"), "visual_state")
         builder.Connect(normals.get_output_port(), law.GetInputPort("normals"))
         builder.Connect(uniforms.get_output_port(), law.GetInputPort("uniforms"))
         for name in ("p_MS", "v_MS", "feedback_force"):
@@ -320,6 +406,11 @@ class SimulatedOperator(Diagram):
     def plan(self, context):
         """The perturbed plan in W that the operator follows in ``context`` (initialised)."""
         return self._law.plan(self.GetSubsystemContext(self._law, context))
+
+    def visual_state(self, context):
+        """With ``config.visual.enabled``: [s, c (3), waited, settled, gave up]
+        (:mod:`~hemg_drake.teleop.visual`) in ``context`` (this diagram's)."""
+        return self._law.visual_state(self.GetSubsystemContext(self._law, context))
 
 
 def set_operator_seed(operator, context, plan, seed):
@@ -342,4 +433,9 @@ def set_operator_seed(operator, context, plan, seed):
         source = operator.GetSubsystemByName("human")
         operator.GetMutableSubsystemContext(source, context).SetDiscreteState(
             human_draws(plan, seed)
+        )
+    if operator.HasSubsystemNamed("visual"):  # the visual operator's tremor, its own stream
+        source = operator.GetSubsystemByName("visual")
+        operator.GetMutableSubsystemContext(source, context).SetDiscreteState(
+            vis.visual_draws(seed)
         )

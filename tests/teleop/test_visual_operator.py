@@ -1,0 +1,122 @@
+"""The operator who acts on what it sees (operator.visual), through Drake: it moves on only
+when it sees a waypoint reached, gives up after its patience, corrects the seen error after
+its reaction time plus the video delay, and trembles at the drawn frequency."""
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+
+from hemg_drake.tasks.plan import TaskPlan
+from hemg_drake.teleop.config import OperatorConfig, VisualConfig
+from hemg_drake.teleop.mapping import WorkspaceMapping
+from hemg_drake.teleop.operator import SimulatedOperator, set_operator_seed
+from hemg_drake.teleop.visual import GAVE_UP, S
+
+MAPPING = WorkspaceMapping(scale=3.0, p_WMo=[0.7, -0.2, 0.25])
+PLAN = TaskPlan(
+    times=[0.0, 0.6, 1.4, 2.0],
+    points=[[0.7, -0.2, 0.25], [0.75, -0.3, 0.25], [0.75, -0.3, 0.2], [0.7, -0.2, 0.25]],
+    kinds=["free", "forceful", "free"],
+)
+STILL = TaskPlan(times=[0.0, 5.0], points=[[0.7, -0.2, 0.25]] * 2, kinds=["free"])
+DT = OperatorConfig().period  # 5 ms, the visual law's period
+
+
+def operator(plan, video_delay=0.0, **visual):
+    config = OperatorConfig(
+        timing_std=0.0, path_std=[0.0, 0.0, 0.0], effort_std=0.0,
+        visual=VisualConfig(enabled=True, **visual),
+    )  # fmt: skip
+    return SimulatedOperator(plan=plan, mapping=MAPPING, config=config, video_delay=video_delay)
+
+
+def start(system, seen, p_MS=None, seed=None):
+    """A simulator with the tool seen at ``seen`` (W) and the stylus held at ``p_MS`` (M);
+    ``seed``: the operator's draws of PLAN (set_operator_seed)."""
+    simulator = Simulator(system)
+    context = simulator.get_mutable_context()
+    if seed is not None:
+        set_operator_seed(system, context, PLAN, seed)  # a clone is a plain Diagram
+    p_MS = MAPPING.slave_to_master(PLAN.points[0]) if p_MS is None else p_MS
+    for name, value in (("p_MS", p_MS), ("v_MS", np.zeros(3)), ("feedback_force", np.zeros(3)),
+                        ("p_WE_seen", np.asarray(seen, float))):  # fmt: skip
+        system.GetInputPort(name).FixValue(context, value)
+    simulator.Initialize()
+    return simulator, context
+
+
+def test_moves_on_when_it_sees_the_waypoint_then_gives_up_after_its_patience():
+    # The tool is seen at the first waypoint all along: the clock reaches 0.6 s, waits the
+    # 0.2 s dwell there (it counts from the period that arrives), passes, and stops at the
+    # second waypoint (1.4 s), never seen; 0.5 s later the operator lets go.
+    system = operator(PLAN, patience=0.5)
+    simulator, context = start(system, PLAN.points[1])
+    simulator.AdvanceTo(1.0)
+    state = system.visual_state(context)
+    assert state[S] == pytest.approx(1.0 - 0.2, abs=1.5 * DT)
+    simulator.AdvanceTo(1.4 + 0.2 + 0.49)
+    state = system.visual_state(context)
+    assert state[S] == pytest.approx(1.4) and not state[GAVE_UP]
+    assert np.linalg.norm(system.GetOutputPort("hand_force").Eval(context)) > 1.0
+    simulator.AdvanceTo(1.4 + 0.2 + 0.52)
+    assert system.visual_state(context)[GAVE_UP] == 1.0
+    np.testing.assert_array_equal(system.GetOutputPort("hand_force").Eval(context), np.zeros(3))
+    simulator.AdvanceTo(2.5)  # ten muscle time constants later: at rest
+    assert system.GetOutputPort("activation").Eval(context)[0] == pytest.approx(0.05, abs=1e-4)
+
+
+def test_corrects_the_seen_error_after_reaction_and_video_delay():
+    # A still plan; the tool is seen where it should be until t1 = 0.5 s, then 2 cm off in
+    # W (2/3 cm in M, scale 3). The operator sees the change 0.1 s (video) + 0.2 s
+    # (reaction) later, then integrates w_c (e - tol e/|e|) each 5 ms: the hand, holding
+    # the stylus on the plan, pulls with 300 N/m times that correction.
+    system = operator(STILL, video_delay=0.1, gain=4.0, tolerance=0.003)
+    p0 = STILL.points[0]
+    simulator, context = start(system, p0)
+    simulator.AdvanceTo(0.5)
+    offset = np.array([0.0, 0.02, 0.0])
+    system.GetInputPort("p_WE_seen").FixValue(context, p0 + offset)
+    simulator.AdvanceTo(0.5 + 0.29)
+    np.testing.assert_allclose(system.GetOutputPort("hand_force").Eval(context), 0, atol=1e-12)
+    simulator.AdvanceTo(0.5 + 0.3 + 0.2)
+    error = -(MAPPING.slave_to_master(p0 + offset) - MAPPING.slave_to_master(p0))
+    rate = 4.0 * error * (1 - 0.003 / np.linalg.norm(error))  # m/s
+    force = system.GetOutputPort("hand_force").Eval(context)
+    # 0.2 s of integration, within one period either side.
+    expected = 300 * 0.2 * np.linalg.norm(rate)
+    assert np.linalg.norm(force) == pytest.approx(expected, rel=DT / 0.2 + 1e-9)
+    direction = rate / np.linalg.norm(rate)
+    np.testing.assert_allclose(force / np.linalg.norm(force), direction, atol=1e-9)
+
+
+def test_tremor_is_the_drawn_sinusoid():
+    # Draws [0.5, 0, 0.25, 0.5]: f = 8 + 4 x 0.5 = 10 Hz, phases 0, 1/4, 1/2 of a cycle; at
+    # t = 12.5 ms (an eighth of a cycle) the target is A [sin 45, sin 135, sin 225] deg off
+    # the plan, and the hand holding the stylus on the plan pulls 300 N/m times that.
+    system = operator(STILL, tremor_amplitude=0.001)
+    simulator = Simulator(system)
+    context = simulator.get_mutable_context()
+    source = system.GetSubsystemByName("visual")
+    system.GetMutableSubsystemContext(source, context).SetDiscreteState([0.5, 0.0, 0.25, 0.5])
+    p_plan = MAPPING.slave_to_master(STILL.points[0])
+    for name, value in (("p_MS", p_plan), ("v_MS", np.zeros(3)), ("feedback_force", np.zeros(3)),
+                        ("p_WE_seen", STILL.points[0])):  # fmt: skip
+        system.GetInputPort(name).FixValue(context, value)
+    simulator.Initialize()
+    simulator.AdvanceTo(0.0125)
+    root_half = np.sqrt(0.5)
+    np.testing.assert_allclose(
+        system.GetOutputPort("hand_force").Eval(context),
+        300 * 0.001 * np.array([root_half, root_half, -root_half]), atol=1e-9,
+    )
+
+
+def test_visual_operator_clones():
+    system = operator(PLAN, tremor_amplitude=0.001)
+    forces = []
+    for copy in (system, system.Clone()):
+        simulator, context = start(copy, PLAN.points[0], seed=5)
+        simulator.AdvanceTo(0.3)
+        forces.append(copy.GetOutputPort("hand_force").Eval(context).copy())
+    assert np.linalg.norm(forces[0]) > 0.1
+    np.testing.assert_array_equal(forces[0], forces[1])
