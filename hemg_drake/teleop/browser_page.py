@@ -127,7 +127,10 @@ class TeleopPage:
         }.get(state, (f"{c}: {state}", ""))
         self.server.update(state=state, headline=headline, hint=default if hint is None else hint)
 
-    def update(self, t, p_WE, f_WE, gain, recording, p_WT=None, activation=None, rate=None):
+    def update(self, t, p_WE, f_WE, gain, recording, p_WT=None, activation=None, rate=None,
+               assist=None):  # fmt: skip
+        """Show the take's state at ``t``; ``assist`` (a dict: weight, phase, states,
+        belief, confidence, on, link_lost) the shared control's read-outs."""
         m = self.meshcat
         f = -np.asarray(f_WE, dtype=float)  # the force the tool applies to the task
         magnitude = float(np.linalg.norm(f))
@@ -152,6 +155,8 @@ class TeleopPage:
             values = dict(K=float(gain), force=min(magnitude, MAX_SHOWN_FORCE))
             if activation is not None:
                 values["activation"] = float(activation)
+            if assist is not None:
+                values["assist"] = dict(assist)
             if rate is not None:
                 values["slow"] = (
                     f"the simulation runs at {rate:.2f}x real time: motion is slowed"
