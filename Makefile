@@ -20,7 +20,7 @@ demo: install
 
 # Two workers: the suite is dominated by independent Drake simulations.
 test: install
-	$(PY) -m pytest -n 2 --dist loadfile
+	$(PY) -m pytest -n 2 --dist loadfile -m "not person"
 
 # The benchmarks' own data and baselines (the bench extra) install on first use.
 bench: install
