@@ -102,8 +102,16 @@ class PageDriver:
             self.tap(plus)
             moved = self.settled_target()
             self.tap(minus)
-            self.settled_target()
-            self.directions[axis] = moved - start
+            back = self.settled_target()
+            d = moved - start
+            if np.linalg.norm(d) < 1e-4:  # the target was at the workspace's wall: the other way
+                self.tap(minus)
+                d = back - self.settled_target()
+                self.tap(plus)
+                self.settled_target()
+            if np.linalg.norm(d) < 1e-4:
+                raise RuntimeError(f"the keys {plus} / {minus} move nothing on the page")
+            self.directions[axis] = d
         return self.directions
 
     def step_towards(self, goal, *, tolerance, axes="xz", fine_below=None):
@@ -151,7 +159,7 @@ def pull_pin(driver, *, pin_length, activation=0.6, dt=0.1, timeout=600.0):
 
 
 def draw_strokes(driver, *, depth=2.5e-3, contact=0.5, tolerance=1.5e-3, dt=0.04,
-                 lift=6e-3, timeout=900.0):
+                 lift=6e-3, timeout=1800.0):
     """Draw the template strokes the page shows, closed loop, by taps.
 
     The keys' directions are measured first (:meth:`PageDriver.calibrate`). For each stroke:
