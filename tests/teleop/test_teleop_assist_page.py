@@ -19,7 +19,7 @@ from tooling.teleop_page import controls_ready, wait_for
 
 from test_teleop_page import ROOT, Command
 
-pytestmark = [pytest.mark.browser, pytest.mark.person]
+pytestmark = [pytest.mark.browser, pytest.mark.person, pytest.mark.timeout(3600)]
 
 
 def cli(*args):

@@ -18,7 +18,7 @@ from tooling.teleop_page import controls_ready, wait_for
 
 from test_teleop_page import ROOT, Command
 
-pytestmark = [pytest.mark.browser, pytest.mark.person]
+pytestmark = [pytest.mark.browser, pytest.mark.person, pytest.mark.timeout(3600)]
 
 # Three pin takes of different timing: idle lead-in (s of take time) and the driver's
 # decision period (s): a slow careful pull, a quick one, and one that starts late.
@@ -53,7 +53,8 @@ def takes(task, run, count, drive):
                 page.press("Escape")
                 wait_for(page, "ended")
                 page.press("KeyK")
-                wait_for(page, "saved", timeout=300)
+                if c < count:  # after the last, the command ends (and its page with it)
+                    wait_for(page, "saved", timeout=300)
             code, out = command.finish(timeout=600)
     finally:
         command.stop()
