@@ -69,7 +69,7 @@ class PageDriver:
         match = re.search(r"recording (\d+(\.\d+)?) s", state(self.page))
         return float(match.group(1)) if match else float("nan")
 
-    def wait_take_time(self, dt, timeout=60.0):
+    def wait_take_time(self, dt, timeout=300.0):
         """Wait until the take's (simulated) time has advanced by ``dt`` s."""
         deadline = time.monotonic() + timeout
         start = self.take_time()
