@@ -50,6 +50,8 @@ def takes(task, run, count, drive):
                 driver = PageDriver(page)
                 drive(driver, c)
                 lengths.append((driver.take_time(), sum(driver.presses.values())))
+                print(f"\n{task} take {c}: {lengths[-1][0]:.1f} s, presses "
+                      f"{dict(driver.presses)}, ink strokes {driver.ink_strokes()}", flush=True)
                 page.press("Escape")
                 wait_for(page, "ended")
                 page.press("KeyK")
