@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test bench clean clean-demo
+.PHONY: install demo test test-person bench clean clean-demo
 
 # The stamp makes a second run instant; editing pyproject.toml reinstalls.
 $(STAMP): pyproject.toml
@@ -20,7 +20,12 @@ demo: install
 
 # Two workers: the suite is dominated by independent Drake simulations.
 test: install
-	$(PY) -m pytest -n 2 --dist loadfile
+	$(PY) -m pytest -n 2 --dist loadfile -m "not person"
+
+# The person tests (marked person): the real teleop page driven by key events through whole
+# takes, then learn and reproduce; tens of minutes, as the page runs below real time.
+test-person: install
+	$(PY) -m pytest -m person -q -s -p no:cacheprovider tests/teleop
 
 # The benchmarks' own data and baselines (the bench extra) install on first use.
 bench: install

@@ -164,7 +164,8 @@ def teleop_command(args):
 
         visualization = Visualization(0)
         page = TeleopPageServer(visualization.meshcat, task=scenario.task,
-                                scale=scenario.workspace_mapping().scale, port=args.port)  # fmt: skip
+                                scale=scenario.workspace_mapping().scale, port=args.port,
+                                assist=scenario.assist.mode)  # fmt: skip
         # The first line, always.
         _print(f"Teleop page: {page.url()} (open it in a browser; Meshcat on port "
                f"{visualization.port()})")  # fmt: skip

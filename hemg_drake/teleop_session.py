@@ -119,7 +119,8 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
         inputs = (
             MeshcatInputs(meshcat, p_MS_initial=p_MS_initial,
                           workspace_size=scenario.master.workspace_size,
-                          activation=operator.rest_activation)  # fmt: skip
+                          activation=operator.rest_activation,
+                          assist=scenario.assist.mode != "none")  # fmt: skip
             if live
             else LoggedInputs(source.time, source.rows, source.wall_time)
         )
@@ -180,6 +181,7 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
     paced = [(0.0, began)]  # (simulated, wall) over the last second: the real-time factor
     activation_port = master.GetOutputPort("activation")
     master_context = master.GetMyContextFromRoot(context)
+    assist_ports = _assist_ports(diagram, master) if scenario.assist.mode != "none" else None
     while True:
         k += 1
         t = k * PAGE_PERIOD
@@ -212,6 +214,7 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
                 activation=activation_port.Eval(master_context)[0],
                 rate=rate if realtime else None,
                 echo=echo,
+                assist=None if assist_ports is None else _assist_values(assist_ports, context),
             )  # fmt: skip
         if on_step is not None:
             on_step(t)
@@ -239,6 +242,30 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
                     end_reason=reason if live else source.end_reason, seed=seed,
                     scenario=scenario.to_yaml())  # fmt: skip
     return Take(demo, log, built, master, page.updates if page else 0, wall)
+
+
+def _assist_ports(diagram, master):
+    """The ports the page shows of the assist: (system, port name) by read-out."""
+    intent = diagram.GetSubsystemByName("intent")
+    arbitration = diagram.GetSubsystemByName("arbitration")
+    return dict(
+        weight=(arbitration, "weight"), phase=(intent, "phase"), h=(intent, "h"),
+        confidence=(intent, "confidence"), on=(master, "assist_on"),
+        link_lost=(arbitration, "link_lost"),
+    )  # fmt: skip
+
+
+def _assist_values(ports, context):
+    """The assist's read-outs now (:meth:`TeleopPage.update`'s ``assist``)."""
+    values = {}
+    for name, (system, port) in ports.items():
+        values[name] = system.GetOutputPort(port).Eval(system.GetMyContextFromRoot(context))
+    h = values.pop("h")
+    return dict(
+        weight=float(values["weight"][0]), phase=int(values["phase"][0]), states=len(h),
+        belief=float(np.max(h)), confidence=float(values["confidence"][0]),
+        on=bool(values["on"][0] >= 0.5), link_lost=bool(values["link_lost"][0] >= 0.5),
+    )  # fmt: skip
 
 
 def template_strokes(plan):
@@ -394,7 +421,8 @@ def _take(scenario, folder, out_dir, duration, replay_inputs, replays, progress,
 
             visualization = Visualization(0)
             page_server = TeleopPageServer(visualization.meshcat, task=scenario.task,
-                                           scale=scenario.workspace_mapping().scale, port=port)  # fmt: skip
+                                           scale=scenario.workspace_mapping().scale, port=port,
+                                           assist=scenario.assist.mode)  # fmt: skip
             progress(f"Teleop page: {page_server.url()} (open it in a browser; Meshcat on "
                      f"port {visualization.port()})")  # fmt: skip
         controls = TakeControls(visualization.meshcat) if wait else None

@@ -59,6 +59,7 @@ def Arbitration_(T):
             - h_policy
             - confidence
             - activation
+            - enabled
             output_ports:
             - p_WE_reference
             - weight
@@ -75,7 +76,10 @@ def Arbitration_(T):
         slave receives it (``p_WE_command``, 3, m, W), x_pol the policy's point
         (``x_policy``: the LQR tracker re-planned from the measured tool point, 3, m, W),
         kappa the intent estimator's ``confidence`` (1), a the EMG chain's ``activation``
-        (1; read in mode ``emg`` only). ``guidance_force`` (3, N, W) = K_g w (x_pol - p_cmd),
+        (1; read in mode ``emg`` only). ``enabled`` (1): the person's switch (the teleop
+        page's A key, :class:`~hemg_drake.teleop.browser.BrowserMaster`'s ``assist_on``);
+        below 0.5 the assist is off, w* = 0 as in mode ``none`` (the weight falls with its
+        filter, no step), and the watchdog does not take over. ``guidance_force`` (3, N, W) = K_g w (x_pol - p_cmd),
         the pull toward the learnt path that the force feedback carries to the master.
         ``weight`` (1) is w, ``link_lost`` (1) 0 or 1.
 
@@ -128,6 +132,7 @@ def Arbitration_(T):
                 "h_policy": self.DeclareVectorInputPort("h_policy", int(n_states)),
                 "confidence": self.DeclareVectorInputPort("confidence", 1),
                 "activation": self.DeclareVectorInputPort("activation", 1),
+                "enabled": self.DeclareVectorInputPort("enabled", 1),
             }
             p0 = np.asarray(p_WE_initial, dtype=float).tolist()
             initial = [0.0, *p0, -1.0, 0.0, *p0]
@@ -174,7 +179,11 @@ def Arbitration_(T):
             command = self._command(context, state)
             x_policy = self._read(context, "x_policy")
             lost = self._age(context) > config.link_timeout
-            if lost and config.mode == "none":  # today's teleop: the stale command, alone
+            on = self._read(context, "enabled")[0] >= 0.5
+            if not on:  # switched off by the person: today's teleop (the weight decays)
+                target = 0.0
+                state[4:6] = (-1.0, 0.0)
+            elif lost and config.mode == "none":  # today's teleop: the stale command, alone
                 target = 0.0
             elif lost:
                 target = 1.0

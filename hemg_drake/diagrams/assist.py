@@ -11,7 +11,7 @@ Signal flow, on the slave's side of the channel::
 With ``assist.mode`` none nothing of this is built.
 """
 
-from pydrake.systems.primitives import Adder
+from pydrake.systems.primitives import Adder, ConstantVectorSource
 
 from hemg_drake.assist.arbitration import Arbitration
 from hemg_drake.assist.intent import IntentEstimator
@@ -42,7 +42,8 @@ def assist_model(scenario):
     return model
 
 
-def add_assist(builder, scenario, *, model, start, command, p_WE, f_WE, activation):
+def add_assist(builder, scenario, *, model, start, command, p_WE, f_WE, activation,
+               enabled=None):  # fmt: skip
     """Add the intent estimator, the policy and the arbitration to ``builder``.
 
     Parameters
@@ -58,6 +59,9 @@ def add_assist(builder, scenario, *, model, start, command, p_WE, f_WE, activati
     command, p_WE, f_WE, activation : OutputPort
         The operator's command as the slave receives it, the measured tool point, the
         interaction force and the EMG chain's activation.
+    enabled : OutputPort, optional
+        The person's on/off switch (1 on; the teleop page's A key, the browser master's
+        ``assist_on``); without one the assist is always on.
 
     Returns
     -------
@@ -98,6 +102,10 @@ def add_assist(builder, scenario, *, model, start, command, p_WE, f_WE, activati
     connect(policy.GetOutputPort("h"), arbitration.GetInputPort("h_policy"))
     connect(intent.GetOutputPort("confidence"), arbitration.GetInputPort("confidence"))
     connect(activation, arbitration.GetInputPort("activation"))
+    if enabled is None:
+        enabled = builder.AddNamedSystem("assist_always_on", ConstantVectorSource([1.0]))
+        enabled = enabled.get_output_port()
+    connect(enabled, arbitration.GetInputPort("enabled"))
     fed_back = f_WE
     if settings.guidance_stiffness > 0:
         total = builder.AddNamedSystem("f_WE_and_guidance", Adder(2, 3))

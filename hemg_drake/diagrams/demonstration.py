@@ -234,6 +234,8 @@ def build_demonstration_diagram(
             builder, scenario, model=assist_model(scenario), start=start,
             command=p_WE_desired, p_WE=slave.GetOutputPort("p_WE"), f_WE=f_WE,
             activation=variable_gain.get_activation_output_port(),
+            enabled=operator.GetOutputPort("assist_on") if operator.HasOutputPort("assist_on")
+            else None,
         )  # fmt: skip
     connect(reference, slave.GetInputPort("p_WE_desired"))
     if scenario.feedback.mode == "force":

@@ -168,13 +168,15 @@ def BrowserMaster_(T):
             - hand_force
             - activation
             - p_MT
+            - assist_on
 
         Ports as the SimulatedOperator's (so ``build_demonstration_diagram(operator_factory=)``
         swaps it in): ``p_MS`` (3, m) and ``v_MS`` (3, m/s) the stylus tip in M;
         ``feedback_force`` (3, N, in M) the device motors' force, read by nothing (a keyboard
         renders no force: the page shows the slave's force instead); ``hand_force`` (3, N, in
         M) for the HapticMaster; ``activation`` (1, in [0, 1]) for the sEMG source; ``p_MT``
-        (3, m) the stylus target in M (for the page).
+        (3, m) the stylus target in M (for the page); ``assist_on`` (1) the person's assist
+        switch (1 on, 0 off; the arbitration's ``enabled``).
 
         Timing: every ``period`` (10 ms, from t = 0) a periodic unrestricted update reads one
         raw row (:data:`COLUMNS`) and its wall time from ``source`` into the abstract state
@@ -192,7 +194,8 @@ def BrowserMaster_(T):
           up are negative; ``speed`` times ``FINE``, a quarter, while the left bumper,
           button 4, is held), so p_T = s + g stays in the workspace box and v_T = (g_k -
           g_(k-1)) / T;
-        - a = clip(max(activation slider, trigger), 0, 1) (the trigger is button 7).
+        - a = clip(max(activation slider, trigger), 0, 1) (the trigger is button 7);
+        - assist_on = 1 if (assist clicks - those at the first sample) is even, else 0.
 
         The hand is the simulated operator's impedance towards the target (eq. 19's F_h):
         ``hand_force = sat(K_h (p_T - p_MS) + D_h (v_T - v_MS), max_hand_force)``, a direct
@@ -286,9 +289,10 @@ def BrowserMaster_(T):
             self._v_MS_input = self.DeclareVectorInputPort("v_MS", 3)
             self.DeclareVectorInputPort("feedback_force", 3)
             # Discrete state: target p_T (3), its velocity v_T (3), gamepad displacement g
-            # (3), activation (1), first keyboard slider values (3) and a "sampled" flag (1).
+            # (3), activation (1), first keyboard slider values (3), a "sampled" flag (1),
+            # the assist button's first clicks (1) and the assist switch (1, on at first).
             self.initial_state = [*self.p_MS_initial, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-                                  initial_activation, 0.0, 0.0, 0.0, 0.0]  # fmt: skip
+                                  initial_activation, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]  # fmt: skip
             self._state_index = self.DeclareDiscreteState(self.initial_state)
             self._samples_index = self.DeclareAbstractState(AbstractValue.Make(NO_SAMPLES))
             self.DeclarePeriodicUnrestrictedUpdateEvent(
@@ -313,6 +317,9 @@ def BrowserMaster_(T):
             )
             self.DeclareVectorOutputPort(
                 "p_MT", 3, self._calc_target, prerequisites_of_calc={state_ticket}
+            )
+            self.DeclareVectorOutputPort(
+                "assist_on", 1, self._calc_assist_on, prerequisites_of_calc={state_ticket}
             )
 
         def _construct_copy(self, other, converter=None):
@@ -355,7 +362,14 @@ def BrowserMaster_(T):
             slider = row[col["slider_activation"]]
             slider = slider if math.isfinite(slider) else 0.0
             activation = min(max(slider, trigger, 0.0), 1.0)
-            return [*p_T, *v_T, *g, activation, *first, 1.0]
+            # The assist switch: on at first, each click of the page's Assist button (A)
+            # toggles it (a non-finite count holds it).
+            clicks = row[col["assist_clicks"]]
+            first_clicks, on = state[14], state[15]
+            if math.isfinite(clicks):
+                first_clicks = clicks if state[13] == 0.0 else first_clicks
+                on = 1.0 if (clicks - _value(first_clicks)) % 2 == 0 else 0.0
+            return [*p_T, *v_T, *g, activation, *first, 1.0, first_clicks, on]
 
         def setpoints(self, row, state):
             """The keyboard's zero, set-point and last position after ``state`` for ``row``
@@ -458,6 +472,9 @@ def BrowserMaster_(T):
 
         def _calc_target(self, context, output):
             output.SetFromVector(np.array(self._state(context)[0:3]))
+
+        def _calc_assist_on(self, context, output):
+            output.SetFromVector(np.array(self._state(context)[15:16]))
 
         # -- what this context's take holds -----------------------------------------------
         def samples(self, context):

@@ -40,6 +40,9 @@ KEYS = {
     SLIDER_ACTIVATION: ("KeyZ", "KeyX"),  # relax / tense
 }
 END_KEY = "Escape"
+# The shared control's switch (docs/shared_control.md): each click toggles the assist between
+# the scenario's mode and none (on at the take's start).
+ASSIST_BUTTON, ASSIST_KEY = "Assist on/off", "KeyA"
 # The keys move the stylus target through the page's script (browser_server): a tap moves
 # it TAP_MM, a key held longer than HOLD_DELAY (s) moves it at HOLD_MM_S in wall-clock time;
 # with Shift, FINE of both. At the tool that is the workspace map's scale (2) times as much.
@@ -60,8 +63,10 @@ FINE_BUTTON = 4
 COLUMNS = (
     "slider_x_mm", "slider_y_mm", "slider_z_mm", "slider_activation", "gamepad_index",
     *(f"axis_{i}" for i in range(N_AXES)), *(f"button_{i}" for i in range(N_BUTTONS)),
-    "end_clicks", "connections",
+    "end_clicks", "connections", "assist_clicks",
 )  # fmt: skip
+# The columns of logs written before the assist's switch (read with assist_clicks 0).
+COLUMNS_BEFORE_ASSIST = COLUMNS[:-1]
 COLUMN_INDEX = {name: i for i, name in enumerate(COLUMNS)}
 INPUTS_FORMAT = 1
 
@@ -80,13 +85,16 @@ class MeshcatInputs:
     workspace_size : 3 floats, m
     activation : float
         The activation slider's initial value.
+    assist : bool
+        Add the assist's switch (:data:`ASSIST_BUTTON`, A) and read its clicks (else 0).
     clock : callable
         Wall clock (s) logged with every row (``time.monotonic``).
     """
 
     def __init__(self, meshcat, *, p_MS_initial, workspace_size=TOUCH_X_WORKSPACE,
-                 activation=0.05, clock=time.monotonic):  # fmt: skip
+                 activation=0.05, assist=False, clock=time.monotonic):  # fmt: skip
         self.meshcat = meshcat
+        self.assist = bool(assist)
         self.clock = clock
         half_mm = 500.0 * as_vector("workspace_size", workspace_size, 3)
         start_mm = 1000.0 * as_vector("p_MS_initial", p_MS_initial, 3)
@@ -100,6 +108,8 @@ class MeshcatInputs:
             else:  # the page's script moves them (KEYS): no Meshcat key bindings
                 meshcat.AddSlider(name, low, high, step, value)
         meshcat.AddButton(END_BUTTON, keycode=END_KEY)  # (again: resets its clicks)
+        if self.assist:
+            meshcat.AddButton(ASSIST_BUTTON, keycode=ASSIST_KEY)
 
     def read(self, t):
         """The page's inputs now: (row of len(COLUMNS) floats, wall time in s)."""
@@ -120,6 +130,7 @@ class MeshcatInputs:
                 index = -1.0  # the page sends an empty gamepad once it is disconnected
         row += [index, *axes, *buttons]
         row += [float(m.GetButtonClicks(END_BUTTON)), float(m.GetNumActiveConnections())]
+        row.append(float(m.GetButtonClicks(ASSIST_BUTTON)) if self.assist else 0.0)
         return row, float(self.clock())
 
 
@@ -213,10 +224,13 @@ def load_inputs(path):
         raise ValueError(f"{path}: not a teleop inputs log (missing {', '.join(missing)})")
     if int(arrays["format_version"]) != INPUTS_FORMAT:
         raise ValueError(f"{path}: inputs log format {arrays['format_version']}, expected 1")
-    if tuple(str(c) for c in arrays["columns"]) != COLUMNS:
+    columns, rows = tuple(str(c) for c in arrays["columns"]), arrays["rows"]
+    if columns == COLUMNS_BEFORE_ASSIST:  # an older log: the assist was never switched
+        rows = np.column_stack([rows, np.zeros(len(rows))])
+    elif columns != COLUMNS:
         raise ValueError(f"{path}: the inputs log's columns differ from this version's")
     return InputsLog(
-        time=arrays["time"], wall_time=arrays["wall_time"], rows=arrays["rows"],
+        time=arrays["time"], wall_time=arrays["wall_time"], rows=rows,
         end_time=float(arrays["end_time"]), end_reason=str(arrays["end_reason"]),
         seed=int(arrays["seed"]), scenario=str(arrays["scenario"]),
     )  # fmt: skip

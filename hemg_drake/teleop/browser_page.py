@@ -138,10 +138,12 @@ class TeleopPage:
         self.server.update(state=state, headline=headline, hint=default if hint is None else hint)
 
     def update(self, t, p_WE, f_WE, gain, recording, p_WT=None, activation=None, rate=None,
-               echo=None):  # fmt: skip
+               echo=None, assist=None):  # fmt: skip
         """Refresh the marks and read-outs; ``echo`` = (p_WC, sliders): where the newest
         sample sends the target (m, in W) and its sliders (mm), for the page's local echo
-        (:meth:`BrowserMaster.command <hemg_drake.teleop.browser.BrowserMaster_.command>`)."""
+        (:meth:`BrowserMaster.command <hemg_drake.teleop.browser.BrowserMaster_.command>`);
+        ``assist`` (a dict: weight, phase, states, belief, confidence, on, link_lost) the
+        shared control's read-outs."""
         m = self.meshcat
         f = -np.asarray(f_WE, dtype=float)  # the force the tool applies to the task
         magnitude = float(np.linalg.norm(f))
@@ -175,6 +177,8 @@ class TeleopPage:
             values = dict(K=float(gain), force=min(magnitude, MAX_SHOWN_FORCE))
             if activation is not None:
                 values["activation"] = float(activation)
+            if assist is not None:
+                values["assist"] = dict(assist)
             if rate is not None:
                 values["slow"] = (
                     f"the simulation runs at {rate:.2f}x real time: motion is slowed"

@@ -81,6 +81,11 @@ OVERLAY = r"""
   <div>K <span id="hemg-k"></span></div><div class="hemg-bar"><div id="hemg-kbar" style="background:#36c"></div></div>
   <div>activation <span id="hemg-a"></span></div><div class="hemg-bar"><div id="hemg-abar" style="background:#c3c"></div></div>
   <div>force at the tool <span id="hemg-f"></span> (orange arrow)</div><div class="hemg-bar"><div id="hemg-fbar" style="background:#e80"></div></div>
+  <div id="hemg-assist" style="display:none">
+    <div>assist <span id="hemg-assist-state"></span>: weight <span id="hemg-w"></span></div>
+    <div class="hemg-bar"><div id="hemg-wbar" style="background:#2a2"></div></div>
+    <div>phase <span id="hemg-phase"></span></div>
+  </div>
   <table id="hemg-legend"></table>
 </div>
 <script>
@@ -199,6 +204,16 @@ OVERLAY = r"""
       bar("hemg-fbar", s.force / s.force_max);
       text("display:hemg-slow", s.slow ? "block" : "none");
       text("hemg-slow", s.slow);
+      const a = s.assist;
+      if (config.assist && a) {  // the shared control (docs/shared_control.md)
+        text("display:hemg-assist", "block");
+        text("hemg-assist-state", (a.on ? "on (" + config.assist + ")" : "off")
+          + (a.link_lost ? ", link lost: the model leads" : ""));
+        text("hemg-w", a.weight.toFixed(2));
+        bar("hemg-wbar", a.weight);
+        text("hemg-phase", "state " + (a.phase + 1) + " of " + a.states
+          + " (belief " + a.belief.toFixed(2) + "), confidence " + a.confidence.toFixed(2));
+      }
     } catch (e) { text("hemg-state", "the teleop command is not running"); }
     if (Object.keys(pending).length && performance.now() - lastFlush > FLUSH_MS) flush();
     setTimeout(poll, POLL_MS);
@@ -249,9 +264,10 @@ def page_html(html, meshcat_port, config):
     return replaced
 
 
-def legend(task, scale):
+def legend(task, scale, assist="none"):
     """The legend's rows (keys, what they do) and the task's line; ``scale``: tool motion per
-    stylus motion (the workspace map's), so the steps are stated at the tool."""
+    stylus motion (the workspace map's), so the steps are stated at the tool; ``assist``: the
+    scenario's assist mode (other than none: a row for its switch)."""
     tool = lambda mm: f"{scale * mm:g}"  # noqa: E731
     rows = [
         (["Enter"], "start a take"), (["Esc"], "end the take"),
@@ -264,6 +280,8 @@ def legend(task, scale):
         ([], f"a tap moves the tool {tool(TAP_MM)} mm, a held key {tool(HOLD_MM_S)} mm/s "
              f"(Shift: {tool(TAP_MM * FINE)} mm, {tool(HOLD_MM_S * FINE)} mm/s)"),
     ]  # fmt: skip
+    if assist != "none":
+        rows.insert(8, (["A"], f"assist on ({assist}) / off"))
     tasks = {
         "cotter_pin": "Cotter pin: squeeze (hold X until K is high) to stiffen, then pull the "
         "pin up (hold W) about 10 cm until it is out.",
@@ -283,16 +301,17 @@ class TeleopPageServer:
     task : str, the scenario's task (its line of the legend).
     scale : float, the workspace map's scale.
     port : int
+    assist : str, the scenario's assist mode (none: no assist read-outs nor switch).
     """
 
-    def __init__(self, meshcat, *, task, scale, port=0):
-        rows, task_line = legend(task, scale)
+    def __init__(self, meshcat, *, task, scale, port=0, assist="none"):
+        rows, task_line = legend(task, scale, assist)
         config = dict(
             legend=rows, task=task_line, keys={n: list(k) for n, k in KEYS.items()},
             stylus=[SLIDER_X, SLIDER_Y, SLIDER_Z],
             activation=SLIDER_ACTIVATION, tap_mm=TAP_MM, hold_mm_s=HOLD_MM_S, fine=FINE,
             hold_delay=HOLD_DELAY, activation_tap=ACTIVATION_TAP,
-            activation_hold=ACTIVATION_HOLD_S,
+            activation_hold=ACTIVATION_HOLD_S, assist="" if assist == "none" else assist,
         )  # fmt: skip
         self._html = page_html(drake_page(meshcat), meshcat.port(), config).encode("utf-8")
         self._lock = threading.Lock()
@@ -346,7 +365,8 @@ class TeleopPageServer:
 
     def update(self, **values):
         """Set some of the page's read-outs: state ("waiting", "recording", "ended",
-        "saved"), headline, hint, K, K_min, K_max, activation, force, force_max, slow."""
+        "saved"), headline, hint, K, K_min, K_max, activation, force, force_max, slow, assist
+        (a dict, :meth:`~hemg_drake.teleop.browser_page.TeleopPage.update`'s)."""
         with self._lock:
             self._state.update(values)
 

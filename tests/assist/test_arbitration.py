@@ -50,12 +50,13 @@ class Harness:
         self.period = period
         self.steps = 0
         self.set(command=[0.1, 0.2, 0.3], policy=[0.4, -0.5, 0.6], phase=0, confidence=1.0,
-                 activation=0.0)  # fmt: skip
+                 activation=0.0, enabled=1.0)  # fmt: skip
 
-    def set(self, *, command=None, policy=None, phase=None, confidence=None, activation=None):
+    def set(self, *, command=None, policy=None, phase=None, confidence=None, activation=None,
+            enabled=None):  # fmt: skip
         fix = {
             "p_WE_command": command, "x_policy": policy, "confidence": confidence,
-            "activation": activation,
+            "activation": activation, "enabled": enabled,
             "h_policy": None if phase is None else np.eye(3)[phase],
         }  # fmt: skip
         for name, value in fix.items():
@@ -166,3 +167,33 @@ def test_mode_none_on_a_lost_link_holds_the_last_command():
     arbitration.set(command=[5.0, 5.0, 5.0])
     assert arbitration.out("link_lost")[0] == 1 and arbitration.out("weight")[0] == 0.0
     assert np.array_equal(arbitration.out("p_WE_reference"), [0.1, 0.2, 0.3])
+
+
+def test_switched_off_the_weight_decays_to_zero_and_back_on_it_rises():
+    """The person's switch (enabled): off, w* = 0, so w falls by the first-order filter
+    (w_k = w_0 (1 - T / tau)^k, by hand) and the reference returns to the command; on
+    again, w rises towards W."""
+    config = AssistConfig(mode="fixed", weight=0.8, weight_time_constant=0.01)
+    h = Harness(config)
+    h.step(200)
+    w0 = h.out("weight")[0]
+    assert w0 == pytest.approx(0.8, abs=1e-6)
+    h.set(enabled=0.0)
+    h.step(5)
+    assert h.out("weight")[0] == pytest.approx(w0 * (1 - 0.1) ** 5, rel=1e-12)
+    h.step(400)
+    assert h.out("weight")[0] < 1e-12
+    assert np.allclose(h.out("p_WE_reference"), [0.1, 0.2, 0.3], atol=1e-12)
+    h.set(enabled=1.0)
+    h.step(1)
+    assert h.out("weight")[0] == pytest.approx(0.1 * 0.8, rel=1e-6)
+
+
+def test_switched_off_a_lost_link_does_not_hand_over_to_the_model():
+    config = AssistConfig(mode="fixed", weight=0.5, link_timeout=0.05, gap_start=0.0,
+                          gap_duration=10.0, weight_time_constant=0.01)  # fmt: skip
+    h = Harness(config)
+    h.set(enabled=0.0)
+    h.step(300)  # 0.3 s: the link lost for 0.25 s
+    assert h.out("link_lost")[0] == 1.0
+    assert h.out("weight")[0] == 0.0

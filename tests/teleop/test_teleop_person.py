@@ -1,0 +1,119 @@
+"""Tested as a person would (issue 24 section 4): the real teleop page driven by key events in a
+closed loop on what it shows (tests/tooling/page_driver.py), three pin takes of different
+timing and two drawing takes, then ``learn`` and ``reproduce`` from them, asserting success.
+Long (the page runs below real time): marked ``person``, run by .ci/run, not make test."""
+
+import json
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from hemg_drake.tasks.plans import pin_length
+from tooling.headless_page import HeadlessPage
+from tooling.page_driver import PageDriver, draw_strokes, pull_pin
+from tooling.teleop_page import controls_ready, wait_for
+
+from test_teleop_page import ROOT, Command
+
+pytestmark = [pytest.mark.browser, pytest.mark.person, pytest.mark.timeout(3600)]
+
+# Three pin takes of different timing: idle lead-in (s of take time) and the driver's
+# decision period (s): a slow careful pull, a quick one, and one that starts late.
+PIN_TIMINGS = ((0.5, 0.1), (0.2, 0.05), (2.5, 0.2))
+
+
+def cli(*args, timeout=1800):
+    import os
+
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, "-m", "hemg_drake.cli", *args], env=env,
+                          capture_output=True, text=True, timeout=timeout)  # fmt: skip
+    return done.returncode, done.stdout + done.stderr
+
+
+def takes(task, run, count, drive):
+    """``count`` takes of ``task`` at one page into ``run``, each driven by ``drive(driver,
+    c)``; returns the takes' (length s, presses)."""
+    command = Command(task, "--out", str(run), "--port", "0", "--no-replay",
+                      "--takes", str(count))  # fmt: skip
+    lengths = []
+    try:
+        with HeadlessPage(command.url) as page:
+            for c in range(1, count + 1):
+                wait_for(page, f"take {c}: waiting", timeout=300)
+                controls_ready(page)
+                page.press("Enter")
+                wait_for(page, "recording")
+                driver = PageDriver(page)
+                drive(driver, c)
+                lengths.append((driver.take_time(), sum(driver.presses.values())))
+                print(f"\n{task} take {c}: {lengths[-1][0]:.1f} s, presses "
+                      f"{dict(driver.presses)}, ink strokes {driver.ink_strokes()}", flush=True)
+                page.press("Escape")
+                wait_for(page, "ended")
+                page.press("KeyK")
+                if c < count:  # after the last, the command ends (and its page with it)
+                    wait_for(page, "saved", timeout=300)
+            code, out = command.finish(timeout=600)
+    finally:
+        command.stop()
+    assert code == 0 and f"{count} takes kept" in out, out
+    return lengths
+
+
+def learn_and_reproduce(run, *settings):
+    sets = [a for s in settings for a in ("--set", s)]
+    code, out = cli("learn", str(run), *sets)
+    assert code == 0, out
+    code, out = cli("reproduce", str(run))
+    assert code == 0, out
+    return json.loads((run / "metrics.json").read_text()), out
+
+
+def test_three_pin_takes_of_different_timing_learn_and_reproduce(tmp_path, chromium):
+    run = tmp_path / "pin"
+
+    def drive(driver, c):
+        lead, dt = PIN_TIMINGS[c - 1]
+        driver.wait_take_time(lead)
+        pull_pin(driver, pin_length=pin_length(), dt=dt)
+        driver.wait_take_time(0.3)
+
+    lengths = takes("cotter_pin", run, 3, drive)
+    results = {}
+    for align in ("none", "trim"):
+        metrics, out = learn_and_reproduce(run, f"learning.align={align}")
+        results[align] = metrics
+        print(f"\npin takes (length s, presses) {lengths}; align {align}: "
+              f"checks {metrics['success_checks']}\n{out}")
+    # The pin comes out, safely, whichever the alignment; with the takes trimmed to their
+    # active spans every success check holds (as measured: untrimmed, the reproduction
+    # learnt the takes' spring-up at the detent's release and overshot by 10.6 mm for a
+    # limit of 10; docs/teleop_browser.md).
+    for align, m in results.items():
+        assert m["pin_out"] and m["safe"], (align, m["success_checks"])
+    assert results["trim"]["success"], results["trim"]["success_checks"]
+
+
+def test_two_drawing_takes_learn_and_reproduce(tmp_path, chromium):
+    run = tmp_path / "drawing"
+
+    def drive(driver, c):
+        driver.wait_take_time(0.3)
+        draw_strokes(driver, depth=2.5e-3 if c == 1 else 2.0e-3)
+        driver.wait_take_time(0.3)
+
+    lengths = takes("drawing", run, 2, drive)
+    results = {}
+    for align in ("none", "trim"):
+        metrics, out = learn_and_reproduce(run, f"learning.align={align}")
+        results[align] = m = metrics
+        print(f"\ndrawing takes (length s, presses) {lengths}; align {align}: strokes "
+              f"{m['strokes']}, shape errors {m['stroke_shape_error_m']}, checks "
+              f"{m['success_checks']}\n{out}")
+    # Three strokes, whichever the alignment (the shape and placement errors are reported).
+    for align, m in results.items():
+        assert m["strokes"] == 3, (align, m["success_checks"])

@@ -1,0 +1,207 @@
+"""A closed-loop key driver for the teleop page: it reads what the page shows (the Meshcat
+scene tree's tool, target, pin and template strokes; the overlay's state line and read-outs)
+and presses keys as a person would, counting every press. Test tooling shared by
+tests/teleop/test_teleop_person.py and benchmarks; not runtime.
+
+Nothing here knows the workspace map: the keys' directions at the tool are measured on the
+page (one tap each, the stylus target's motion seen in the scene).
+"""
+
+import collections
+import re
+import time
+
+import numpy as np
+
+from tooling.teleop_page import state
+
+TARGET = ["teleop", "target"]
+HAND = ["drake", "illustration", "baxter_right_arm", "right_hand"]
+PIN = ["drake", "illustration", "cotter_pin", "pin"]
+# The keys that move the tool, by the master axis they move (+ key, - key).
+AXIS_KEYS = {"x": ("ArrowRight", "ArrowLeft"), "y": ("KeyW", "KeyS"), "z": ("ArrowDown", "ArrowUp")}
+
+
+class PageDriver:
+    """Key presses on a :class:`~tooling.headless_page.HeadlessPage` and what the page shows.
+
+    ``presses`` counts the presses by key (a tap is one press: keyDown then keyUp).
+    """
+
+    def __init__(self, page):
+        self.page = page
+        self.presses = collections.Counter()
+        self.directions = {}
+
+    # -- what the page shows --------------------------------------------------------------
+    def position(self, path):
+        """A scene node's position in the world (m, Drake's W: the node's own transform,
+        as set by Meshcat's SetTransform)."""
+        js = ("(function(){const n = viewer.scene_tree.find(%s); const e = n.object.matrix"
+              ".elements; return [e[12], e[13], e[14]];})()" % list(path))
+        return np.array(self.page.evaluate(js), dtype=float)
+
+    def template(self):
+        """The template strokes the page shows: a list of (k, 3) arrays (m, W)."""
+        js = ("(function(){const t = viewer.scene_tree.find(['teleop', 'template']); "
+              "return Object.keys(t.children).sort().map(k => {let o = t.children[k].object;"
+              " while (o && !o.geometry) o = o.children[0];"
+              " return Array.from(o.geometry.attributes.position.array);});})()")
+        return [np.array(s, dtype=float).reshape(-1, 3) for s in self.page.evaluate(js)]
+
+    def ink_strokes(self):
+        """How many strokes of ink the page shows."""
+        js = ("(function(){const t = viewer.scene_tree.find(['teleop', 'ink']); "
+              "return Object.keys(t.children).length;})()")
+        return int(self.page.evaluate(js) or 0)
+
+    def text(self, element):
+        return self.page.evaluate(f"document.getElementById('{element}').textContent") or ""
+
+    def number(self, element):
+        """The first number in an overlay read-out (hemg-a: activation, hemg-f: force, hemg-w:
+        the assist's weight)."""
+        match = re.search(r"-?\d+(\.\d+)?", self.text(element))
+        return float(match.group()) if match else float("nan")
+
+    def take_time(self):
+        """The take's time on the state line ("take 1: recording 3.2 s"), s; NaN if none."""
+        match = re.search(r"recording (\d+(\.\d+)?) s", state(self.page))
+        return float(match.group(1)) if match else float("nan")
+
+    def wait_take_time(self, dt, timeout=300.0):
+        """Wait until the take's (simulated) time has advanced by ``dt`` s."""
+        deadline = time.monotonic() + timeout
+        start = self.take_time()
+        while start != start:  # NaN: the state line missed a poll (a loaded machine)
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"the page shows no take time: {state(self.page)!r}")
+            time.sleep(0.05)
+            start = self.take_time()
+        while not self.take_time() >= start + dt - 1e-9:
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"the take's time stayed at {start} s: {state(self.page)!r}")
+            time.sleep(0.02)
+
+    # -- pressing -------------------------------------------------------------------------
+    def tap(self, code, *, shift=False):
+        self.page.press(code, shift=shift)
+        self.presses[code] += 1
+
+    def settled_target(self, dt=0.15):
+        """The target once it has stopped moving (two reads ``dt`` of take time apart)."""
+        before = self.position(TARGET)
+        while True:
+            self.wait_take_time(dt)
+            now = self.position(TARGET)
+            if np.linalg.norm(now - before) < 1e-5:
+                return now
+            before = now
+
+    def calibrate(self, axes="xyz"):
+        """Measure each axis' + key's motion of the target at the tool (m per tap, W) with a
+        tap there and back; sets ``directions`` (one W vector per axis)."""
+        for axis in axes:
+            plus, minus = AXIS_KEYS[axis]
+            start = self.settled_target()
+            self.tap(plus)
+            moved = self.settled_target()
+            self.tap(minus)
+            back = self.settled_target()
+            d = moved - start
+            if np.linalg.norm(d) < 1e-4:  # the target was at the workspace's wall: the other way
+                self.tap(minus)
+                d = back - self.settled_target()
+                self.tap(plus)
+                self.settled_target()
+            if np.linalg.norm(d) < 1e-4:
+                raise RuntimeError(f"the keys {plus} / {minus} move nothing on the page")
+            self.directions[axis] = d
+        return self.directions
+
+    def step_towards(self, goal, *, tolerance, axes="xz", fine_below=None):
+        """One tap on the axis (of ``axes``) whose key moves the target most towards ``goal``
+        (m, W); False when the target is within ``tolerance`` of it along every axis."""
+        target = self.position(TARGET)
+        best, gain = None, 0.0
+        for axis in axes:
+            d = self.directions[axis]
+            step = float(np.dot(goal - target, d) / np.dot(d, d))  # in taps
+            if abs(step) * np.linalg.norm(d) > tolerance and abs(step) > abs(gain):
+                best, gain = axis, step
+        if best is None:
+            return False
+        fine = fine_below is not None and abs(gain) * np.linalg.norm(self.directions[best]) < fine_below
+        self.tap(AXIS_KEYS[best][0 if gain > 0 else 1], shift=fine)
+        return True
+
+
+def pull_pin(driver, *, pin_length, activation=0.6, dt=0.1, timeout=600.0):
+    """Squeeze, then pull the pin until the page shows it out; closed loop, by taps.
+
+    Each ``dt`` of take time: while the activation read-out is below ``activation`` tap X;
+    then tap W whenever the hand rose less than 0.5 mm in the last ``dt`` (a person taps
+    again when the tool stops; an assist that pulls saves the taps). Returns the pin's
+    withdrawal seen (m).
+    """
+    start = driver.position(PIN)
+    hand = driver.position(HAND)
+    deadline = time.monotonic() + timeout
+    while True:
+        out = float(driver.position(PIN)[2] - start[2])
+        if out >= pin_length:
+            return out
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"the pin is only {1e3 * out:.1f} mm out; {dict(driver.presses)}")
+        if driver.number("hemg-a") < activation:
+            driver.tap("KeyX")
+        else:
+            now = driver.position(HAND)
+            if now[2] - hand[2] < 5e-4:
+                driver.tap("KeyW")
+            hand = now
+        driver.wait_take_time(dt)
+
+
+def draw_strokes(driver, *, depth=2.5e-3, contact=0.5, tolerance=1.5e-3, dt=0.04,
+                 lift=6e-3, timeout=1800.0):
+    """Draw the template strokes the page shows, closed loop, by taps.
+
+    The keys' directions are measured first (:meth:`PageDriver.calibrate`). For each stroke:
+    move the target above its start (the arrows), lower the pen (S) until the force read-out
+    shows contact (> ``contact`` N), then ``depth`` (m) further into the paper, follow the
+    stroke's waypoints to within ``tolerance`` (m; Shift for the last millimetre), and lift
+    (W) until the force is gone and ``lift`` more. One decision per ``dt`` of take time.
+    Returns the number of ink strokes the page shows.
+    """
+    deadline = time.monotonic() + timeout
+    directions = driver.calibrate("xyz")
+    up = directions["y"]  # W moves the target up
+    tap_up = float(np.linalg.norm(up))
+
+    def check():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"drawing: out of time; presses {dict(driver.presses)}")
+
+    for stroke in driver.template():
+        for k, point in enumerate(stroke):
+            while driver.step_towards(point, tolerance=tolerance, fine_below=2 * tolerance):
+                driver.wait_take_time(dt)
+                check()
+            if k == 0:  # pen down: to contact, then depth further
+                while driver.number("hemg-f") <= contact:
+                    driver.tap("KeyS")
+                    driver.wait_take_time(2 * dt)
+                    check()
+                for _ in range(max(1, round(depth / tap_up))):
+                    driver.tap("KeyS")
+                    driver.wait_take_time(dt)
+        while driver.number("hemg-f") > contact:  # pen up
+            driver.tap("KeyW")
+            driver.wait_take_time(2 * dt)
+            check()
+        for _ in range(max(1, round(lift / tap_up))):
+            driver.tap("KeyW")
+            driver.wait_take_time(dt)
+    driver.wait_take_time(0.3)
+    return driver.ink_strokes()
