@@ -1,7 +1,7 @@
 """Tested as a person would (issue 24 section 4): the real teleop page driven by key events in a
 closed loop on what it shows (tests/tooling/page_driver.py), three pin takes of different
 timing and two drawing takes, then ``learn`` and ``reproduce`` from them, asserting success.
-Long (the page runs below real time): marked ``person``, run by .ci/run, not make test."""
+Long (the page runs below real time): marked ``person``, run by ``make test-person``, not make test."""
 
 import json
 import subprocess
