@@ -20,16 +20,21 @@ runs the tuning pairs instead and refuses an evaluation seed.
 """
 
 import argparse
+import dataclasses as dc
 import json
 import math
+import shutil
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from bench_heldout import evaluate, pairs, run_scenario
+from bench_heldout import evaluate, pairs, quiet, run_scenario
 
 from hemg_drake.diagrams.demonstration import operator_plan
+from hemg_drake.fileio import write_text_atomic
+from hemg_drake.pipeline import HELDOUT, demonstrate, demonstrate_heldout, learn, reproduce
+from hemg_drake.scenario import load_scenario, shipped_scenario
 
 # The learning and reproduction settings for human-like takes, per task, over the shipped
 # scenario's (docs/learning.md, "Learning from natural takes": chosen on the tuning pairs).
@@ -56,6 +61,59 @@ def natural_scenario(task, seed, fresh, style, *, takes=TAKES, count=FRESH, over
     end = max(operator_plan(scenario, s).end_time for s in seeds)
     duration = max(scenario.duration, math.ceil(end + 1.0))
     return scenario.replaced([f"duration={duration}"])
+
+
+def shipped_settings(scenario):
+    """``scenario`` with the shipped scenario's learning and reproduction sections (but the
+    fresh takes' seed and count): what a cached run is recorded with, so that the settings
+    of the run that recorded it never leak into one that reuses it."""
+    shipped = load_scenario(shipped_scenario(scenario.task))
+    fresh = scenario.reproduction
+    return dc.replace(scenario, learning=shipped.learning, reproduction=dc.replace(
+        shipped.reproduction, heldout_seed=fresh.heldout_seed, num_heldout=fresh.num_heldout))
+
+
+def settings(task, style, plain, sets):
+    """The learning.* and reproduction.* overrides of a run over the shipped scenario's."""
+    own = NATURAL[task] if style == "human" and not plain else []
+    return [o for o in [*own, *sets] if o.startswith(("learning.", "reproduction."))]
+
+
+def cached(scenario, cache, progress=quiet):
+    """The run folder ``cache/<task>_<style>_<seed>`` holding the scenario's takes and fresh
+    takes (recorded with :func:`shipped_settings`), recorded there unless already recorded
+    from the same scenario but for its settings (the takes depend only on their seeds)."""
+    scenario = shipped_settings(scenario)
+    run = Path(cache) / f"{scenario.task}_{scenario.operator.style}_{scenario.seed}"
+    key = scenario.to_yaml()
+    stamp = run / "scenario_key.yaml"
+    if stamp.exists() and stamp.read_text() == key:
+        return run
+    if stamp.exists():
+        shutil.rmtree(run)  # the bench's own entry, of another scenario: recorded anew
+    start = time.perf_counter()
+    demonstrate(scenario, run, replays=False, progress=progress)
+    demonstrate_heldout(scenario, run, progress=progress)
+    write_text_atomic(stamp, key)
+    progress(f"<!-- {run.name}: takes recorded in {time.perf_counter() - start:.0f} s -->")
+    return run
+
+
+def evaluate_cached(scenario, cache, folder, base, variants):
+    """As ``bench_heldout.evaluate``, on a copy of the cached takes, each variant learnt with
+    ``base`` (the run's settings over the shipped ones) and then its own overrides."""
+    run = Path(folder) / f"{scenario.task}_{scenario.seed}"
+    shutil.rmtree(run, ignore_errors=True)
+    shutil.copytree(cached(scenario, cache, progress=print), run)
+    results = {}
+    for v, variant in enumerate(variants):
+        overrides = [*base, *(o for o in variant.split(",") if o)]
+        learn(run, overrides=overrides, progress=quiet)
+        tracker = scenario.replaced(overrides).reproduction.tracker
+        results[f"{variant} {tracker}".strip()] = reproduce(
+            run, overrides=overrides, out_dir=run / f"{v}_{tracker}", replay=False,
+            heldout=run / HELDOUT, progress=quiet)  # fmt: skip
+    return results
 
 
 def verdict(task, m):
@@ -103,9 +161,16 @@ def main(argv=None):
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     parser.add_argument("--variants", nargs="+", default=[""], metavar="K=V[,K=V]")
     parser.add_argument("--json", help="also write every metric to this file")
+    parser.add_argument("--cache", metavar="DIR",
+                        help="record each run's takes once into DIR and reuse them (they "
+                        "depend on the seeds, not on learning.* / reproduction.*)")
+    parser.add_argument("--record-only", action="store_true",
+                        help="with --cache: record the takes, learn nothing")
     args = parser.parse_args(argv)
     if args.fresh < 2 or args.takes < 1:
         parser.error("--fresh must be at least 2 and --takes at least 1")
+    if args.record_only and not args.cache:
+        parser.error("--record-only needs --cache DIR")
     kind = "tuning" if args.tuning else "evaluation"
     try:  # every run's seeds checked before anything is simulated
         plans = {(task, style): [natural_scenario(task, s, t, style, takes=args.takes,
@@ -126,7 +191,15 @@ def main(argv=None):
             for style in args.styles:
                 for scenario in plans[task, style]:
                     start = time.perf_counter()
-                    results = evaluate(scenario, folder, None, args.variants)
+                    if args.record_only:
+                        cached(scenario, args.cache, progress=print)
+                        continue
+                    if args.cache:
+                        base = settings(task, style, args.plain, args.set)
+                        results = evaluate_cached(scenario, args.cache, folder, base,
+                                                  args.variants)  # fmt: skip
+                    else:
+                        results = evaluate(scenario, folder, None, args.variants)
                     fresh = scenario.reproduction.heldout_seed
                     everything[f"{task} {style} {scenario.seed}"] = results
                     for variant, m in results.items():
