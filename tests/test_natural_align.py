@@ -117,7 +117,8 @@ def test_a_known_time_warp_is_undone_onto_the_reference():
     # The same path with a pause, taken slowly then quickly, 1.5x longer: warped onto the
     # reference it lies on the reference's samples, to the warp's sampling resolution.
     u = np.linspace(0.0, 1.0, 600)
-    phase = np.clip(np.where(u < 0.3, 0.5 * u / 0.3, np.where(u < 0.4, 0.5, 0.5 + 0.5 * (u - 0.4) / 0.6)), 0, 1) ** 1.5
+    halfway = np.where(u < 0.4, 0.5, 0.5 + 0.5 * (u - 0.4) / 0.6)  # a pause from 0.3 to 0.4
+    phase = np.clip(np.where(u < 0.3, 0.5 * u / 0.3, halfway), 0, 1) ** 1.5
     warped = warped_onto(curve_take(phase), reference)
     assert warped.shape == reference.shape
     step = np.max(np.linalg.norm(np.diff(curve_take(phase)[:, :3], axis=0), axis=1))
@@ -127,10 +128,12 @@ def test_a_known_time_warp_is_undone_onto_the_reference():
 
 
 def test_dtw_warps_every_take_onto_the_take_of_median_length():
-    takes = [curve_take(np.linspace(0, 1, n) ** e) for n, e in ((300, 1.0), (500, 2.0), (420, 0.7))]
+    shapes = ((300, 1.0), (500, 2.0), (420, 0.7))  # samples, warp exponent
+    takes = [curve_take(np.linspace(0, 1, n) ** e) for n, e in shapes]
     assert reference_take(takes) == 2 and reference_take(takes[:2]) == 0
     warped, spans = aligned(takes, "dtw")
-    assert [w.shape for w in warped] == [(420, 7)] * 3 and spans == [(0, 300), (0, 500), (0, 420)]
+    assert [w.shape for w in warped] == [(420, 7)] * 3
+    assert spans == [(0, 300), (0, 500), (0, 420)]
     np.testing.assert_array_equal(warped[2], takes[2])
     for w in warped[:2]:
         assert np.max(np.linalg.norm(w[:, :3] - takes[2][:, :3], axis=1)) < 0.003
