@@ -43,7 +43,6 @@ def test_three_human_takes_learn_the_pin(tmp_path):
     middle = sorted(range(3), key=lambda c: len(full[c]))[1]
     assert all(w.shape == full[middle].shape for w in warped)
     assert (warped[middle] == full[middle]).all()
-    learn(run, overrides=["learning.align=dtw"], progress=quiet)  # learns on the warped takes
     learn(run, progress=quiet)
     metrics = reproduce(run, replay=False, progress=quiet)
     assert metrics["pin_out"] and metrics["success_checks"]["no overshoot"]
