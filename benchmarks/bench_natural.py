@@ -15,30 +15,44 @@ drawing's three strokes, each within 5 mm of the fresh takes' (shape error); the
 correlation with the demonstrations >= 0.7. The benchmark refuses a tuning seed; ``--tuning``
 runs the tuning pairs instead and refuses an evaluation seed.
 
-    .venv/bin/python benchmarks/bench_natural.py [--tasks ...] [--seeds 3] [--tuning]
-        [--styles human scripted] [--variants K=V[,K=V] ...] [--set KEY=VALUE] [--json out]
+    .venv/bin/python benchmarks/bench_natural.py [--tasks ...] [--seeds 3] [--skip 0]
+        [--tuning] [--styles human scripted] [--variants K=V[,K=V] ...] [--set KEY=VALUE]
+        [--cache DIR [--record-only]] [--json out]
+
+``--cache DIR`` records each run's takes and fresh takes once into DIR (with the shipped
+learning and reproduction settings in their metadata) and reuses them while the scenario but
+for those settings is the same; each run then learns on a copy with its own settings over
+the shipped ones. ``--record-only`` records and learns nothing (e.g. in the background).
 """
 
 import argparse
+import dataclasses as dc
 import json
 import math
+import shutil
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from bench_heldout import evaluate, pairs, run_scenario
+from bench_heldout import evaluate, pairs, quiet, run_scenario
 
 from hemg_drake.diagrams.demonstration import operator_plan
+from hemg_drake.fileio import write_text_atomic
+from hemg_drake.pipeline import HELDOUT, demonstrate, demonstrate_heldout, learn, reproduce
+from hemg_drake.scenario import load_scenario, shipped_scenario
 
 # The learning and reproduction settings for human-like takes, per task, over the shipped
 # scenario's (docs/learning.md, "Learning from natural takes": chosen on the tuning pairs).
 # The pin: the shipped init "time" with temporal weighting held (k-means, spatial, k-means +
 # forward failed; forward's timing was 2-3x worse) and trimming the idle lowered the
 # stiffness correlation (0.70 against 0.88-0.92 untrimmed on tuning seeds 11 and 26).
+# The drawing: its shipped init "polyline", N = 18, LQR with temporal weighting, on the takes
+# time-warped onto the median-length one ("dtw": the zig-zag 2.7 mm off shape on tuning pair
+# 111 / 1211, against 10.5 mm unaligned).
 NATURAL = {
     "cotter_pin": [],
-    "drawing": [],
+    "drawing": ["learning.align=dtw"],
 }
 GOAL_STROKE_M, GOAL_CORRELATION = 0.005, 0.7
 TAKES, FRESH = 3, 4
@@ -56,6 +70,59 @@ def natural_scenario(task, seed, fresh, style, *, takes=TAKES, count=FRESH, over
     end = max(operator_plan(scenario, s).end_time for s in seeds)
     duration = max(scenario.duration, math.ceil(end + 1.0))
     return scenario.replaced([f"duration={duration}"])
+
+
+def shipped_settings(scenario):
+    """``scenario`` with the shipped scenario's learning and reproduction sections (but the
+    fresh takes' seed and count): what a cached run is recorded with, so that the settings
+    of the run that recorded it never leak into one that reuses it."""
+    shipped = load_scenario(shipped_scenario(scenario.task))
+    fresh = scenario.reproduction
+    return dc.replace(scenario, learning=shipped.learning, reproduction=dc.replace(
+        shipped.reproduction, heldout_seed=fresh.heldout_seed, num_heldout=fresh.num_heldout))
+
+
+def settings(task, style, plain, sets):
+    """The learning.* and reproduction.* overrides of a run over the shipped scenario's."""
+    own = NATURAL[task] if style == "human" and not plain else []
+    return [o for o in [*own, *sets] if o.startswith(("learning.", "reproduction."))]
+
+
+def cached(scenario, cache, progress=quiet):
+    """The run folder ``cache/<task>_<style>_<seed>`` holding the scenario's takes and fresh
+    takes (recorded with :func:`shipped_settings`), recorded there unless already recorded
+    from the same scenario but for its settings (the takes depend only on their seeds)."""
+    scenario = shipped_settings(scenario)
+    run = Path(cache) / f"{scenario.task}_{scenario.operator.style}_{scenario.seed}"
+    key = scenario.to_yaml()
+    stamp = run / "scenario_key.yaml"
+    if stamp.exists() and stamp.read_text() == key:
+        return run
+    if stamp.exists():
+        shutil.rmtree(run)  # the bench's own entry, of another scenario: recorded anew
+    start = time.perf_counter()
+    demonstrate(scenario, run, replays=False, progress=progress)
+    demonstrate_heldout(scenario, run, progress=progress)
+    write_text_atomic(stamp, key)
+    progress(f"<!-- {run.name}: takes recorded in {time.perf_counter() - start:.0f} s -->")
+    return run
+
+
+def evaluate_cached(scenario, cache, folder, base, variants):
+    """As ``bench_heldout.evaluate``, on a copy of the cached takes, each variant learnt with
+    ``base`` (the run's settings over the shipped ones) and then its own overrides."""
+    run = Path(folder) / f"{scenario.task}_{scenario.seed}"
+    shutil.rmtree(run, ignore_errors=True)
+    shutil.copytree(cached(scenario, cache, progress=print), run)
+    results = {}
+    for v, variant in enumerate(variants):
+        overrides = [*base, *(o for o in variant.split(",") if o)]
+        learn(run, overrides=overrides, progress=quiet)
+        tracker = scenario.replaced(overrides).reproduction.tracker
+        results[f"{variant} {tracker}".strip()] = reproduce(
+            run, overrides=overrides, out_dir=run / f"{v}_{tracker}", replay=False,
+            heldout=run / HELDOUT, progress=quiet)  # fmt: skip
+    return results
 
 
 def verdict(task, m):
@@ -92,6 +159,7 @@ def main(argv=None):
     parser.add_argument("--tasks", nargs="+", default=["cotter_pin"],
                         choices=["cotter_pin", "drawing"])  # fmt: skip
     parser.add_argument("--seeds", type=int, default=2, help="the first N pairs (0: all 10)")
+    parser.add_argument("--skip", type=int, default=0, help="leave out the first K of them")
     parser.add_argument("--tuning", action="store_true",
                         help="the tuning pairs (choose settings here); default: evaluation")
     parser.add_argument("--styles", nargs="+", default=["human", "scripted"],
@@ -103,15 +171,22 @@ def main(argv=None):
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     parser.add_argument("--variants", nargs="+", default=[""], metavar="K=V[,K=V]")
     parser.add_argument("--json", help="also write every metric to this file")
+    parser.add_argument("--cache", metavar="DIR",
+                        help="record each run's takes once into DIR and reuse them (they "
+                        "depend on the seeds, not on learning.* / reproduction.*)")
+    parser.add_argument("--record-only", action="store_true",
+                        help="with --cache: record the takes, learn nothing")
     args = parser.parse_args(argv)
     if args.fresh < 2 or args.takes < 1:
         parser.error("--fresh must be at least 2 and --takes at least 1")
+    if args.record_only and not args.cache:
+        parser.error("--record-only needs --cache DIR")
     kind = "tuning" if args.tuning else "evaluation"
     try:  # every run's seeds checked before anything is simulated
         plans = {(task, style): [natural_scenario(task, s, t, style, takes=args.takes,
                                                   count=args.fresh, overrides=args.set,
                                                   kind=kind, plain=args.plain)
-                                 for s, t in pairs(task, kind, args.seeds)]
+                                 for s, t in pairs(task, kind, args.seeds)[args.skip:]]
                  for task in args.tasks for style in args.styles}  # fmt: skip
     except ValueError as error:
         print(f"bench_natural: {error}", file=sys.stderr)
@@ -126,7 +201,15 @@ def main(argv=None):
             for style in args.styles:
                 for scenario in plans[task, style]:
                     start = time.perf_counter()
-                    results = evaluate(scenario, folder, None, args.variants)
+                    if args.record_only:
+                        cached(scenario, args.cache, progress=print)
+                        continue
+                    if args.cache:
+                        base = settings(task, style, args.plain, args.set)
+                        results = evaluate_cached(scenario, args.cache, folder, base,
+                                                  args.variants)  # fmt: skip
+                    else:
+                        results = evaluate(scenario, folder, None, args.variants)
                     fresh = scenario.reproduction.heldout_seed
                     everything[f"{task} {style} {scenario.seed}"] = results
                     for variant, m in results.items():

@@ -84,7 +84,8 @@ def learning_data(demos, scenario):
     Learnt from the tool point, a pen on the sheet teaches a reference on the sheet's
     surface and the reproduction barely presses (measured: strokes broke off). k is the
     logged gain in both cases, logged at the same instants as the reference.
-    With ``learning.align`` "trim" each is cut to its active span (learning/align.py).
+    With ``learning.align`` "trim" each is cut to its active span, with "dtw" time-warped
+    onto the take of median length (learning/align.py).
     """
     return _learning_data(demos, scenario)[0]
 
@@ -299,7 +300,8 @@ def _learn(folder, overrides, n_iter, diagrams, progress):
     with folder.transaction("learn", progress=progress) as new:
         model.save(new.model)
         written = [new.model]
-        time_0 = demos[0].time[slice(*spans[0])]
+        # Demonstration 1's times as learnt (cut by "trim", on the reference's samples by "dtw").
+        time_0 = demos[0].time[spans[0][0]] + scenario.log_period * np.arange(len(data[0]))
         written.append(write_state_activations_figure(time_0, h, scenario.task, new.path))
         if diagrams:
             written += write_diagrams(scenario, model, new.path, progress=progress)

@@ -1,6 +1,7 @@
 """End to end, small: three human-like takes of the cotter pin, learnt with the shipped
 settings (chosen for natural takes, docs/learning.md) and reproduced, pull the pin out without
-overshoot; "trim" cuts each take's idle lead-in to just before it stiffens."""
+overshoot; "trim" cuts each take's idle lead-in to just before it stiffens, "dtw" warps each
+onto the median-length take."""
 
 import pytest
 
@@ -36,6 +37,12 @@ def test_three_human_takes_learn_the_pin(tmp_path):
         # The idle lead-in cut, to 0.2 s (the margin) before the hand moved or stiffened:
         # after the plan started (it rests on the ring first), before it pulls.
         assert plan.start_time - 0.2 <= demo.time[begin] <= plan.times[2]
+    # "dtw": every take on the samples of the median-length one, which it keeps as it is.
+    warped = learning_data(demos, stored.replaced(["learning.align=dtw"]))
+    full = learning_data(demos, stored)
+    middle = sorted(range(3), key=lambda c: len(full[c]))[1]
+    assert all(w.shape == full[middle].shape for w in warped)
+    assert (warped[middle] == full[middle]).all()
     learn(run, progress=quiet)
     metrics = reproduce(run, replay=False, progress=quiet)
     assert metrics["pin_out"] and metrics["success_checks"]["no overshoot"]

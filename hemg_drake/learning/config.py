@@ -6,7 +6,7 @@ import dataclasses as dc
 from hemg_drake.config_fields import checked, key_path
 
 # Alignments of learning.align (learning/align.py).
-ALIGNMENTS = ("none", "trim")
+ALIGNMENTS = ("none", "trim", "dtw")
 
 # HSMM initialisations, reproduction state weightings, trackers and LQR state costs.
 HSMM_INITS = ("kmeans", "time", "polyline")
@@ -58,8 +58,9 @@ class LearningConfig:
     # (its Gaussians are no wider than the covariance floor), the scene frame alone 0.5 mm.
     task_frames: str = checked("scene", choices=("scene", "base_and_scene"))
     # How the demonstrations are aligned before the HSMM learns them (learning/align.py):
-    # "none" (as recorded) or "trim" (each cut to its active span: the idle lead-in and
-    # lead-out of a person's takes cut off, docs/learning.md "Learning from natural takes").
+    # "none" (as recorded), "trim" (each cut to its active span: the idle lead-in and
+    # lead-out of a person's takes cut off, docs/learning.md "Learning from natural takes")
+    # or "dtw" (each time-warped onto the take of median length by DTW on the positions).
     align: str = checked("none", choices=ALIGNMENTS)
 
 
