@@ -45,8 +45,9 @@ SETTLE_PAUSE = 200e-6
 # Samples an unaligned read may have taken early at most (a streamer's packet).
 MAX_CATCH_UP = 64
 # Lock-free reading: an unchanged snapshot confirms a pending one only this much later
-# (a streamer preempted in the middle of its copy rarely stays so that long).
-CONFIRM_AFTER = 2e-3
+# (a streamer preempted in the middle of its copy rarely stays so that long; at 2 ms a
+# loaded 2-core machine let a torn row through in about 1 run of 10).
+CONFIRM_AFTER = 30e-3
 # Reads in a row without a consistent snapshot before the alignment is given up.
 RESYNC_AFTER = 20
 _INSTALL_HINT = "start the LibEMG streamer first (docs/emg.md, 'Live sources')"

@@ -12,7 +12,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.primitives import LogVectorOutput
 
 from hemg_drake.emg.chain import add_emg_gain_chain
-from hemg_drake.emg.libemg import LibEmgSharedMemory
+from hemg_drake.emg.libemg import CONFIRM_AFTER, LibEmgSharedMemory
 from hemg_drake.emg.libemg_writer import StreamerMemory
 from hemg_drake.emg.sources import (
     LIVE_COUNTERS,
@@ -216,11 +216,11 @@ def _packets(first, total, size):
 def _drain(reader):
     """What a reader returns for an idle streamer: read until nothing more comes (without
     the locks, a snapshot is emitted when the next read confirms it)."""
-    blocks, empty = [], 0
-    while empty < 10:  # 10 ms without a sample
+    blocks, last = [], time.monotonic()
+    while time.monotonic() - last < CONFIRM_AFTER + 0.01:  # the confirmation, then 10 ms more
         block = reader.read_samples()
-        empty = empty + 1 if block is None else 0
-        blocks += [] if block is None else [block]
+        if block is not None:
+            blocks, last = blocks + [block], time.monotonic()
         time.sleep(0.001)
     return np.concatenate(blocks) if blocks else None
 
