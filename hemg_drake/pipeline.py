@@ -259,7 +259,8 @@ def learn(run_dir, *, overrides=(), n_iter=None, diagrams=False, progress=print)
     n_iter : int, optional
         Largest number of EM iterations; default ``learning.n_iter``.
     diagrams : bool
-        Also draw the demonstration and reproduction diagrams (:func:`write_diagrams`).
+        Also draw the demonstration and reproduction diagrams
+        (:func:`~hemg_drake.viz.run_figures.write_run_diagrams`).
     progress : callable taking one line of text.
 
     Returns
@@ -275,7 +276,7 @@ def learn(run_dir, *, overrides=(), n_iter=None, diagrams=False, progress=print)
 
 def _learn(folder, overrides, n_iter, diagrams, progress):
     from hemg_drake.placements import last_frames, scene_placements
-    from hemg_drake.viz.run_figures import write_state_activations_figure
+    from hemg_drake.viz.run_figures import write_run_diagrams, write_state_activations_figure
 
     folder.check("demonstrate", folder.dataset, run_hint=_demonstrate_hint(folder))
     demos, scenario = load_demonstrations(folder.dataset)
@@ -304,7 +305,8 @@ def _learn(folder, overrides, n_iter, diagrams, progress):
         time_0 = demos[0].time[spans[0][0]] + scenario.log_period * np.arange(len(data[0]))
         written.append(write_state_activations_figure(time_0, h, scenario.task, new.path))
         if diagrams:
-            written += write_diagrams(scenario, model, new.path, progress=progress)
+            written += write_run_diagrams(scenario, placed_model(model, scenario), new.path,
+                                          progress=progress)  # fmt: skip
         new.finish("learn", written, inputs=[new.dataset])
     progress("wrote " + ", ".join(str(new.shown(path)) for path in written))
     return model
@@ -441,6 +443,7 @@ def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progr
     from hemg_drake.diagrams.reproduction import build_reproduction_diagram, run_reproduction
     from hemg_drake.diagrams.visualization import Visualization
     from hemg_drake.evaluation import format_metrics, task_metrics
+    from hemg_drake.learning.demos import demonstrated_gain
     from hemg_drake.viz.recording import record_run
     from hemg_drake.viz.run_figures import write_reproduction_figures
 
@@ -490,31 +493,3 @@ def _reproduce(scenario, model, demos, folder, out, start, offset, replay, progr
     progress(format_metrics({scenario.task: metrics}))
     progress(f"wrote {out.final}/: " + ", ".join(p.name for p in written))
     return metrics
-
-
-def demonstrated_gain(demos, duration, samples=400):
-    """The demonstrations' own gain K replayed in time (``reproduction.gain_source:
-    demonstrated``): each demonstration's K at the same fractions of its length, averaged,
-    on times [0, ``duration``]. Returns (times, K), arrays of shape (samples,)."""
-    fractions = np.linspace(0.0, 1.0, samples)
-    gains = [
-        np.interp(fractions, (d.time - d.time[0]) / (d.time[-1] - d.time[0]), d.gain)
-        for d in demos
-    ]
-    return fractions * duration, np.mean(gains, axis=0)
-
-
-def write_diagrams(scenario, model, run_dir, *, progress=print):
-    """The demonstration and reproduction diagrams as SVG (Graphviz, every port), or as
-    ``.dot`` text with a one-line hint when Graphviz is missing."""
-    from hemg_drake.diagrams.demonstration import build_demonstration_diagram
-    from hemg_drake.diagrams.reproduction import build_reproduction_diagram
-    from hemg_drake.viz.run_figures import write_diagram_pictures
-
-    diagrams = {
-        "demonstration_diagram": build_demonstration_diagram(scenario).diagram,
-        "reproduction_diagram": build_reproduction_diagram(
-            scenario, placed_model(model, scenario)
-        ).diagram,
-    }
-    return write_diagram_pictures(diagrams, run_dir, progress=progress)

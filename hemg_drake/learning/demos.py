@@ -355,3 +355,15 @@ def tool_quaternions(demos):
         signs = first * np.cumprod(np.r_[1.0, np.where(steps < 0, -1.0, 1.0)])
         result.append(quats * signs[:, None])
     return result
+
+
+def demonstrated_gain(demos, duration, samples=400):
+    """The demonstrations' own gain K replayed in time (``reproduction.gain_source:
+    demonstrated``): each demonstration's K at the same fractions of its length, averaged,
+    on times [0, ``duration``]. Returns (times, K), arrays of shape (samples,)."""
+    fractions = np.linspace(0.0, 1.0, samples)
+    gains = [
+        np.interp(fractions, (d.time - d.time[0]) / (d.time[-1] - d.time[0]), d.gain)
+        for d in demos
+    ]
+    return fractions * duration, np.mean(gains, axis=0)

@@ -83,3 +83,17 @@ def write_diagram_pictures(diagrams, folder, *, progress=print):
         if message:
             progress(message)
     return written
+
+
+def write_run_diagrams(scenario, placed, folder, *, progress=print):
+    """The demonstration and reproduction diagrams of a run (``placed``: its model at the
+    scenario's placement) as SVG (Graphviz, every port), or as ``.dot`` text with a one-line
+    hint when Graphviz is missing."""
+    from hemg_drake.diagrams.demonstration import build_demonstration_diagram
+    from hemg_drake.diagrams.reproduction import build_reproduction_diagram
+
+    diagrams = {
+        "demonstration_diagram": build_demonstration_diagram(scenario).diagram,
+        "reproduction_diagram": build_reproduction_diagram(scenario, placed).diagram,
+    }
+    return write_diagram_pictures(diagrams, folder, progress=progress)
