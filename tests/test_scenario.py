@@ -339,6 +339,12 @@ def test_missing_file():
         ("assist: {mode: bogus}", ["assist.mode", "bogus", "emg"]),
         ("reproduction: {stiffness: tensor}", ["reproduction.stiffness", "tensor", "spd"]),
         ("reproduction: {gain_source: guess}", ["reproduction.gain_source", "guess", "learnt"]),
+        # The visual operator (issue 26's study) and the alignment's new value.
+        ("learning: {align: warp}", ["learning.align", "warp", "dtw"]),
+        ("operator: {visual: {patience: 0}}", ["operator.visual.patience", "positive"]),
+        ("operator: {visual: {tolerance: -0.001}}", ["operator.visual.tolerance", "positive"]),
+        ("operator: {visual: {tremor_frequency: [8.0]}}",
+         ["operator.visual.tremor_frequency", "2"]),
     ],
 )
 def test_bad_scenarios_name_the_file_and_key(tmp_path, text, words):
