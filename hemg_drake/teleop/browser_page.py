@@ -135,6 +135,10 @@ class TeleopPage:
             "ended": (f"{c}: ended at {t:.1f} s", "K keeps it, D discards it"),
             "saved": (f"{c}: saved", "the next take is being prepared"),
         }.get(state, (f"{c}: {state}", ""))
+        if state == "waiting" and self.server.shown("state") in ("saved", "not kept"):
+            # How the last take ended stays on the line: the next one may be ready sooner
+            # than the page polls (a person, or a test, would miss "discarded").
+            headline += f" (last: {self.server.shown('headline')})"
         self.server.update(state=state, headline=headline, hint=default if hint is None else hint)
 
     def update(self, t, p_WE, f_WE, gain, recording, p_WT=None, activation=None, rate=None,

@@ -370,6 +370,11 @@ class TeleopPageServer:
         with self._lock:
             self._state.update(values)
 
+    def shown(self, key):
+        """The read-out ``key`` as the page last got it (e.g. "state", "headline")."""
+        with self._lock:
+            return self._state.get(key)
+
     def close(self):
         self._httpd.shutdown()
         self._httpd.server_close()

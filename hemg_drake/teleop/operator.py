@@ -131,7 +131,9 @@ def OperatorLaw_(T):
             draws = np.full(vis.DRAW_COUNT, 0.5)
             if self._visual is not None:
                 # What the operator sees: the tool point in W, delayed by the channel's
-                # slave-to-master delay and the reaction time (a shift register here).
+                # slave-to-master delay and the reaction time. A shift register in this
+                # system's state, not Drake's DiscreteTimeDelay: that one's history starts at
+                # zero, and the operator must see the tool where it starts (set at init).
                 self._seen_input = self.DeclareVectorInputPort("p_WE_seen", 3)
                 self._visual_draws_input = self.DeclareVectorInputPort("visual", vis.DRAW_COUNT)
                 self._n_seen = vis.delay_samples(self._visual, self._video_delay, values["period"])

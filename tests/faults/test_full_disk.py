@@ -112,14 +112,15 @@ def check_full_disk(disk, case, *, pages=None, inodes=None):
 
 
 # (command, which of its writes runs out of space): the first, a middle one, the last.
-# make test runs one per command's worst place (its last write: the manifest); the rest
-# are .ci/run's deep step.
+# make test runs the worst place (the last write: the manifest) of learn and import, which
+# share the writing with the others (fileio); the rest are .ci/run's deep step (make test
+# keeps under 10 minutes).
 DEEP = pytest.mark.deep
 POINTS = [
     pytest.param("demonstrate", 0, marks=DEEP), pytest.param("demonstrate", 2, marks=DEEP),
-    ("demonstrate", -1),
+    pytest.param("demonstrate", -1, marks=DEEP),
     pytest.param("learn", 1, marks=DEEP), ("learn", -1),
-    pytest.param("reproduce", 0, marks=DEEP), ("reproduce", -1),
+    pytest.param("reproduce", 0, marks=DEEP), pytest.param("reproduce", -1, marks=DEEP),
     pytest.param("teleop", 0, marks=DEEP), pytest.param("teleop", -1, marks=DEEP),
     pytest.param("import", 0, marks=DEEP), ("import", -1),
 ]  # fmt: skip
@@ -138,7 +139,8 @@ def test_a_full_disk_while_writing_names_the_file_and_keeps_the_run(
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name, inodes", [("demonstrate", 0), ("learn", 0), ("learn", 2)])
+@pytest.mark.parametrize("name, inodes", [pytest.param("demonstrate", 0, marks=DEEP),
+                                          ("learn", 0), pytest.param("learn", 2, marks=DEEP)])
 def test_no_inode_for_the_new_version_or_its_links_names_the_folder(
     disk, base, tmp_path_factory, name, inodes
 ):  # fmt: skip

@@ -14,8 +14,15 @@ from tooling.faults import COMMANDS, Case, _env, kill_many, leftovers, snapshot
 SEED = 2025  # the kills' moments; the benchmark draws others
 
 
+# make test kills learn, teleop and import (the run's writes go through the same fileio);
+# demonstrate and reproduce are .ci/run's deep step (make test keeps under 10 minutes).
+DEEP = {"demonstrate", "reproduce"}
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("name", sorted(COMMANDS))
+@pytest.mark.parametrize(
+    "name", [pytest.param(n, marks=pytest.mark.deep) if n in DEEP else n for n in sorted(COMMANDS)]
+)
 def test_a_killed_command_leaves_the_earlier_run_or_the_new_one(base, tmp_path, name):
     case = Case(name, base, tmp_path).learn_states()
     assert len(case.points) >= 4, case.points  # the writes and the swap are fault points

@@ -15,7 +15,7 @@ from hemg_drake.tasks.plans import pin_length
 from hemg_drake.teleop.browser_inputs import COLUMNS, load_inputs
 from tooling.headless_page import HeadlessPage
 from tooling.page_driver import PageDriver, pull_pin
-from tooling.teleop_page import controls_ready, wait_for
+from tooling.teleop_page import controls_ready, end_take, wait_for
 
 from test_teleop_page import ROOT, Command
 
@@ -72,9 +72,7 @@ def pin_take(tmp_path, *settings, toggle=False):
                 seen["state_off"] = driver.text("hemg-assist-state")
                 seen["weight_off"] = driver.number("hemg-w")
             take_time = driver.take_time()
-            page.press("Escape")
-            wait_for(page, "ended")
-            page.press("KeyK")
+            end_take(page)
             code, output = command.finish()
     finally:
         command.stop()

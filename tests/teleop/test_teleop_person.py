@@ -14,7 +14,7 @@ import pytest
 from hemg_drake.tasks.plans import pin_length
 from tooling.headless_page import HeadlessPage
 from tooling.page_driver import PageDriver, draw_strokes, pull_pin
-from tooling.teleop_page import controls_ready, wait_for
+from tooling.teleop_page import controls_ready, end_take, wait_for
 
 from test_teleop_page import ROOT, Command
 
@@ -52,9 +52,7 @@ def takes(task, run, count, drive):
                 lengths.append((driver.take_time(), sum(driver.presses.values())))
                 print(f"\n{task} take {c}: {lengths[-1][0]:.1f} s, presses "
                       f"{dict(driver.presses)}, ink strokes {driver.ink_strokes()}", flush=True)
-                page.press("Escape")
-                wait_for(page, "ended")
-                page.press("KeyK")
+                end_take(page)
                 if c < count:  # after the last, the command ends (and its page with it)
                     wait_for(page, "saved", timeout=300)
             code, out = command.finish(timeout=600)

@@ -183,25 +183,23 @@ def draw_strokes(driver, *, depth=2.5e-3, contact=0.5, tolerance=1.5e-3, dt=0.04
         if time.monotonic() > deadline:
             raise TimeoutError(f"drawing: out of time; presses {dict(driver.presses)}")
 
+    def press(key, touching, further):
+        """Tap ``key`` until the force read-out says touching (or not), then ``further`` (m)."""
+        while (driver.number("hemg-f") > contact) != touching:
+            driver.tap(key)
+            driver.wait_take_time(2 * dt)
+            check()
+        for _ in range(max(1, round(further / tap_up))):
+            driver.tap(key)
+            driver.wait_take_time(dt)
+
     for stroke in driver.template():
         for k, point in enumerate(stroke):
             while driver.step_towards(point, tolerance=tolerance, fine_below=2 * tolerance):
                 driver.wait_take_time(dt)
                 check()
-            if k == 0:  # pen down: to contact, then depth further
-                while driver.number("hemg-f") <= contact:
-                    driver.tap("KeyS")
-                    driver.wait_take_time(2 * dt)
-                    check()
-                for _ in range(max(1, round(depth / tap_up))):
-                    driver.tap("KeyS")
-                    driver.wait_take_time(dt)
-        while driver.number("hemg-f") > contact:  # pen up
-            driver.tap("KeyW")
-            driver.wait_take_time(2 * dt)
-            check()
-        for _ in range(max(1, round(lift / tap_up))):
-            driver.tap("KeyW")
-            driver.wait_take_time(dt)
+            if k == 0:
+                press("KeyS", True, depth)  # pen down: to contact, then depth further
+        press("KeyW", False, lift)  # pen up: off the paper, then lift higher
     driver.wait_take_time(0.3)
     return driver.ink_strokes()

@@ -27,3 +27,10 @@ def wait_for(page, text, timeout=120.0):
         if time.monotonic() > deadline:
             raise TimeoutError(f"the page never said {text!r} (it says {state(page)!r})")
         time.sleep(0.05)
+
+
+def end_take(page, verdict="KeyK"):
+    """End the take (Escape), wait for the page to say so, then keep (K) or discard (D) it."""
+    page.press("Escape")
+    wait_for(page, "ended")
+    page.press(verdict)
