@@ -75,6 +75,8 @@ def test_takes_start_end_discard_keep_in_the_real_page(chromium, tmp_path):
             assert not (run / "dataset.npz").exists()
             time.sleep(2.0)
             assert "recording" not in state(page)  # the next does not start by itself
+            wait_for(page, "waiting")  # and its line still says how the last one ended
+            assert "(last: discarded)" in state(page), state(page)
             # Take 1 again: four taps to the right, ended, kept.
             page.press("Enter")
             wait_for(page, "recording")
