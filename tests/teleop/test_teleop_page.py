@@ -16,6 +16,7 @@ from hemg_drake.learning.demos import load_dataset
 from hemg_drake.teleop.browser import BrowserMaster
 from hemg_drake.teleop.browser_inputs import COLUMNS, TAP_MM, LoggedInputs, load_inputs
 from tooling.headless_page import HeadlessPage  # tests/tooling: test tooling, not runtime
+from tooling.page_driver import PageDriver
 from tooling.teleop_page import controls_ready, end_take, state, wait_for
 
 pytestmark = pytest.mark.browser
@@ -139,9 +140,9 @@ def test_a_drawing_take_shows_ink_on_the_template_as_it_is_drawn(chromium, tmp_p
             wait_for(page, "recording")
             # The pen down onto the sheet (30 mm at 20 mm/s), held as a person holds it: until
             # the force read-out shows contact, then a moment more (into the paper).
-            force = "parseFloat(document.getElementById('hemg-f').textContent) || 0"
+            driver = PageDriver(page)
             deadline = time.monotonic() + 120
-            while page.evaluate(force) < 0.5:
+            while not driver.number("hemg-f") >= 0.5:  # (NaN: no read-out yet)
                 assert time.monotonic() < deadline, "S never brought the pen onto the sheet"
                 page.key("keyDown", "KeyS")
                 time.sleep(0.5)
