@@ -54,7 +54,8 @@ def diagnose(folder):
             row["w_mean"] = weight.mean()
             row["w_working"] = weight[:n][working].mean() if working.any() else np.nan
         labels = record["labels"]
-        cells.setdefault((int(labels["delay_ms"]), labels["mode"]), []).append(row)
+        key = (labels.get("operator", ""), int(labels["delay_ms"]), labels["mode"])
+        cells.setdefault(key, []).append(row)
     return cells
 
 
@@ -67,15 +68,19 @@ def main():
         for key, rows in diagnose(folder).items():
             cells.setdefault(key, []).extend(rows)
     names = ["swings", "correction_mm", "held_at_s", "w_mean", "w_working"]
-    print("| delay (ms) | mode | n | " + " | ".join(names) + " |")
-    print("|---" * (3 + len(names)) + "|")
     order = {"none": 0, "fixed": 1, "confidence": 2, "emg": 3}
-    for (delay, mode), rows in sorted(cells.items(), key=lambda kv: (kv[0][0], order[kv[0][1]])):
-        values = []
-        for name in names:
-            found = [r[name] for r in rows if name in r and np.isfinite(r[name])]
-            values.append(f"{np.mean(found):.3g}" if found else "-")
-        print(f"| {delay} | {mode} | {len(rows)} | " + " | ".join(values) + " |")
+    for operator in sorted({key[0] for key in cells}):
+        if operator:
+            print(f"\n{operator}:\n")
+        print("| delay (ms) | mode | n | " + " | ".join(names) + " |")
+        print("|---" * (3 + len(names)) + "|")
+        mine = [(key[1:], rows) for key, rows in cells.items() if key[0] == operator]
+        for (delay, mode), rows in sorted(mine, key=lambda kv: (kv[0][0], order[kv[0][1]])):
+            values = []
+            for name in names:
+                found = [r[name] for r in rows if name in r and np.isfinite(r[name])]
+                values.append(f"{np.mean(found):.3g}" if found else "-")
+            print(f"| {delay} | {mode} | {len(rows)} | " + " | ".join(values) + " |")
 
 
 if __name__ == "__main__":

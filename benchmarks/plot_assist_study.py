@@ -6,8 +6,9 @@ mean and 95 % confidence interval (Student's t over the pairs).
     python benchmarks/plot_assist_study.py runs/study_assist_pin runs/study_assist_drawing \
         -o docs/img/study_assist.png
 
-Reads the sweeps' ``trials/*/trial.json`` (also while they run); prints the paired
-differences as Markdown tables.
+Reads the sweeps' ``trials/*/trial.json`` (also while they run); one study per task and
+simulated operator (the ``operator`` axis); prints the means and paired differences as
+Markdown tables.
 """
 
 import argparse
@@ -30,6 +31,11 @@ MEASURES = {
     "demonstration.phase_lag_s": "phase right, lag (s)",
     "demonstration.passivity_energy_min_j": "observer energy, least (J)",
 }
+# The figure's panels (the tables have every measure).
+FIGURE = ("success", "completed", "demonstration.hand_impulse_n_s",
+          "demonstration.contact_force_peak_n", "demonstration.gave_up",
+          "demonstration.disagreement_m", "demonstration.phase_lag_s",
+          "demonstration.passivity_energy_min_j")  # fmt: skip
 SUCCESS = {"cotter_pin": "demonstration.pin_out", "drawing": "demonstration.three_strokes"}
 
 
@@ -124,7 +130,7 @@ def plot(studies, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    measures = [m for m in MEASURES if any(row.get(m) is not None for _, rows in studies for row in rows)]
+    measures = [m for m in FIGURE if any(row.get(m) is not None for _, rows in studies for row in rows)]
     columns = 4
     per_task = -(-len(measures) // columns)
     figure, axes = plt.subplots(len(studies) * per_task, columns, figsize=(3.4 * columns, 2.6 * per_task * len(studies)), squeeze=False)  # fmt: skip
@@ -163,11 +169,12 @@ def main():
     parser.add_argument("folders", nargs="+")
     parser.add_argument("-o", "--out", default="study_assist.png")
     args = parser.parse_args()
-    merged = {}  # one study per task, its folders' trials together (one per operator)
+    merged = {}  # one study per task and operator, its folders' trials together
     for folder in args.folders:
         task, rows = trials(folder)
-        if rows:
-            merged.setdefault(task, []).extend(rows)
+        for row in rows:
+            operator = row.get("operator")
+            merged.setdefault(task if operator is None else f"{task}, {operator}", []).append(row)
     studies = list(merged.items())
     for task, rows in studies:
         print(means(task, rows))

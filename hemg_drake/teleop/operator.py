@@ -10,7 +10,7 @@ from pydrake.systems.framework import Context_, Diagram, DiagramBuilder, LeafSys
 from pydrake.systems.primitives import RandomSource
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from hemg_drake._validate import all_finite, as_scalar
+from hemg_drake._validate import all_finite, as_scalar, as_vector
 from hemg_drake.tasks.plan import TaskPlan
 from hemg_drake.teleop.config import OperatorConfig
 from hemg_drake.teleop.human_style import human_draw_count, human_draws, humanised
@@ -101,7 +101,9 @@ def OperatorLaw_(T):
         a function of time only, so the hand force is differentiable in p_MS, v_MS).
         """
 
-        def _construct(self, *, plan, mapping, config, video_delay=0.0, converter=None):
+        def _construct(
+            self, *, plan, mapping, config, video_delay=0.0, sheet_normal_W=None, converter=None
+        ):
             LeafSystem_[T].__init__(self, converter)
             if not isinstance(plan, TaskPlan):
                 raise ValueError(f"plan must be a TaskPlan, got {type(plan).__name__}")
@@ -111,6 +113,12 @@ def OperatorLaw_(T):
                 )
             self._plan, self._mapping, self._config = plan, mapping, config
             self._video_delay = float(video_delay)
+            self._sheet_normal_W = sheet_normal_W
+            # The sheet's normal in M: pen-down segments are seen on the sheet (visual.py).
+            self._normal_M = None
+            if sheet_normal_W is not None:
+                n_W = as_vector("sheet_normal_W", sheet_normal_W, 3)
+                self._normal_M = mapping.R_WM.inverse().multiply(n_W / np.linalg.norm(n_W))
             values = _checked(config)
             self._values = values
             self._path_std = list(config.path_std)
@@ -161,7 +169,8 @@ def OperatorLaw_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(
                 self, plan=other._plan, mapping=other._mapping, config=other._config,
-                video_delay=other._video_delay, converter=converter,
+                video_delay=other._video_delay, sheet_normal_W=other._sheet_normal_W,
+                converter=converter,
             )  # fmt: skip
 
         def _plans(self, normals, uniforms, human=None):
@@ -275,8 +284,14 @@ def OperatorLaw_(T):
             plan_M = context.get_abstract_state(self._plans_index).get_value()[1]
             state = _floats(context.get_discrete_state(self._visual_index).value())
             discrete_state.get_mutable_vector(self._visual_index).SetFromVector(
-                vis.visual_step(state, seen_M, plan_M, self._visual, self._values["period"])
+                vis.visual_step(
+                    state, seen_M, plan_M, self._visual, self._values["period"], self._normal_M
+                )
             )
+
+        def sheet_normal_M(self):
+            """The drawing sheet's unit normal in M as the visual operator uses it, or None."""
+            return None if self._normal_M is None else np.array(self._normal_M)
 
         def visual_state(self, context):
             """The visual operator's state (:mod:`~hemg_drake.teleop.visual`), floats."""
@@ -362,14 +377,22 @@ class SimulatedOperator(Diagram):
     config : OperatorConfig
         Hand impedance (N/m, N s/m) and force limit (N), activation levels, co-contraction
         gain (1/N), time constant (s), period (s), and the variability's spreads.
+    video_delay : float
+        The channel's slave-to-master delay (s) through which the visual operator sees.
+    sheet_normal_W : 3 floats, optional
+        The drawing sheet's normal in W: the visual operator sees pen-down segments on the
+        sheet (their depth it feels, not sees).
     """
 
-    def __init__(self, *, plan, mapping, config=OperatorConfig(), video_delay=0.0):
+    def __init__(
+        self, *, plan, mapping, config=OperatorConfig(), video_delay=0.0, sheet_normal_W=None
+    ):
         Diagram.__init__(self)
         builder = DiagramBuilder()
-        law = builder.AddNamedSystem(
-            "law", OperatorLaw(plan=plan, mapping=mapping, config=config, video_delay=video_delay)
-        )
+        law = builder.AddNamedSystem("law", OperatorLaw(
+            plan=plan, mapping=mapping, config=config, video_delay=video_delay,
+            sheet_normal_W=sheet_normal_W,
+        ))  # fmt: skip
         self._law = law
         self.plan_nominal = plan
         n_normals, n_uniforms = plan.perturbation_sizes()
@@ -408,6 +431,10 @@ class SimulatedOperator(Diagram):
     def plan(self, context):
         """The perturbed plan in W that the operator follows in ``context`` (initialised)."""
         return self._law.plan(self.GetSubsystemContext(self._law, context))
+
+    def sheet_normal_M(self):
+        """The drawing sheet's unit normal in M (pen-down segments are seen on it), or None."""
+        return self._law.sheet_normal_M()
 
     def visual_state(self, context):
         """With ``config.visual.enabled``: [s, c (3), waited, settled, gave up]

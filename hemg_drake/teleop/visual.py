@@ -20,7 +20,14 @@ tool does not get where it should. The law here, one update every ``period`` sec
 - **patience**: held at one waypoint longer than ``patience`` seconds, the operator lets go
   for good (no hand force, muscles at rest);
 - **tremor**: A sin(2 pi f t + phi_k) on each axis of the hand's target, f and phi_k from
-  seeded uniform draws (:func:`visual_draws`).
+  seeded uniform draws (:func:`visual_draws`);
+- **on the paper** (pen-down segments, given the sheet's normal n in M): the operator sees
+  where the pen is on the sheet, not how deep it presses (that it feels), so the error it
+  sees is e - (e . n) n: the correction ignores the depth (and drops what it had of it when
+  the pen goes down), and a waypoint between two pen-down
+  segments counts as reached where the pen is seen on the sheet (without it the plan's
+  press 3 mm under the paper, where the pen cannot go, is an error the operator never
+  closes, pushing deeper until it gives up).
 
 The hand then pulls the stylus toward p_plan(s) + c + tremor with its impedance
 (:func:`~hemg_drake.teleop.operator.hand_impedance_force`).
@@ -78,7 +85,15 @@ def next_gate(times, s):
     return None
 
 
-def visual_step(state, seen_M, plan_M, config, dt):
+def seen_error(target, seen, normal=None):
+    """target - seen (m, 3), without its component along the unit ``normal`` if given."""
+    error = np.asarray(target, dtype=float) - np.asarray(seen, dtype=float)
+    if normal is not None:
+        error = error - float(error @ normal) * normal
+    return error
+
+
+def visual_step(state, seen_M, plan_M, config, dt, normal_M=None):
     """The visual state one period ``dt`` later (see the module docstring).
 
     Parameters
@@ -87,6 +102,8 @@ def visual_step(state, seen_M, plan_M, config, dt):
     seen_M : 3 floats, the tool point the operator sees now, in M (m).
     plan_M : TaskPlan in M, the operator's (perturbed) plan.
     config : VisualConfig
+    normal_M : unit 3-vector in M, optional; the sheet's normal (pen-down segments are
+        seen on the sheet).
 
     Returns
     -------
@@ -100,7 +117,11 @@ def visual_step(state, seen_M, plan_M, config, dt):
     gate = next_gate(plan_M.times, s)
     if gate is not None and s + dt > gate + 1e-12:  # at (or arriving at) a waypoint
         point, _ = plan_M.position_velocity_floats(gate)
-        reached = float(np.linalg.norm(np.asarray(point) - seen)) <= config.tolerance
+        # On the paper only between two pen-down segments: a pen put down or lifted is seen.
+        index = int(np.searchsorted(plan_M.times, gate))
+        both_down = plan_M.pen_down[index - 1] and plan_M.pen_down[index]
+        error = seen_error(point, seen, normal_M if both_down else None)
+        reached = float(np.linalg.norm(error)) <= config.tolerance
         new[SETTLED] = new[SETTLED] + dt if reached else 0.0
         if new[SETTLED] >= config.dwell - 1e-12:
             new[S], new[WAIT], new[SETTLED] = max(s, gate) + dt, 0.0, 0.0
@@ -112,7 +133,12 @@ def visual_step(state, seen_M, plan_M, config, dt):
     else:
         new[S] = s + dt
     target, _ = plan_M.position_velocity_floats(s)
-    error = np.asarray(target) - seen
+    # The segment that leads to the clock: held at a stroke's end the pen is still down.
+    index = min(max(int(np.searchsorted(plan_M.times, s - 1e-12)) - 1, 0), len(plan_M.kinds) - 1)
+    on_paper = normal_M if plan_M.pen_down[index] else None
+    if on_paper is not None:  # the depth goes by feel: what was aimed deeper is dropped
+        new[C] = seen_error(new[C], 0.0, on_paper)
+    error = seen_error(target, seen, on_paper)
     norm = float(np.linalg.norm(error))
     if norm > config.tolerance:
         correction = new[C] + dt * config.gain * error * (1.0 - config.tolerance / norm)

@@ -6,11 +6,13 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
+from hemg_drake.diagrams.demonstration import build_demonstration_diagram
+from hemg_drake.scenario import load_scenario, shipped_scenario
 from hemg_drake.tasks.plan import TaskPlan
 from hemg_drake.teleop.config import OperatorConfig, VisualConfig
 from hemg_drake.teleop.mapping import WorkspaceMapping
 from hemg_drake.teleop.operator import SimulatedOperator, set_operator_seed
-from hemg_drake.teleop.visual import GAVE_UP, S
+from hemg_drake.teleop.visual import C, GAVE_UP, S
 
 MAPPING = WorkspaceMapping(scale=3.0, p_WMo=[0.7, -0.2, 0.25])
 PLAN = TaskPlan(
@@ -22,12 +24,15 @@ STILL = TaskPlan(times=[0.0, 5.0], points=[[0.7, -0.2, 0.25]] * 2, kinds=["free"
 DT = OperatorConfig().period  # 5 ms, the visual law's period
 
 
-def operator(plan, video_delay=0.0, **visual):
+def operator(plan, video_delay=0.0, sheet_normal_W=None, **visual):
     config = OperatorConfig(
         timing_std=0.0, path_std=[0.0, 0.0, 0.0], effort_std=0.0,
         visual=VisualConfig(enabled=True, **visual),
     )  # fmt: skip
-    return SimulatedOperator(plan=plan, mapping=MAPPING, config=config, video_delay=video_delay)
+    return SimulatedOperator(
+        plan=plan, mapping=MAPPING, config=config, video_delay=video_delay,
+        sheet_normal_W=sheet_normal_W,
+    )  # fmt: skip
 
 
 def start(system, seen, p_MS=None, seed=None):
@@ -89,6 +94,36 @@ def test_corrects_the_seen_error_after_reaction_and_video_delay():
     np.testing.assert_allclose(force / np.linalg.norm(force), direction, atol=1e-9)
 
 
+def test_sees_pen_down_segments_on_the_sheet_not_in_depth():
+    # Paper at z = 0.25 m; the plan goes down from 5 mm above it to 15 mm under it (5 mm in
+    # M, beyond the 3 mm tolerance), draws a 5 cm chord there, then lifts. The pen is seen on the paper above the
+    # press point all along. Given the sheet's normal, the waypoint between the two pen-down
+    # segments counts as reached (the depth is felt, not seen) and the operator moves on to
+    # the chord's end (never seen reached: it holds there); its correction has no component
+    # along the normal. Without the normal it holds at the press point, correcting downward.
+    paper = 0.25
+    plan = TaskPlan(
+        times=[0.0, 0.5, 1.0, 2.0],
+        points=[[0.75, -0.3, paper + 0.005], [0.75, -0.3, paper - 0.015],
+                [0.8, -0.3, paper - 0.015], [0.75, -0.3, paper + 0.005]],
+        kinds=["forceful", "forceful", "free"], pen_down=[True, True, False],
+    )  # fmt: skip
+    seen = [0.75, -0.3, paper]
+    n_M = MAPPING.R_WM.inverse().multiply([0.0, 0.0, 1.0])
+    clocks, corrections = [], []
+    for normal in ([0.0, 0.0, 2.0], None):  # any length: the system normalises it
+        system = operator(plan, sheet_normal_W=normal)
+        simulator, context = start(system, seen, p_MS=MAPPING.slave_to_master(plan.points[0]))
+        simulator.AdvanceTo(1.5)
+        state = system.visual_state(context)
+        clocks.append(state[S])
+        corrections.append(state[C])
+    assert clocks[0] == pytest.approx(1.0) and clocks[1] == pytest.approx(0.5)
+    assert abs(corrections[0] @ n_M) < 1e-12 and np.linalg.norm(corrections[0]) > 1e-3
+    # Without the normal: the depth error seen, corrected downward (into the paper).
+    assert corrections[1] @ n_M < -1e-3
+
+
 def test_tremor_is_the_drawn_sinusoid():
     # Draws [0.5, 0, 0.25, 0.5]: f = 8 + 4 x 0.5 = 10 Hz, phases 0, 1/4, 1/2 of a cycle; at
     # t = 12.5 ms (an eighth of a cycle) the target is A [sin 45, sin 135, sin 225] deg off
@@ -120,3 +155,19 @@ def test_visual_operator_clones():
         forces.append(copy.GetOutputPort("hand_force").Eval(context).copy())
     assert np.linalg.norm(forces[0]) > 0.1
     np.testing.assert_array_equal(forces[0], forces[1])
+
+
+@pytest.mark.parametrize("task", ["drawing", "cotter_pin"])
+def test_the_demonstration_gives_the_operator_the_sheets_normal(task):
+    # The sheet's normal in M, from the scenario's own sheet pose (turned 30 deg) and
+    # mapping: R_WM^T z_W for the drawing; none for the pin.
+    scenario = load_scenario(shipped_scenario(task), overrides=[
+        "operator.visual.enabled=true", "scene.yaw_deg=30",
+    ])  # fmt: skip
+    diagram = build_demonstration_diagram(scenario).diagram
+    normal = diagram.GetSubsystemByName("operator").sheet_normal_M()
+    if task == "cotter_pin":
+        assert normal is None
+        return
+    R_WM = scenario.workspace_mapping().R_WM.matrix()
+    np.testing.assert_allclose(normal, R_WM.T @ [0.0, 0.0, 1.0], atol=1e-12)
