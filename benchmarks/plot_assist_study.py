@@ -108,6 +108,34 @@ def means(task, rows):
     return "\n".join(lines)
 
 
+# The summary's columns: what decides the goal.
+SUMMARY = ("completed", "success", "demonstration.contact_force_peak_n",
+           "demonstration.hand_impulse_n_s")  # fmt: skip
+
+
+def summary(studies):
+    """Markdown: one row per study and delay; per measure the means of the modes, in the
+    order none / fixed / confidence / emg."""
+    lines = ["| study | delay (ms) | n | " + " | ".join(MEASURES[m] for m in SUMMARY) + " |",
+             "|---" * (3 + len(SUMMARY)) + "|"]  # fmt: skip
+    for name, rows in studies:
+        for delay in delays(rows):
+            cells, counts = [], set()
+            for measure in SUMMARY:
+                means = []
+                for mode in MODES:
+                    found = [float(r[measure]) for r in rows
+                             if r["mode"] == mode and int(r["delay_ms"]) == delay
+                             and r.get(measure) is not None and np.isfinite(float(r[measure]))]  # fmt: skip
+                    means.append(f"{np.mean(found):.2g}" if found else "-")
+                    if measure == "success" and found:
+                        counts.add(len(found))
+                cells.append(" / ".join(means))
+            n = "/".join(str(c) for c in sorted(counts))
+            lines.append(f"| {name} | {delay} | {n} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def table(task, rows):
     """Markdown: per delay and measure, emg - none and emg - fixed."""
     lines = [f"**{task}** (emg minus the baseline, mean [95 % CI], n pairs)", "",
@@ -176,6 +204,8 @@ def main():
             operator = row.get("operator")
             merged.setdefault(task if operator is None else f"{task}, {operator}", []).append(row)
     studies = list(merged.items())
+    print(summary(studies))
+    print()
     for task, rows in studies:
         print(means(task, rows))
         print()

@@ -101,7 +101,9 @@ def test_two_drawing_takes_learn_and_reproduce(tmp_path, chromium):
 
     def drive(driver, c):
         driver.wait_take_time(0.3)
-        draw_strokes(driver, depth=2.5e-3 if c == 1 else 2.0e-3)
+        # Held arrows to within 4 mm of each waypoint, as a person moves, then taps; tensed
+        # to draw (the stiffness the robot learns), relaxed between strokes.
+        draw_strokes(driver, depth=2.5e-3 if c == 1 else 2.0e-3, hold=4e-3, activation=0.5)
         driver.wait_take_time(0.3)
 
     lengths = takes("drawing", run, 2, drive)

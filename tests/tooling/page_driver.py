@@ -19,6 +19,8 @@ TARGET = ["teleop", "target"]
 HAND = ["drake", "illustration", "baxter_right_arm", "right_hand"]
 PIN = ["drake", "illustration", "cotter_pin", "pin"]
 # The keys that move the tool, by the master axis they move (+ key, - key).
+# The activation read-out a relaxed operator returns to (the slider starts at 0.05).
+RELAXED = 0.1
 AXIS_KEYS = {"x": ("ArrowRight", "ArrowLeft"), "y": ("KeyW", "KeyS"), "z": ("ArrowDown", "ArrowUp")}
 
 
@@ -136,6 +138,39 @@ class PageDriver:
         return True
 
 
+def hold_towards(driver, goal, *, near, axes="xz", timeout=120.0):
+    """Hold the keys that move the target towards ``goal`` (m, W) as a person holds the
+    arrows, watching the cross (the page echoes the keys at once): every axis farther than
+    ``near`` (m) at once, each released when the cross is within ``near`` along it or past
+    the goal (a dog-leg on a diagonal), and not pressed again. Then the target settles;
+    taps (:meth:`PageDriver.step_towards`) do the rest."""
+    held, done = {}, set()  # axis -> the key held; the axes released
+    deadline = time.monotonic() + timeout
+    try:
+        while True:
+            target = driver.position(TARGET)
+            for axis in axes:
+                d = driver.directions[axis]
+                along = float(np.dot(goal - target, d) / np.linalg.norm(d))  # m, signed
+                key = AXIS_KEYS[axis][0 if along > 0 else 1]
+                if axis in held and (abs(along) <= near or held[axis] != key):
+                    driver.page.key("keyUp", held.pop(axis))
+                    done.add(axis)
+                elif axis not in held and axis not in done and abs(along) > near:
+                    driver.page.key("keyDown", key)
+                    driver.presses[key] += 1
+                    held[axis] = key
+            if not held:
+                break
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"holding {sorted(held.values())}: the cross stays at {target}")
+            time.sleep(0.02)
+    finally:
+        for key in held.values():
+            driver.page.key("keyUp", key)
+    driver.settled_target()
+
+
 def pull_pin(driver, *, pin_length, activation=0.6, dt=0.1, timeout=600.0):
     """Squeeze, then pull the pin until the page shows it out; closed loop, by taps.
 
@@ -164,8 +199,11 @@ def pull_pin(driver, *, pin_length, activation=0.6, dt=0.1, timeout=600.0):
 
 
 def draw_strokes(driver, *, depth=2.5e-3, contact=0.5, tolerance=1.5e-3, dt=0.04,
-                 lift=6e-3, timeout=1800.0):
-    """Draw the template strokes the page shows, closed loop, by taps.
+                 lift=6e-3, hold=None, activation=None, timeout=1800.0):
+    """Draw the template strokes the page shows, closed loop, by taps (and held keys: with
+    ``hold`` (m) each move is held to within ``hold`` of its waypoint, :func:`hold_towards`;
+    with ``activation``, tensed (X) to that read-out before each pen-down and relaxed (Z) to
+    ``RELAXED`` after each lift, as the paper's operator stiffens the arm to draw).
 
     The keys' directions are measured first (:meth:`PageDriver.calibrate`). For each stroke:
     move the target above its start (the arrows), lower the pen (S) until the force read-out
@@ -193,13 +231,26 @@ def draw_strokes(driver, *, depth=2.5e-3, contact=0.5, tolerance=1.5e-3, dt=0.04
             driver.tap(key)
             driver.wait_take_time(dt)
 
+    def tense(above, key, level):
+        """Tap ``key`` until the activation read-out is above (or below) ``level``."""
+        while (driver.number("hemg-a") >= level) != above:
+            driver.tap(key)
+            driver.wait_take_time(dt)
+            check()
+
     for stroke in driver.template():
         for k, point in enumerate(stroke):
+            if hold is not None:  # the long way held, the last millimetres tapped
+                hold_towards(driver, point, near=hold)
             while driver.step_towards(point, tolerance=tolerance, fine_below=2 * tolerance):
                 driver.wait_take_time(dt)
                 check()
             if k == 0:
+                if activation is not None:
+                    tense(True, "KeyX", activation)
                 press("KeyS", True, depth)  # pen down: to contact, then depth further
         press("KeyW", False, lift)  # pen up: off the paper, then lift higher
+        if activation is not None:
+            tense(False, "KeyZ", RELAXED)
     driver.wait_take_time(0.3)
     return driver.ink_strokes()
