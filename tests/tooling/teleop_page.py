@@ -4,6 +4,8 @@ benchmarks/bench_teleop_page.py."""
 
 import time
 
+from hemg_drake.teleop.browser_inputs import KEYS
+
 
 def state(page):
     """The page's state line (waiting, recording, ...), "" before it has one."""
@@ -11,10 +13,13 @@ def state(page):
 
 
 def controls_ready(page, timeout=300.0):
-    """Wait until Meshcat has given the page its buttons and sliders."""
+    """Wait until Meshcat has given the page its buttons and every slider the keys move
+    (each arrives in a message of its own: a key whose slider is not there yet does nothing)."""
     deadline = time.monotonic() + timeout
-    while not page.evaluate("!!(window.viewer && viewer.gui_controllers['Start take'] && "
-                            "viewer.gui_controllers['stylus x (mm)'])"):  # fmt: skip
+    names = ["Start take", *KEYS]
+    while not page.evaluate("!!(window.viewer && %s)" % " && ".join(
+        f"viewer.gui_controllers[{name!r}]" for name in names
+    )):  # fmt: skip
         if time.monotonic() > deadline:
             raise TimeoutError("the page never got its controls")
         time.sleep(0.05)
