@@ -203,7 +203,9 @@ def main():
         for row in rows:
             operator = row.get("operator")
             merged.setdefault(task if operator is None else f"{task}, {operator}", []).append(row)
-    studies = list(merged.items())
+    operators = {"nominal": 0, "noisy": 1, "slow": 2}  # the order
+    studies = sorted(merged.items(), key=lambda kv: (
+        kv[0].split(", ")[0], operators.get(kv[0].split(", ")[-1], len(operators)), kv[0]))
     print(summary(studies))
     print()
     for task, rows in studies:
