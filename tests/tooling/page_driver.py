@@ -19,9 +19,9 @@ TARGET = ["teleop", "target"]
 HAND = ["drake", "illustration", "baxter_right_arm", "right_hand"]
 PIN = ["drake", "illustration", "cotter_pin", "pin"]
 # The keys that move the tool, by the master axis they move (+ key, - key).
+AXIS_KEYS = {"x": ("ArrowRight", "ArrowLeft"), "y": ("KeyW", "KeyS"), "z": ("ArrowDown", "ArrowUp")}
 # The activation read-out a relaxed operator returns to (the slider starts at 0.05).
 RELAXED = 0.1
-AXIS_KEYS = {"x": ("ArrowRight", "ArrowLeft"), "y": ("KeyW", "KeyS"), "z": ("ArrowDown", "ArrowUp")}
 
 
 class PageDriver:
