@@ -69,7 +69,8 @@ def main():
             cells.setdefault(key, []).extend(rows)
     names = ["swings", "correction_mm", "held_at_s", "w_mean", "w_working"]
     order = {"none": 0, "fixed": 1, "confidence": 2, "emg": 3}
-    for operator in sorted({key[0] for key in cells}):
+    ranks = {"nominal": 0, "noisy": 1, "slow": 2}  # the order
+    for operator in sorted({key[0] for key in cells}, key=lambda o: (ranks.get(o, 3), o)):
         if operator:
             print(f"\n{operator}:\n")
         print("| delay (ms) | mode | n | " + " | ".join(names) + " |")
