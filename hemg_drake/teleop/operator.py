@@ -118,7 +118,10 @@ def OperatorLaw_(T):
             self._normal_M = None
             if sheet_normal_W is not None:
                 n_W = as_vector("sheet_normal_W", sheet_normal_W, 3)
-                self._normal_M = mapping.R_WM.inverse().multiply(n_W / np.linalg.norm(n_W))
+                length = float(np.linalg.norm(n_W))
+                if length < 1e-9:
+                    raise ValueError(f"sheet_normal_W must not be zero, got {n_W.tolist()}")
+                self._normal_M = mapping.R_WM.inverse().multiply(n_W / length)
             values = _checked(config)
             self._values = values
             self._path_std = list(config.path_std)

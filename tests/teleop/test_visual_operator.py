@@ -171,3 +171,8 @@ def test_the_demonstration_gives_the_operator_the_sheets_normal(task):
         return
     R_WM = scenario.workspace_mapping().R_WM.matrix()
     np.testing.assert_allclose(normal, R_WM.T @ [0.0, 0.0, 1.0], atol=1e-12)
+
+
+def test_a_zero_sheet_normal_is_refused():
+    with pytest.raises(ValueError, match="sheet_normal_W must not be zero"):
+        operator(PLAN, sheet_normal_W=[0.0, 0.0, 0.0])
