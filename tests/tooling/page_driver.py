@@ -37,10 +37,12 @@ class PageDriver:
 
     # -- what the page shows --------------------------------------------------------------
     def position(self, path):
-        """A scene node's position in the world (m, Drake's W: the node's own transform,
-        as set by Meshcat's SetTransform)."""
-        js = ("(function(){const n = viewer.scene_tree.find(%s); const e = n.object.matrix"
-              ".elements; return [e[12], e[13], e[14]];})()" % list(path))
+        """A scene node's position in the world (m, Drake's W: the node's own transform, as
+        set by Meshcat's SetTransform or the page's echo of the keys). Its ``position``, not
+        its ``matrix``: three.js recomputes the matrix from it only when it renders, so on a
+        page that has not rendered since a tap the matrix still shows the cross before it."""
+        js = ("(function(){const p = viewer.scene_tree.find(%s).object.position;"
+              " return [p.x, p.y, p.z];})()" % list(path))
         return np.array(self.page.evaluate(js), dtype=float)
 
     def template(self):
