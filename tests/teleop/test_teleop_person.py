@@ -114,8 +114,9 @@ def test_two_drawing_takes_learn_and_reproduce(tmp_path, chromium):
         print(f"\ndrawing takes (length s, presses) {lengths}; align {align}: strokes "
               f"{m['strokes']}, shape errors {m['stroke_shape_error_m']}, checks "
               f"{m['success_checks']}\n{out}")
-    # Three strokes with the takes time-warped onto each other (learning.align dtw, the
-    # setting for natural drawing takes; docs/learning.md). Unaligned is reported only: the
-    # driver's two takes of about 280 s (900 taps each) learnt unaligned draw 2 strokes
-    # (as measured; aligned 3 strokes, 3.9 / 2.8 / 6.6 mm off the takes' strokes in shape).
-    assert results["dtw"]["strokes"] == 3, results["dtw"]["success_checks"]
+    # Three strokes, unaligned and with the takes time-warped onto each other
+    # (learning.align dtw, the setting for natural drawing takes; docs/learning.md). As
+    # measured with held keys: unaligned 4.4 / 4.0 / 6.1 mm off the takes' strokes in shape,
+    # dtw 2.9 / 3.5 / 7.4 mm (the zig-zag beyond the evaluator's 5 mm: not asserted yet).
+    for align, m in results.items():
+        assert m["strokes"] == 3, (align, m["success_checks"])
