@@ -85,12 +85,10 @@ def next_gate(times, s):
     return None
 
 
-def seen_error(target, seen, normal=None):
-    """target - seen (m, 3), without its component along the unit ``normal`` if given."""
-    error = np.asarray(target, dtype=float) - np.asarray(seen, dtype=float)
-    if normal is not None:
-        error = error - float(error @ normal) * normal
-    return error
+def on_sheet(vector, normal=None):
+    """``vector`` (3) without its component along the unit ``normal`` (unchanged if None)."""
+    vector = np.asarray(vector, dtype=float)
+    return vector if normal is None else vector - float(vector @ normal) * normal
 
 
 def visual_step(state, seen_M, plan_M, config, dt, normal_M=None):
@@ -118,9 +116,8 @@ def visual_step(state, seen_M, plan_M, config, dt, normal_M=None):
     if gate is not None and s + dt > gate + 1e-12:  # at (or arriving at) a waypoint
         point, _ = plan_M.position_velocity_floats(gate)
         # On the paper only between two pen-down segments: a pen put down or lifted is seen.
-        index = int(np.searchsorted(plan_M.times, gate))
-        both_down = plan_M.pen_down[index - 1] and plan_M.pen_down[index]
-        error = seen_error(point, seen, normal_M if both_down else None)
+        both_down = plan_M.segment(gate - 1e-12).pen_down and plan_M.segment(gate).pen_down
+        error = on_sheet(np.asarray(point) - seen, normal_M if both_down else None)
         reached = float(np.linalg.norm(error)) <= config.tolerance
         new[SETTLED] = new[SETTLED] + dt if reached else 0.0
         if new[SETTLED] >= config.dwell - 1e-12:
@@ -134,11 +131,10 @@ def visual_step(state, seen_M, plan_M, config, dt, normal_M=None):
         new[S] = s + dt
     target, _ = plan_M.position_velocity_floats(s)
     # The segment that leads to the clock: held at a stroke's end the pen is still down.
-    index = min(max(int(np.searchsorted(plan_M.times, s - 1e-12)) - 1, 0), len(plan_M.kinds) - 1)
-    on_paper = normal_M if plan_M.pen_down[index] else None
+    on_paper = normal_M if plan_M.segment(s - 1e-12).pen_down else None
     if on_paper is not None:  # the depth goes by feel: what was aimed deeper is dropped
-        new[C] = seen_error(new[C], 0.0, on_paper)
-    error = seen_error(target, seen, on_paper)
+        new[C] = on_sheet(new[C], on_paper)
+    error = on_sheet(np.asarray(target) - seen, on_paper)
     norm = float(np.linalg.norm(error))
     if norm > config.tolerance:
         correction = new[C] + dt * config.gain * error * (1.0 - config.tolerance / norm)
