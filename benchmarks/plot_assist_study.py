@@ -84,6 +84,13 @@ def interval(diffs):
     return float(diffs.mean()), float(half), n
 
 
+def values(rows, measure, mode, delay):
+    """The finite values of ``measure`` over the trials of one mode and delay."""
+    return [float(r[measure]) for r in rows
+            if r["mode"] == mode and int(r["delay_ms"]) == delay
+            and r.get(measure) is not None and np.isfinite(float(r[measure]))]  # fmt: skip
+
+
 def delays(rows):
     return sorted({int(row["delay_ms"]) for row in rows})
 
@@ -99,12 +106,11 @@ def means(task, rows):
             cell = [row for row in rows if row["mode"] == mode and int(row["delay_ms"]) == delay]
             if not cell:
                 continue
-            values = []
+            shown = []
             for measure in present:
-                found = [float(r[measure]) for r in cell
-                         if r.get(measure) is not None and np.isfinite(float(r[measure]))]  # fmt: skip
-                values.append(f"{np.mean(found):.3g}" if found else "-")
-            lines.append(f"| {delay} | {mode} | {len(cell)} | " + " | ".join(values) + " |")
+                found = values(cell, measure, mode, delay)
+                shown.append(f"{np.mean(found):.3g}" if found else "-")
+            lines.append(f"| {delay} | {mode} | {len(cell)} | " + " | ".join(shown) + " |")
     return "\n".join(lines)
 
 
@@ -124,9 +130,7 @@ def summary(studies):
             for measure in SUMMARY:
                 means = []
                 for mode in MODES:
-                    found = [float(r[measure]) for r in rows
-                             if r["mode"] == mode and int(r["delay_ms"]) == delay
-                             and r.get(measure) is not None and np.isfinite(float(r[measure]))]  # fmt: skip
+                    found = values(rows, measure, mode, delay)
                     means.append(f"{np.mean(found):.2g}" if found else "-")
                     if measure == "success" and found:
                         counts.add(len(found))
@@ -171,14 +175,12 @@ def plot(studies, path):
             for mode in MODES:
                 xs, ys, errors = [], [], []
                 for delay in delays(rows):
-                    values = [float(row[measure]) for row in rows
-                              if row["mode"] == mode and int(row["delay_ms"]) == delay
-                              and row.get(measure) is not None and np.isfinite(row[measure])]  # fmt: skip
-                    if values:
+                    found = values(rows, measure, mode, delay)
+                    if found:
                         xs.append(delay)
-                        ys.append(np.mean(values))
-                        spread = np.array(values) - np.mean(values)
-                        errors.append(interval(spread)[1] if len(values) > 1 else 0.0)
+                        ys.append(np.mean(found))
+                        spread = np.array(found) - np.mean(found)
+                        errors.append(interval(spread)[1] if len(found) > 1 else 0.0)
                 if xs:  # the mean and its 95 % t interval, the modes side by side
                     shift = 6.0 * (MODES.index(mode) - 1.5)
                     ax.errorbar(np.array(xs) + shift, ys, yerr=np.nan_to_num(errors),
