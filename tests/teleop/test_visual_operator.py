@@ -173,6 +173,11 @@ def test_the_demonstration_gives_the_operator_the_sheets_normal(task):
     np.testing.assert_allclose(normal, R_WM.T @ [0.0, 0.0, 1.0], atol=1e-12)
 
 
-def test_a_zero_sheet_normal_is_refused():
-    with pytest.raises(ValueError, match="sheet_normal_W must not be zero"):
-        operator(PLAN, sheet_normal_W=[0.0, 0.0, 0.0])
+@pytest.mark.parametrize("normal, message", [
+    ([0.0, 0.0, 0.0], "sheet_normal_W must not be zero"),
+    ([0.0, 1.0], "sheet_normal_W"),
+    ([0.0, float("nan"), 1.0], "sheet_normal_W"),
+])  # fmt: skip
+def test_a_malformed_sheet_normal_is_refused(normal, message):
+    with pytest.raises(ValueError, match=message):
+        operator(PLAN, sheet_normal_W=normal)
