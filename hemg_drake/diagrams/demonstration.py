@@ -182,6 +182,7 @@ def build_demonstration_diagram(
             plan=scenario.task_plan(), mapping=mapping, config=scenario.operator,
             # The visual operator sees the slave through the channel's slave-to-master half.
             video_delay=scenario.feedback.delay_steps * scenario.master.period,
+            command_delay=scenario.mapping.delay_steps * scenario.master.period,
             sheet_normal_W=(
                 scenario.X_WT().rotation().matrix()[:, 2] if scenario.task == "drawing" else None
             ),

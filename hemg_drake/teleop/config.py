@@ -130,6 +130,14 @@ class VisualConfig:
     # uniform in the range, phase per axis uniform (physiological tremor 8-12 Hz).
     tremor_amplitude: float = checked(0.0)
     tremor_frequency: list[float] = checked([8.0, 12.0], positive=True, size=2)
+    # Efference copy: the seen tool is compared with the command the operator sent when
+    # that image's motion began (plan clock and correction, delayed by the whole loop:
+    # command delay, video delay, reaction), and the corrections sent since count as under
+    # way (a Smith predictor, as the cerebellum is modelled: Miall et al. 1993). So a move
+    # seen late is no error and the correction loop has no delay to oscillate with. Off,
+    # the lag seen during a long fast move is integrated as error and the correction winds
+    # up, and beyond w_c (tau + 2T) = pi/2 it oscillates (the pin study ran with it off).
+    efference_copy: bool = False
 
     def check(self, key=""):
         low, high = self.tremor_frequency

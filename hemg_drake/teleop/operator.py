@@ -102,7 +102,8 @@ def OperatorLaw_(T):
         """
 
         def _construct(
-            self, *, plan, mapping, config, video_delay=0.0, sheet_normal_W=None, converter=None
+            self, *, plan, mapping, config, video_delay=0.0, command_delay=0.0,
+            sheet_normal_W=None, converter=None,
         ):
             LeafSystem_[T].__init__(self, converter)
             if not isinstance(plan, TaskPlan):
@@ -113,6 +114,7 @@ def OperatorLaw_(T):
                 )
             self._plan, self._mapping, self._config = plan, mapping, config
             self._video_delay = float(video_delay)
+            self._command_delay = float(command_delay)
             self._sheet_normal_W = sheet_normal_W
             # The sheet's normal in M: pen-down segments are seen on the sheet (visual.py).
             self._normal_M = None
@@ -150,6 +152,13 @@ def OperatorLaw_(T):
                 self._n_seen = vis.delay_samples(self._visual, self._video_delay, values["period"])
                 self._visual_index = self.DeclareDiscreteState(vis.initial_state())
                 self._seen_index = self.DeclareDiscreteState(np.zeros(3 * self._n_seen))
+                # The efference copy: what was sent (clock, correction) over the loop's latency.
+                self._sent_index, self._n_sent = None, 0
+                if self._visual.efference_copy:
+                    self._n_sent = vis.loop_samples(
+                        self._visual, self._command_delay, self._video_delay, values["period"]
+                    )
+                    self._sent_index = self.DeclareDiscreteState(np.zeros(4 * self._n_sent))
             nominal = (*self._plans(np.zeros(n_normals), np.zeros(n_uniforms), human), draws)
             self._plans_index = self.DeclareAbstractState(AbstractValue.Make(nominal))
             self.DeclareInitializationUnrestrictedUpdateEvent(self._draw)
@@ -172,8 +181,8 @@ def OperatorLaw_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(
                 self, plan=other._plan, mapping=other._mapping, config=other._config,
-                video_delay=other._video_delay, sheet_normal_W=other._sheet_normal_W,
-                converter=converter,
+                video_delay=other._video_delay, command_delay=other._command_delay,
+                sheet_normal_W=other._sheet_normal_W, converter=converter,
             )  # fmt: skip
 
         def _plans(self, normals, uniforms, human=None):
@@ -205,9 +214,14 @@ def OperatorLaw_(T):
                 state.get_mutable_discrete_state(self._seen_index).SetFromVector(
                     np.tile(seen, self._n_seen)
                 )
+                start = _float(context.get_time())
                 state.get_mutable_discrete_state(self._visual_index).SetFromVector(
-                    vis.initial_state(_float(context.get_time()))
+                    vis.initial_state(start)
                 )
+                if self._sent_index is not None:  # before the start: at the start, uncorrected
+                    state.get_mutable_discrete_state(self._sent_index).SetFromVector(
+                        np.tile([start, 0.0, 0.0, 0.0], self._n_sent)
+                    )
             plans = (*self._plans(normals, uniforms, human), draws)
             state.get_mutable_abstract_state(self._plans_index).set_value(plans)
 
@@ -286,9 +300,17 @@ def OperatorLaw_(T):
             seen_M = self._mapping.slave_to_master(seen[:3])
             plan_M = context.get_abstract_state(self._plans_index).get_value()[1]
             state = _floats(context.get_discrete_state(self._visual_index).value())
+            sent = None
+            if self._sent_index is not None:  # the oldest sent, then remember this one's
+                history = _floats(context.get_discrete_state(self._sent_index).value())
+                sent = history[:4]
+                discrete_state.get_mutable_vector(self._sent_index).SetFromVector(
+                    np.concatenate([history[4:], state[vis.S:vis.C.stop]])
+                )
             discrete_state.get_mutable_vector(self._visual_index).SetFromVector(
                 vis.visual_step(
-                    state, seen_M, plan_M, self._visual, self._values["period"], self._normal_M
+                    state, seen_M, plan_M, self._visual, self._values["period"], self._normal_M,
+                    sent,
                 )
             )
 
@@ -382,19 +404,23 @@ class SimulatedOperator(Diagram):
         gain (1/N), time constant (s), period (s), and the variability's spreads.
     video_delay : float
         The channel's slave-to-master delay (s) through which the visual operator sees.
+    command_delay : float
+        The channel's master-to-slave delay (s): with ``config.visual.efference_copy`` the
+        operator knows its loop's latency (command delay + video delay + reaction time).
     sheet_normal_W : 3 floats, optional
         The drawing sheet's normal in W: the visual operator sees pen-down segments on the
         sheet (their depth it feels, not sees).
     """
 
     def __init__(
-        self, *, plan, mapping, config=OperatorConfig(), video_delay=0.0, sheet_normal_W=None
+        self, *, plan, mapping, config=OperatorConfig(), video_delay=0.0, command_delay=0.0,
+        sheet_normal_W=None,
     ):
         Diagram.__init__(self)
         builder = DiagramBuilder()
         law = builder.AddNamedSystem("law", OperatorLaw(
             plan=plan, mapping=mapping, config=config, video_delay=video_delay,
-            sheet_normal_W=sheet_normal_W,
+            command_delay=command_delay, sheet_normal_W=sheet_normal_W,
         ))  # fmt: skip
         self._law = law
         self.plan_nominal = plan

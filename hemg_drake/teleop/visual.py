@@ -21,6 +21,12 @@ tool does not get where it should. The law here, one update every ``period`` sec
   for good (no hand force, muscles at rest);
 - **tremor**: A sin(2 pi f t + phi_k) on each axis of the hand's target, f and phi_k from
   seeded uniform draws (:func:`visual_draws`);
+- **efference copy** (``efference_copy``, a Smith predictor): the operator keeps what it
+  sent, (s, c), for the loop's whole latency L (command delay + video delay + reaction
+  time) and compares the tool it sees with the command (s_L, c_L) sent L ago, counting the
+  corrections sent since as under way: e = p_plan(s_L) - p_seen - (c - c_L). A move seen
+  late is then no error, and with the slave following, c' = w_c (m - c) for a steady miss m
+  (a contact, the tracker's offset): first order, no delay left in the loop;
 - **on the paper** (pen-down segments, given the sheet's normal n in M): the operator sees
   where the pen is on the sheet, not how deep it presses (that it feels), so the error it
   sees is e - (e . n) n: the correction ignores the depth (and drops what it had of it when
@@ -59,6 +65,12 @@ def delay_samples(config, video_delay, period):
     return max(1, int(round((video_delay + config.reaction_time) / period)))
 
 
+def loop_samples(config, command_delay, video_delay, period):
+    """Samples of the loop's latency kept by the efference copy: the command delay plus the
+    seen tool point's delay (:func:`delay_samples`)."""
+    return int(round(command_delay / period)) + delay_samples(config, video_delay, period)
+
+
 def initial_state(start_time=0.0):
     """The plan clock at ``start_time``, no correction, not waiting, not given up."""
     state = np.zeros(STATE_SIZE)
@@ -91,7 +103,7 @@ def on_sheet(vector, normal=None):
     return vector if normal is None else vector - float(vector @ normal) * normal
 
 
-def visual_step(state, seen_M, plan_M, config, dt, normal_M=None):
+def visual_step(state, seen_M, plan_M, config, dt, normal_M=None, sent=None):
     """The visual state one period ``dt`` later (see the module docstring).
 
     Parameters
@@ -102,6 +114,8 @@ def visual_step(state, seen_M, plan_M, config, dt, normal_M=None):
     config : VisualConfig
     normal_M : unit 3-vector in M, optional; the sheet's normal (pen-down segments are
         seen on the sheet).
+    sent : 4 floats, optional; with ``config.efference_copy`` (required then): the plan
+        clock and the correction (3) sent the loop's latency ago.
 
     Returns
     -------
@@ -129,12 +143,17 @@ def visual_step(state, seen_M, plan_M, config, dt, normal_M=None):
                 new[GAVE_UP] = 1.0
     else:
         new[S] = s + dt
-    target, _ = plan_M.position_velocity_floats(s)
     # The segment that leads to the clock: held at a stroke's end the pen is still down.
+    if normal_M is not None and plan_M.segment(s - 1e-12).pen_down:
+        new[C] = on_sheet(new[C], normal_M)  # the depth goes by feel: aimed deeper is dropped
+    under_way = 0.0
+    if config.efference_copy:
+        if sent is None:
+            raise ValueError("visual_step: efference_copy needs what was sent")
+        s, under_way = float(sent[0]), new[C] - np.asarray(sent[1:4], dtype=float)
+    target, _ = plan_M.position_velocity_floats(s)
     on_paper = normal_M if plan_M.segment(s - 1e-12).pen_down else None
-    if on_paper is not None:  # the depth goes by feel: what was aimed deeper is dropped
-        new[C] = on_sheet(new[C], on_paper)
-    error = on_sheet(np.asarray(target) - seen, on_paper)
+    error = on_sheet(np.asarray(target) - seen - under_way, on_paper)
     norm = float(np.linalg.norm(error))
     if norm > config.tolerance:
         correction = new[C] + dt * config.gain * error * (1.0 - config.tolerance / norm)

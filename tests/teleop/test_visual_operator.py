@@ -12,7 +12,7 @@ from hemg_drake.tasks.plan import TaskPlan
 from hemg_drake.teleop.config import OperatorConfig, VisualConfig
 from hemg_drake.teleop.mapping import WorkspaceMapping
 from hemg_drake.teleop.operator import SimulatedOperator, set_operator_seed
-from hemg_drake.teleop.visual import C, GAVE_UP, S
+from hemg_drake.teleop.visual import C, GAVE_UP, S, initial_state, loop_samples, visual_step
 
 MAPPING = WorkspaceMapping(scale=3.0, p_WMo=[0.7, -0.2, 0.25])
 PLAN = TaskPlan(
@@ -70,12 +70,19 @@ def test_moves_on_when_it_sees_the_waypoint_then_gives_up_after_its_patience():
     assert system.GetOutputPort("activation").Eval(context)[0] == pytest.approx(0.05, abs=1e-4)
 
 
-def test_corrects_the_seen_error_after_reaction_and_video_delay():
+@pytest.mark.parametrize("efference_copy", [False, True])
+def test_corrects_the_seen_error_after_reaction_and_video_delay(efference_copy):
     # A still plan; the tool is seen where it should be until t1 = 0.5 s, then 2 cm off in
     # W (2/3 cm in M, scale 3). The operator sees the change 0.1 s (video) + 0.2 s
     # (reaction) later, then integrates w_c (e - tol e/|e|) each 5 ms: the hand, holding
-    # the stylus on the plan, pulls with 300 N/m times that correction.
-    system = operator(STILL, video_delay=0.1, gain=4.0, tolerance=0.003)
+    # the stylus on the plan, pulls with 300 N/m times that correction. With an efference
+    # copy the corrections sent since count as under way (none is seen yet: the loop's
+    # latency is 0.3 s), so the correction c approaches the error's excess instead of
+    # growing with it: c_n = (|e| - tol)(1 - (1 - w_c dt)^n), forward Euler of
+    # c' = w_c (|e| - tol - c).
+    system = operator(
+        STILL, video_delay=0.1, gain=4.0, tolerance=0.003, efference_copy=efference_copy
+    )
     p0 = STILL.points[0]
     simulator, context = start(system, p0)
     simulator.AdvanceTo(0.5)
@@ -88,10 +95,39 @@ def test_corrects_the_seen_error_after_reaction_and_video_delay():
     rate = 4.0 * error * (1 - 0.003 / np.linalg.norm(error))  # m/s
     force = system.GetOutputPort("hand_force").Eval(context)
     # 0.2 s of integration, within one period either side.
-    expected = 300 * 0.2 * np.linalg.norm(rate)
-    assert np.linalg.norm(force) == pytest.approx(expected, rel=DT / 0.2 + 1e-9)
+    if efference_copy:
+        excess = np.linalg.norm(error) - 0.003
+        low, high = (300 * excess * (1 - (1 - 4.0 * DT) ** n) for n in (39, 41))
+        assert low <= np.linalg.norm(force) <= high
+    else:
+        expected = 300 * 0.2 * np.linalg.norm(rate)
+        assert np.linalg.norm(force) == pytest.approx(expected, rel=DT / 0.2 + 1e-9)
     direction = rate / np.linalg.norm(rate)
     np.testing.assert_allclose(force / np.linalg.norm(force), direction, atol=1e-9)
+
+
+def test_an_efference_copy_does_not_correct_a_move_seen_late():
+    # One 15 cm move in 1 s (5 cm/s in M), the slave seen exactly on the plan as it goes.
+    # Seen 0.1 s (video) + 0.2 s (reaction) late, the tool lags the plan by 1.5 cm in M,
+    # far beyond the 3 mm tolerance: compared with the plan now, that lag is integrated as
+    # error, into the correction; compared with the plan when the image was taken (the
+    # efference copy), what is left is at most a sample's motion (0.25 mm), under the
+    # tolerance: no correction.
+    move = TaskPlan(
+        times=[0.0, 1.0], points=[[0.7, -0.2, 0.25], [0.7, -0.05, 0.25]], kinds=["free"]
+    )
+    corrections = []
+    for efference_copy in (True, False):
+        system = operator(move, video_delay=0.1, efference_copy=efference_copy)
+        simulator, context = start(system, move.points[0])
+        seen = system.GetInputPort("p_WE_seen")
+        for k in range(1, 181):  # to 0.9 s, the tool where the plan is at each sample
+            seen.FixValue(context, move.position_velocity_floats(context.get_time())[0])
+            simulator.AdvanceTo(k * DT)
+        corrections.append(np.linalg.norm(system.visual_state(context)[C]))
+    assert corrections[0] == 0.0
+    # Without it: from 0.3 s on, 4 rad/s times (1.5 cm - 3 mm) each second, ~0.7 cm by 0.9 s.
+    assert corrections[1] == pytest.approx(4.0 * (0.015 - 0.003) * 0.6, rel=0.05)
 
 
 def test_sees_pen_down_segments_on_the_sheet_not_in_depth():
@@ -146,8 +182,9 @@ def test_tremor_is_the_drawn_sinusoid():
     )
 
 
-def test_visual_operator_clones():
-    system = operator(PLAN, tremor_amplitude=0.001)
+@pytest.mark.parametrize("efference_copy", [False, True])
+def test_visual_operator_clones(efference_copy):
+    system = operator(PLAN, tremor_amplitude=0.001, efference_copy=efference_copy)
     forces = []
     for copy in (system, system.Clone()):
         simulator, context = start(copy, PLAN.points[0], seed=5)
@@ -181,3 +218,33 @@ def test_the_demonstration_gives_the_operator_the_sheets_normal(task):
 def test_a_malformed_sheet_normal_is_refused(normal, message):
     with pytest.raises(ValueError, match=message):
         operator(PLAN, sheet_normal_W=normal)
+
+
+@pytest.mark.parametrize("efference_copy", [True, False])
+def test_under_delay_the_efference_copy_settles_where_the_integral_oscillates(efference_copy):
+    # The loop closed by hand around the law: a still plan, the slave missing every command
+    # by m = 1 cm (in M) and seen L = 0.7 s after it was sent (0.25 s each way and 0.2 s of
+    # reaction). The seen error's plain integral is a delayed integrator,
+    # w_c L = 2.8 > pi/2: it oscillates (bounded by the 3 cm limit). With the efference
+    # copy the loop is c' = w_c (m - tol - c): it settles at 7 mm, the miss seen within the
+    # tolerance, monotonically.
+    config = VisualConfig(enabled=True, efference_copy=efference_copy)
+    plan_M = STILL.in_frame(MAPPING.slave_to_master(STILL.points))
+    p_plan = np.asarray(plan_M.points[0])
+    miss = np.array([0.01, 0.0, 0.0])
+    n = loop_samples(config, 0.25, 0.25, DT)
+    assert n == 140
+    state, sent = initial_state(), [np.zeros(4)] * n
+    history = []
+    for _ in range(1000):  # 5 s
+        seen = p_plan + sent[0][1:4] - miss  # the command sent L ago, missed by m
+        new = visual_step(state, seen, plan_M, config, DT, sent=sent[0])
+        sent = [*sent[1:], state[:4].copy()]
+        state = new
+        history.append(state[C][0])
+    history = np.array(history)
+    if efference_copy:
+        assert np.all(np.diff(history) >= 0)
+        assert history[-1] == pytest.approx(0.01 - 0.003, abs=1e-6)
+    else:  # swinging beyond the miss and back, the whole 3 cm bound
+        assert history.max() == pytest.approx(0.03) and history.min() < -0.01
