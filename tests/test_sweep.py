@@ -375,3 +375,35 @@ def test_two_sweeps_on_one_folder_one_is_refused_naming_the_other(tmp_path, capf
         first.send_signal(signal.SIGINT)
         first.communicate(timeout=60)
     assert first.returncode in (0, 130)
+
+
+def test_a_drawings_completion_is_when_its_third_stroke_ends():
+    # Hand-made logs at 100 Hz: ink (|f| 5 N) over [1, 2), [3, 4), [5, 6.5) s, the pen at
+    # rest elsewhere: three strokes, the last inked sample at 6.49 s. A log with two: NaN,
+    # and the mean completion is over the demonstrations that drew three.
+    import math
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from hemg_drake.scenario import load_scenario, shipped_scenario
+    from hemg_drake.sweep.trial import demonstration_metrics
+
+    time = np.arange(0, 800) * 0.01
+
+    def demo(spans):
+        f_WE = np.zeros((time.size, 3))
+        for a, b in spans:
+            f_WE[(time >= a - 1e-9) & (time < b - 1e-9), 2] = 5.0
+        zeros = np.zeros((time.size, 3))
+        return SimpleNamespace(
+            time=time, p_WE=zeros, p_MS=zeros, f_WE=f_WE, emg_time=time,
+            muscle_activation=np.full(time.size, 0.1), gain=np.full(time.size, 100.0),
+        )  # fmt: skip
+
+    scenario = load_scenario(shipped_scenario("drawing"))
+    three, two = demo([(1, 2), (3, 4), (5, 6.5)]), demo([(1, 2), (3, 4)])
+    record = demonstration_metrics(scenario, [three, two])
+    assert record["strokes"] == 2.5 and record["three_strokes"] == 0.5
+    assert record["completion_s"] == pytest.approx(6.49)
+    assert math.isnan(demonstration_metrics(scenario, [two])["completion_s"])

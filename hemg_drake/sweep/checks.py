@@ -42,7 +42,7 @@ METRICS = {
               "master_hit_wall", "gain_lag_s", "contact_force_peak_n", "muscle_effort",
               "hand_impulse_n_s", "hand_work_j"],
         "cotter_pin": ["pin_out", "completion_s"],
-        "drawing": ["strokes", "three_strokes"],
+        "drawing": ["strokes", "three_strokes", "completion_s"],
     },
     "learn": {"*": ["n_iter", "converged"]},
     "reproduce": {

@@ -55,12 +55,14 @@ def demonstration_metrics(scenario, demos):
     - cotter pin: ``pin_out``: fraction of demonstrations whose tool point rose 8 cm (the
       pin comes out after its 3 mm detent, the grasp stretches 1 cm at most);
       ``completion_s``: when it had (mean over those that did; NaN if none); drawing:
-      ``strokes`` (mean count) and ``three_strokes`` (fraction with exactly three).
+      ``strokes`` (mean count), ``three_strokes`` (fraction with exactly three) and
+      ``completion_s``: when the third stroke's ink ended (mean over the demonstrations
+      with three; NaN if none).
     """
     import numpy as np
     from scipy.signal import butter, sosfiltfilt
 
-    from hemg_drake.evaluation import strokes
+    from hemg_drake.evaluation import stroke_runs
 
     mapping = scenario.workspace_mapping()
     half_box = 0.5 * np.asarray(scenario.master.workspace_size)
@@ -93,10 +95,12 @@ def demonstration_metrics(scenario, demos):
             if len(risen):
                 task["completion_s"].append(float(demo.time[risen[0]]))
         else:
-            count = len(strokes(demo.time, demo.p_WE, demo.f_WE))
-            task["strokes"].append(float(count))
-            task["three_strokes"].append(float(count == 3))
-    if scenario.task == "cotter_pin" and not task["completion_s"]:
+            runs = stroke_runs(demo.time, demo.f_WE)[0]
+            task["strokes"].append(float(len(runs)))
+            task["three_strokes"].append(float(len(runs) == 3))
+            if len(runs) == 3:
+                task["completion_s"].append(float(demo.time[runs[-1][1] - 1]))
+    if not task["completion_s"]:
         task["completion_s"] = [float("nan")]
     record.update({k: v for k, v in task.items() if v})
     return {name: float(np.mean(values)) for name, values in record.items()}
