@@ -37,6 +37,16 @@ FIGURE = ("success", "completed", "demonstration.hand_impulse_n_s",
           "demonstration.disagreement_m", "demonstration.phase_lag_s",
           "demonstration.passivity_energy_min_j")  # fmt: skip
 SUCCESS = {"cotter_pin": "demonstration.pin_out", "drawing": "demonstration.three_strokes"}
+# The drawing's words for the measures MEASURES names after the pin.
+DRAWING = {"completed": "three strokes, operator did not give up",
+           "demonstration.completion_s": "third stroke done after (s)"}  # fmt: skip
+
+
+def label(study, measure):
+    """``measure``'s name in the tables of ``study`` ("drawing, noisy": the drawing's)."""
+    if study.split(",")[0] == "drawing":
+        return DRAWING.get(measure, MEASURES[measure])
+    return MEASURES[measure]
 
 
 def trials(folder):
@@ -99,7 +109,7 @@ def means(task, rows):
     """Markdown: per delay and mode, each measure's mean (n trials)."""
     present = [m for m in MEASURES if any(row.get(m) is not None for row in rows)]
     lines = [f"**{task}** (mean over the trials; n per cell in the first column)", "",
-             "| delay (ms) | mode | n | " + " | ".join(MEASURES[m] for m in present) + " |",
+             "| delay (ms) | mode | n | " + " | ".join(label(task, m) for m in present) + " |",
              "|---" * (3 + len(present)) + "|"]  # fmt: skip
     for delay in delays(rows):
         for mode in MODES:
@@ -122,7 +132,8 @@ SUMMARY = ("completed", "success", "demonstration.contact_force_peak_n",
 def summary(studies):
     """Markdown: one row per study and delay; per measure the means of the modes, in the
     order none / fixed / confidence / emg."""
-    lines = ["| study | delay (ms) | n | " + " | ".join(MEASURES[m] for m in SUMMARY) + " |",
+    first = studies[0][0] if studies else ""
+    lines = ["| study | delay (ms) | n | " + " | ".join(label(first, m) for m in SUMMARY) + " |",
              "|---" * (3 + len(SUMMARY)) + "|"]  # fmt: skip
     for name, rows in studies:
         for delay in delays(rows):
@@ -145,8 +156,8 @@ def table(task, rows):
     lines = [f"**{task}** (emg minus the baseline, mean [95 % CI], n pairs)", "",
              "| delay (ms) | measure | emg - none | emg - fixed |", "|---|---|---|---|"]  # fmt: skip
     for delay in delays(rows):
-        for measure, name in MEASURES.items():
-            cells = []
+        for measure in MEASURES:
+            name, cells = label(task, measure), []
             for baseline in ("none", "fixed"):
                 diffs = paired(rows, measure, "emg", baseline, delay)
                 mean, half, n = interval(diffs)
@@ -186,7 +197,7 @@ def plot(studies, path):
                     ax.errorbar(np.array(xs) + shift, ys, yerr=np.nan_to_num(errors),
                                 marker="o", ms=3, capsize=2, label=mode,
                                 color=f"C{MODES.index(mode)}")  # one colour per mode, every panel  # fmt: skip
-            ax.set_title(f"{task}: {MEASURES[measure]}", fontsize=8)
+            ax.set_title(f"{task}: {label(task, measure)}", fontsize=8)
             ax.set_xlabel("one-way delay (ms)", fontsize=8)
             ax.tick_params(labelsize=7)
     axes[0, 0].legend(fontsize=7)
