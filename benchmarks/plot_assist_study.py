@@ -22,6 +22,7 @@ MEASURES = {
     "success": "task success (fraction)",
     "completed": "pin out, operator did not give up",
     "demonstration.completion_s": "pin out after (s)",
+    "demonstration.strokes": "ink pieces (mean)",
     "demonstration.hand_impulse_n_s": "hand force integral (N s)",
     "demonstration.hand_work_j": "hand work on the master (J)",
     "demonstration.muscle_effort": "muscle activation (mean)",
