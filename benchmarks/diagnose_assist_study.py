@@ -1,9 +1,11 @@
 """Why the visual operator fails in the shared-control study (docs/studies.md, "Shared
 control"): per delay and mode, from each trial's logs (``trials/*/run``: dataset.npz and
-interaction.npz), the mean assist weight (over the run and while the operator works
-against the pin, activation > 0.5), how often the tool fell back below 2 cm after having
-been above 8 cm (the pin pushed back in: the correction oscillating), the largest
-correction the operator made, and the plan-clock time where it gave up.
+interaction.npz), the mean assist weight (over the run and while the operator works,
+activation > 0.5), the largest correction the operator made, the plan-clock time where it
+gave up, and per task: the pin, how often the tool fell back below 2 cm after having been
+above 8 cm (the pin pushed back in: the correction oscillating); the drawing, the pen's
+touches (contacts with the sheet, however short: 3 for a clean drawing) and the ink
+pieces they make (``demonstration.strokes``).
 
     python benchmarks/diagnose_assist_study.py runs/study_assist_pin
 """
@@ -14,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hemg_drake.analysis.contact import contact_runs, in_contact
+from hemg_drake.evaluation import stroke_runs
 from hemg_drake.fileio import load_npz
 from hemg_drake.learning.demos import load_dataset
 from hemg_drake.teleop.visual import C, GAVE_UP
@@ -42,8 +46,14 @@ def diagnose(folder):
         time = logs["demo0.time"][:, 0]
         visual = logs["demo0.visual_state"]
         gave = np.flatnonzero(visual[:, GAVE_UP] > 0)
-        row = {
-            "swings": swings(demo.p_WE[:, 2] - demo.p_WE[0, 2]),
+        if "demonstration.strokes" in record["metrics"]:  # the drawing
+            row = {
+                "touches": len(contact_runs(in_contact(demo.f_WE), 1)),
+                "pieces": len(stroke_runs(demo.time, demo.f_WE)[0]),
+            }
+        else:
+            row = {"swings": swings(demo.p_WE[:, 2] - demo.p_WE[0, 2])}
+        row |= {
             "correction_mm": 1e3 * np.linalg.norm(visual[:, C], axis=1).max(),
             "held_at_s": visual[gave[0], 0] if len(gave) else np.nan,
         }
@@ -67,7 +77,9 @@ def main():
     for folder in args.folders:
         for key, rows in diagnose(folder).items():
             cells.setdefault(key, []).extend(rows)
-    names = ["swings", "correction_mm", "held_at_s", "w_mean", "w_working"]
+    present = {name for rows in cells.values() for row in rows for name in row}
+    names = [name for name in ("swings", "touches", "pieces") if name in present]
+    names += ["correction_mm", "held_at_s", "w_mean", "w_working"]
     order = {"none": 0, "fixed": 1, "confidence": 2, "emg": 3}
     ranks = {"nominal": 0, "noisy": 1, "slow": 2}  # the issue's order
     for operator in sorted({key[0] for key in cells}, key=lambda o: (ranks.get(o, 3), o)):
