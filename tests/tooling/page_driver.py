@@ -140,32 +140,52 @@ class PageDriver:
         return True
 
 
-def hold_towards(driver, goal, *, near, axes="xz", timeout=120.0):
-    """Hold the keys that move the target towards ``goal`` (m, W) as a person holds the
-    arrows, watching the cross (the page echoes the keys at once): every axis farther than
-    ``near`` (m) at once, each released when the cross is within ``near`` along it or past
-    the goal (a dog-leg on a diagonal), and not pressed again. Then the target settles;
-    taps (:meth:`PageDriver.step_towards`) do the rest."""
-    held, done = {}, set()  # axis -> the key held; the axes released
+def hold_towards(driver, goal, *, near, axes="xz", slack=1e-3, timeout=120.0):
+    """Hold the keys that move the target towards ``goal`` (m, W) along the straight line
+    from where it is, as a person draws a slanted line with the arrows, watching the cross
+    (the page echoes the keys at once): the key of the axis with the longer way is held
+    until the cross is within ``near`` (m) of the goal along it (or past it); the other
+    axis' key is held while the cross lags the line by more than ``slack`` (m) along that
+    axis, and let go once it is back on it. Then the target settles; taps
+    (:meth:`PageDriver.step_towards`) do the rest."""
+    start = driver.position(TARGET)
+    units = {a: driver.directions[a] / np.linalg.norm(driver.directions[a]) for a in axes}
+    way = {a: float(np.dot(goal - start, u)) for a, u in units.items()}  # m, signed
+    major = max(axes, key=lambda a: abs(way[a]))
+    if abs(way[major]) <= near:
+        return
+    held = {}  # axis -> the key held
     deadline = time.monotonic() + timeout
+
+    def hold(axis, key):
+        if held.get(axis) != key:
+            release(axis)
+            driver.page.key("keyDown", key)
+            driver.presses[key] += 1
+            held[axis] = key
+
+    def release(axis):
+        if axis in held:
+            driver.page.key("keyUp", held.pop(axis))
+
     try:
         while True:
-            target = driver.position(TARGET)
-            for axis in axes:
-                d = driver.directions[axis]
-                along = float(np.dot(goal - target, d) / np.linalg.norm(d))  # m, signed
-                key = AXIS_KEYS[axis][0 if along > 0 else 1]
-                if axis in held and (abs(along) <= near or held[axis] != key):
-                    driver.page.key("keyUp", held.pop(axis))
-                    done.add(axis)
-                elif axis not in held and axis not in done and abs(along) > near:
-                    driver.page.key("keyDown", key)
-                    driver.presses[key] += 1
-                    held[axis] = key
-            if not held:
+            moved = driver.position(TARGET) - start
+            left = way[major] - float(np.dot(moved, units[major]))
+            if abs(left) <= near or left * way[major] < 0:  # there, or past it
                 break
+            hold(major, AXIS_KEYS[major][0 if way[major] > 0 else 1])
+            done = 1.0 - left / way[major]  # the fraction of the line behind the cross
+            for axis in axes:
+                if axis == major:
+                    continue
+                lag = done * way[axis] - float(np.dot(moved, units[axis]))  # m, signed
+                if abs(lag) > slack:
+                    hold(axis, AXIS_KEYS[axis][0 if lag > 0 else 1])
+                elif lag * {AXIS_KEYS[axis][0]: 1, AXIS_KEYS[axis][1]: -1}.get(held.get(axis), 0) <= 0:
+                    release(axis)  # on the line (or its key would take it past)
             if time.monotonic() > deadline:
-                raise TimeoutError(f"holding {sorted(held.values())}: the cross stays at {target}")
+                raise TimeoutError(f"holding {sorted(held.values())}: the cross stays at {moved + start}")
             time.sleep(0.02)
     finally:
         for key in held.values():
