@@ -38,7 +38,9 @@ lead's quiet machine.
 """
 
 import argparse
+import collections
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -121,6 +123,27 @@ def cpu_seconds(pid, group=False):
     return total
 
 
+def chromium_processes(pid):
+    """CPU seconds of Chromium's processes (the process group of ``pid``) by their type:
+    browser (the main process), renderer (the page's script and three.js), gpu-process
+    (SwiftShader's rendering), utility (network: the websocket), zygote."""
+    pgid = os.getpgid(pid)
+    by_type = collections.Counter()
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            if os.getpgid(int(entry)) != pgid:
+                continue
+            with open(f"/proc/{entry}/cmdline", "rb") as line:
+                found = re.search(rb"--type=([\w-]+)", line.read())  # helpers rewrite theirs
+        except OSError:
+            continue
+        kind = found.group(1).decode() if found else "browser"
+        by_type[kind] += cpu_seconds(int(entry))
+    return by_type
+
+
 def target_steps(log):
     """The stylus target per 10 ms sample, the inputs log re-driving a BrowserMaster alone."""
     master = BrowserMaster(source=LoggedInputs(log.time, log.rows), p_MS_initial=[0, -0.025, 0])
@@ -151,6 +174,7 @@ def run(task, taps, hold, screenshot, seed):
                 except RuntimeError:
                     print("Enter again", file=sys.stderr)
             cpu_from = (cpu_seconds(command.pid), cpu_seconds(page.process.pid, group=True))
+            kinds_from = chromium_processes(page.process.pid)
             load = [os.getloadavg()[0]]
             time.sleep(1.0)
             for k in range(taps):
@@ -176,6 +200,8 @@ def run(task, taps, hold, screenshot, seed):
             wait_for(page, "ended", timeout=300.0)
             cpu = (cpu_seconds(command.pid) - cpu_from[0],
                    cpu_seconds(page.process.pid, group=True) - cpu_from[1])  # fmt: skip
+            kinds = chromium_processes(page.process.pid)
+            kinds.subtract(kinds_from)
             load.append(os.getloadavg()[0])
             page.press("KeyK")
             out, _ = command.communicate(timeout=600)
@@ -202,6 +228,8 @@ def run(task, taps, hold, screenshot, seed):
     print(f"  CPU per simulated second: the teleop command {cpu[0] / simulated:.2f} s, "
           f"Chromium {cpu[1] / simulated:.2f} s (load average {load[0]:.1f} at the take's "
           f"start, {load[1]:.1f} at its end, 2 cores)")  # fmt: skip
+    print("  Chromium by process, CPU s per simulated second: " + ", ".join(
+        f"{kind} {seconds / simulated:.2f}" for kind, seconds in kinds.most_common()))
     for name, values in (("the target (the page's local echo of the keys)", latencies),
                          (f"the robot (its hand {ROBOT_MM} mm on the page)", robot)):
         if len(values):
