@@ -250,6 +250,25 @@ OVERLAY = r"""
 """
 
 
+# Before Meshcat creates its WebGL context: on a software renderer (SwiftShader, llvmpipe)
+# ask for no multisampling. Measured in headless Chromium (docs/teleop_browser.md): a key to
+# the cross's motion 19-49 ms median without it, 65-115 ms with it.
+NO_SOFTWARE_MSAA = """<script>(function() {
+  let software = false;
+  try {
+    const gl = document.createElement("canvas").getContext("webgl");
+    const info = gl && gl.getExtension("WEBGL_debug_renderer_info");
+    software = !!info && /swiftshader|llvmpipe|software/i.test(gl.getParameter(info.UNMASKED_RENDERER_WEBGL));
+  } catch (e) {}
+  if (!software) return;
+  const getContext = HTMLCanvasElement.prototype.getContext;
+  HTMLCanvasElement.prototype.getContext = function(type, attributes) {
+    if (String(type).startsWith("webgl")) attributes = Object.assign({}, attributes, {antialias: false});
+    return getContext.call(this, type, attributes);
+  };
+})();</script>"""
+
+
 def page_html(html, meshcat_port, config):
     """Drake's Meshcat page ``html``, its script and websocket pointed at ``meshcat_port``,
     with the overlay (``config``: the legend and key speeds, as JSON) added."""
@@ -259,7 +278,8 @@ def page_html(html, meshcat_port, config):
     replaced = replaced.replace("url = location.toString();", ws)
     overlay = OVERLAY.replace("__CONFIG__", json.dumps(config))
     replaced = replaced.replace("</body>", overlay + "</body>")
-    if scripts != 1 or ws not in replaced or overlay not in replaced:
+    replaced = replaced.replace("<head>", "<head>" + NO_SOFTWARE_MSAA, 1)
+    if scripts != 1 or ws not in replaced or overlay not in replaced or NO_SOFTWARE_MSAA not in replaced:
         raise RuntimeError("Drake's meshcat.html changed: the teleop page cannot point it at Meshcat")
     return replaced
 

@@ -59,6 +59,9 @@ def test_takes_start_end_discard_keep_in_the_real_page(chromium, tmp_path):
                          "a tap moves the tool 1 mm"):  # fmt: skip
                 assert said in text, text
             assert page.evaluate("viewer.gui.closed") is False
+            # Headless Chromium renders in software: the scene without multisampling.
+            assert page.evaluate("window.hemgSoftwareRendering") is True
+            assert page.evaluate("viewer.renderer.getContext().getContextAttributes().antialias") is False
             box = page.evaluate("JSON.stringify(document.getElementById('hemg-panel')"
                                 ".getBoundingClientRect())")  # fmt: skip
             assert '"x":8' in box
