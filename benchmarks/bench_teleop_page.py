@@ -137,10 +137,10 @@ def chromium_processes(pid):
                 continue
             with open(f"/proc/{entry}/cmdline", "rb") as line:
                 found = re.search(rb"--type=([\w-]+)", line.read())  # helpers rewrite theirs
-        except OSError:
+            seconds = cpu_seconds(int(entry))
+        except OSError:  # the process ended meanwhile
             continue
-        kind = found.group(1).decode() if found else "browser"
-        by_type[kind] += cpu_seconds(int(entry))
+        by_type[found.group(1).decode() if found else "browser"] += seconds
     return by_type
 
 
@@ -202,6 +202,7 @@ def run(task, taps, hold, screenshot, seed):
                    cpu_seconds(page.process.pid, group=True) - cpu_from[1])  # fmt: skip
             kinds = chromium_processes(page.process.pid)
             kinds.subtract(kinds_from)
+            kinds = +kinds  # a helper that ended during the take: not counted
             load.append(os.getloadavg()[0])
             page.press("KeyK")
             out, _ = command.communicate(timeout=600)

@@ -58,10 +58,12 @@ def test_pin_swings_correction_and_weight(diagnose, tmp_path):
     labels = {"operator": "nominal", "delay_ms": "250", "mode": "emg"}
     _trial(tmp_path, "a", labels, {"demonstration.pin_out": 1.0}, rise=rise,
            f_WE=np.zeros((len(T), 3)), activation=activation, weight=weight)  # fmt: skip
-    # A failed trial is not read.
-    (tmp_path / "trials" / "b").mkdir()
+    # A failed trial is not read, though its logs are there.
+    other = {"operator": "nominal", "delay_ms": "0", "mode": "none"}
+    _trial(tmp_path, "b", other, {"demonstration.pin_out": 1.0}, rise=rise,
+           f_WE=np.zeros((len(T), 3)), activation=activation, weight=weight)  # fmt: skip
     (tmp_path / "trials" / "b" / "trial.json").write_text(
-        json.dumps({"status": "failed", "labels": labels, "metrics": {}}), encoding="utf-8")
+        json.dumps({"status": "failed", "labels": other, "metrics": {}}), encoding="utf-8")
     cells = diagnose.diagnose(tmp_path)
     assert list(cells) == [("nominal", 250, "emg")]
     (row,) = cells[("nominal", 250, "emg")]

@@ -257,8 +257,13 @@ NO_SOFTWARE_MSAA = """<script>(function() {
   let software = false;
   try {
     const gl = document.createElement("canvas").getContext("webgl");
-    const info = gl && gl.getExtension("WEBGL_debug_renderer_info");
-    software = !!info && /swiftshader|llvmpipe|software/i.test(gl.getParameter(info.UNMASKED_RENDERER_WEBGL));
+    if (gl) {
+      const info = gl.getExtension("WEBGL_debug_renderer_info");
+      software = /swiftshader|llvmpipe|software/i.test(
+        gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+      const lose = gl.getExtension("WEBGL_lose_context");
+      if (lose) lose.loseContext();  // the probe's context, not kept
+    }
   } catch (e) {}
   if (!software) return;
   const getContext = HTMLCanvasElement.prototype.getContext;

@@ -146,7 +146,9 @@ def hold_towards(driver, goal, *, near, axes="xz", slack=1e-3, timeout=120.0):
     (the page echoes the keys at once): the key of the axis with the longer way is held
     until the cross is within ``near`` (m) of the goal along it (or past it); the other
     axis' key is held while the cross lags the line by more than ``slack`` (m) along that
-    axis, and let go once it is back on it. Then the target settles; taps
+    axis, and let go once it is back on it. Each press of that key moves one tap, then
+    nothing for the page's hold delay (0.25 s), so near 45 degrees the cross can lag the
+    line by a few millimetres before it catches up. Then the target settles; taps
     (:meth:`PageDriver.step_towards`) do the rest."""
     start = driver.position(TARGET)
     units = {a: driver.directions[a] / np.linalg.norm(driver.directions[a]) for a in axes}
