@@ -105,22 +105,11 @@ WATCHER = """
 ROBOT_MM = 0.2
 
 
-def cpu_seconds(pid, group=False):
-    """User + system CPU seconds of process ``pid`` (its threads), or of its process group."""
-    pgid = os.getpgid(pid)
-    total = 0.0
-    for entry in os.listdir("/proc") if group else [str(pid)]:
-        if not entry.isdigit():
-            continue
-        try:
-            if group and os.getpgid(int(entry)) != pgid:
-                continue
-            with open(f"/proc/{entry}/stat") as stat:
-                fields = stat.read().rsplit(")", 1)[1].split()
-            total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-        except (OSError, ValueError, IndexError):
-            continue
-    return total
+def cpu_seconds(pid):
+    """User + system CPU seconds of process ``pid`` (its threads)."""
+    with open(f"/proc/{pid}/stat") as stat:
+        fields = stat.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def chromium_processes(pid):
@@ -173,8 +162,8 @@ def run(task, taps, hold, screenshot, seed):
                     break
                 except RuntimeError:
                     print("Enter again", file=sys.stderr)
-            cpu_from = (cpu_seconds(command.pid), cpu_seconds(page.process.pid, group=True))
             kinds_from = chromium_processes(page.process.pid)
+            cpu_from = (cpu_seconds(command.pid), sum(kinds_from.values()))
             load = [os.getloadavg()[0]]
             time.sleep(1.0)
             for k in range(taps):
@@ -198,9 +187,8 @@ def run(task, taps, hold, screenshot, seed):
             robot = np.array(page.evaluate("window.hemgRobot") or [])
             page.press("Escape")
             wait_for(page, "ended", timeout=300.0)
-            cpu = (cpu_seconds(command.pid) - cpu_from[0],
-                   cpu_seconds(page.process.pid, group=True) - cpu_from[1])  # fmt: skip
             kinds = chromium_processes(page.process.pid)
+            cpu = (cpu_seconds(command.pid) - cpu_from[0], sum(kinds.values()) - cpu_from[1])
             kinds.subtract(kinds_from)
             kinds = +kinds  # a helper that ended during the take: not counted
             load.append(os.getloadavg()[0])

@@ -229,14 +229,7 @@ OVERLAY = r"""
   const hook = () => {
     if (!(window.viewer && viewer.render && viewer.renderer)) { setTimeout(hook, 100); return; }
     const render = viewer.render.bind(viewer);
-    let software = false;
-    try {
-      const gl = viewer.renderer.getContext();
-      const info = gl.getExtension("WEBGL_debug_renderer_info");
-      const name = info ? gl.getParameter(info.UNMASKED_RENDERER_WEBGL) : "";
-      software = /swiftshader|llvmpipe|software/i.test(name);
-    } catch (e) {}
-    window.hemgSoftwareRendering = software;
+    const software = window.hemgSoftwareRendering === true;  // NO_SOFTWARE_MSAA's probe
     viewer.render = function() {
       const now = performance.now();
       if (software && !urgent && now - lastRender < 1000 / SOFTWARE_FPS) return;
@@ -250,8 +243,9 @@ OVERLAY = r"""
 """
 
 
-# Before Meshcat creates its WebGL context: on a software renderer (SwiftShader, llvmpipe)
-# ask for no multisampling. Measured in headless Chromium (docs/teleop_browser.md): a key to
+# Before Meshcat creates its WebGL context: whether WebGL renders in software (SwiftShader,
+# llvmpipe; window.hemgSoftwareRendering, read by the overlay), and there ask for no
+# multisampling. Measured in headless Chromium (docs/teleop_browser.md): a key to
 # the cross's motion 19-49 ms median without it, 65-115 ms with it.
 NO_SOFTWARE_MSAA = """<script>(function() {
   let software = false;
@@ -265,6 +259,7 @@ NO_SOFTWARE_MSAA = """<script>(function() {
       if (lose) lose.loseContext();  // the probe's context, not kept
     }
   } catch (e) {}
+  window.hemgSoftwareRendering = software;
   if (!software) return;
   const getContext = HTMLCanvasElement.prototype.getContext;
   HTMLCanvasElement.prototype.getContext = function(type, attributes) {
