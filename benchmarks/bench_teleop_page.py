@@ -98,6 +98,11 @@ WATCHER = """
     requestAnimationFrame(watch);
   }
   requestAnimationFrame(watch);
+  // The frames the page renders, and its software frame rate (the page's pace) each 0.5 s.
+  window.hemgFrames = 0; window.hemgPaced = [];
+  const render = viewer.renderer.render.bind(viewer.renderer);
+  viewer.renderer.render = (...a) => { window.hemgFrames++; return render(...a); };
+  setInterval(() => window.hemgPaced.push(window.hemgPace.fps()), 500);
 })();
 """
 # The robot has moved when its hand body is this far (mm) from where it was at the key
@@ -162,6 +167,8 @@ def run(task, taps, hold, screenshot, seed):
                     break
                 except RuntimeError:
                     print("Enter again", file=sys.stderr)
+            frames_from, pace_from = page.evaluate("[hemgFrames, hemgPaced.length]")
+            wall_from = time.monotonic()
             kinds_from = chromium_processes(page.process.pid)
             cpu_from = (cpu_seconds(command.pid), sum(kinds_from.values()))
             load = [os.getloadavg()[0]]
@@ -188,6 +195,9 @@ def run(task, taps, hold, screenshot, seed):
             page.press("Escape")
             wait_for(page, "ended", timeout=300.0)
             kinds = chromium_processes(page.process.pid)
+            frames = page.evaluate("hemgFrames") - frames_from
+            frame_rate = frames / (time.monotonic() - wall_from)
+            pace = [x for x in page.evaluate("hemgPaced")[pace_from:] if x is not None]
             cpu = (cpu_seconds(command.pid) - cpu_from[0], sum(kinds.values()) - cpu_from[1])
             kinds.subtract(kinds_from)
             kinds = +kinds  # a helper that ended during the take: not counted
@@ -219,6 +229,9 @@ def run(task, taps, hold, screenshot, seed):
           f"start, {load[1]:.1f} at its end, 2 cores)")  # fmt: skip
     print("  Chromium by process, CPU s per simulated second: " + ", ".join(
         f"{kind} {seconds / simulated:.2f}" for kind, seconds in kinds.most_common()))
+    print(f"  the page rendered {frame_rate:.1f} frames a second" + (
+        f"; its software frame cap (pace) median {np.median(pace):g}, {min(pace):g}-"
+        f"{max(pace):g} fps" if pace else " (a GPU: no cap)"))
     for name, values in (("the target (the page's local echo of the keys)", latencies),
                          (f"the robot (its hand {ROBOT_MM} mm on the page)", robot)):
         if len(values):

@@ -183,6 +183,8 @@ class TeleopPage:
                 values["activation"] = float(activation)
             if assist is not None:
                 values["assist"] = dict(assist)
+            # The page paces its software rendering on it (browser_server.OVERLAY's pace).
+            values["rate"] = None if rate is None else round(float(rate), 3)
             if rate is not None:
                 values["slow"] = (
                     f"the simulation runs at {rate:.2f}x real time: motion is slowed"

@@ -106,6 +106,32 @@ OVERLAY = r"""
     if (scene) scene.close();  // the take's buttons and sliders show without scrolling
   };
   openControls();
+  // A software renderer (no GPU: SwiftShader, llvmpipe) spends tens of ms of CPU on each
+  // frame the page shows, whatever changed in it (a bar, a slider, the scene), taken from
+  // the simulation on the same cores. There the page gives way: it renders at half the
+  // resolution, everything it changes is shown in one frame, at most `fps` times a second
+  // (a key going down: at once), and `fps` follows the simulation's real-time factor (the
+  // server's `rate`, once a second): halved while the simulation falls behind, one more
+  // while it keeps up (docs/teleop_browser.md, "Pacing").
+  const software = window.hemgSoftwareRendering === true;  // NO_SOFTWARE_MSAA's probe
+  const SOFTWARE_PIXEL_RATIO = 0.5, FPS_MIN = 2, FPS_MAX = 15, BEHIND = 0.97, KEPT_UP = 0.99;
+  const nextFps = (fps, rate) =>
+    rate < BEHIND ? Math.max(FPS_MIN, fps / 2) : rate >= KEPT_UP ? Math.min(FPS_MAX, fps + 1) : fps;
+  let fps = 8, adapted = 0, urgent = false, lastRender = -1e9;
+  function pace(rate) {
+    const now = performance.now();
+    if (!software || typeof rate !== "number" || now - adapted < 1000) return;
+    fps = nextFps(fps, rate);
+    adapted = now;
+  }
+  window.hemgPace = {nextFps, fps: () => software ? fps : null};  // for tests and benchmarks
+  if (software) {
+    // Meshcat's real-time plot redraws on each of its messages (4 a second of simulated
+    // time), each a frame: the page's "slow" line says it instead.
+    const style = document.createElement("style");
+    style.textContent = "#stats-plot { display: none !important; }";
+    document.head.appendChild(style);
+  }
   // Held keys: a tap moves one step; held past HOLD_DELAY, a set speed in wall-clock time.
   const axes = {};
   for (const [name, [down, up]] of Object.entries(config.keys)) {
@@ -159,20 +185,23 @@ OVERLAY = r"""
   let shift = false;
   window.addEventListener("keydown", (e) => { shift = e.shiftKey; }, true);
   window.addEventListener("keyup", (e) => { shift = e.shiftKey; }, true);
-  function tick() {
-    const now = performance.now();
+  function moveHeld(now) {
     for (const h of Object.values(held)) {
       const from = Math.max(h.last, h.since + 1000 * config.hold_delay);
       if (now > from) nudge(h.axis, h.axis.speed * (shift ? config.fine : 1) * (now - from) / 1000);
       h.last = now;
     }
+  }
+  function tick() {
     requestAnimationFrame(tick);
+    // In software the render moves them (below), so the sliders change in its frames.
+    if (!software) moveHeld(performance.now());
+    else if (Object.keys(held).length && window.viewer) viewer.set_dirty();
   }
   requestAnimationFrame(tick);
-  // The state and read-outs, from the server that served this page. Software-rendered
-  // pages pay a whole frame for any change of the overlay, so an element is written only
-  // when its text or bar changes, and the writes wait for the next frame Meshcat renders
-  // anyway (at most FLUSH_MS: a still scene still shows the state).
+  // The state and read-outs, from the server that served this page. An element is written
+  // only when its text or bar changes, in the next frame Meshcat renders (a still scene is
+  // asked for one after FLUSH_MS).
   const POLL_MS = 100, FLUSH_MS = 150;
   const el = (id) => document.getElementById(id);
   const shown = {}, pending = {};
@@ -214,26 +243,26 @@ OVERLAY = r"""
         text("hemg-phase", "state " + (a.phase + 1) + " of " + a.states
           + " (belief " + a.belief.toFixed(2) + "), confidence " + a.confidence.toFixed(2));
       }
+      pace(s.rate);
     } catch (e) { text("hemg-state", "the teleop command is not running"); }
-    if (Object.keys(pending).length && performance.now() - lastFlush > FLUSH_MS) flush();
+    if (Object.keys(pending).length && performance.now() - lastFlush > FLUSH_MS) {
+      if (window.viewer && viewer.renderer) viewer.set_dirty(); else flush();
+    }
     setTimeout(poll, POLL_MS);
   }
   poll();
-  // Each frame Meshcat renders: the echo over the server's transform, the overlay's writes.
-  // A software renderer (no GPU: SwiftShader, llvmpipe) spends tens of ms of CPU on each
-  // frame, taken from the simulation on the same cores: there the scene is rendered at
-  // most SOFTWARE_FPS times a second (a frame asked for sooner waits: needs_render stays
-  // set), except at once when a key moved the cross.
-  const SOFTWARE_FPS = 15;
-  let urgent = false, lastRender = -1e9;
+  // Each frame Meshcat renders: held keys' motion (software), the echo over the server's
+  // transform, the overlay's writes. In software a frame asked for sooner than 1 / fps
+  // waits (needs_render stays set), except at once when a key moved the cross.
   const hook = () => {
     if (!(window.viewer && viewer.render && viewer.renderer)) { setTimeout(hook, 100); return; }
     const render = viewer.render.bind(viewer);
-    const software = window.hemgSoftwareRendering === true;  // NO_SOFTWARE_MSAA's probe
+    if (software) viewer.renderer.setPixelRatio(SOFTWARE_PIXEL_RATIO);
     viewer.render = function() {
       const now = performance.now();
-      if (software && !urgent && now - lastRender < 1000 / SOFTWARE_FPS) return;
+      if (software && !urgent && now - lastRender < 1000 / fps) return;
       urgent = false; lastRender = now;
+      if (software) moveHeld(now);
       echo(); flush(); render();
     };
   };
@@ -336,7 +365,7 @@ class TeleopPageServer:
         self._html = page_html(drake_page(meshcat), meshcat.port(), config).encode("utf-8")
         self._lock = threading.Lock()
         self._state = dict(state="starting", headline="getting the scene ready", hint="", K=0.0, K_min=0.0,
-                           K_max=1.0, activation=0.0, force=0.0, force_max=60.0, slow="")  # fmt: skip
+                           K_max=1.0, activation=0.0, force=0.0, force_max=60.0, slow="", rate=None)  # fmt: skip
         server = self
 
         class Handler(http.server.BaseHTTPRequestHandler):
@@ -385,7 +414,8 @@ class TeleopPageServer:
 
     def update(self, **values):
         """Set some of the page's read-outs: state ("waiting", "recording", "ended",
-        "saved"), headline, hint, K, K_min, K_max, activation, force, force_max, slow, assist
+        "saved"), headline, hint, K, K_min, K_max, activation, force, force_max, slow, rate
+        (the real-time factor over the last second, or None), assist
         (a dict, :meth:`~hemg_drake.teleop.browser_page.TeleopPage.update`'s)."""
         with self._lock:
             self._state.update(values)

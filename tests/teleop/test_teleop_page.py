@@ -2,10 +2,12 @@
 printed URL opened in headless Chromium, real key events (DevTools ``Input.dispatchKeyEvent``)
 and what the page shows read back from it."""
 
+import json
 import os
 import subprocess
 import sys
 import time
+import urllib.request
 from pathlib import Path
 
 import numpy as np
@@ -62,6 +64,14 @@ def test_takes_start_end_discard_keep_in_the_real_page(chromium, tmp_path):
             # Headless Chromium renders in software: the scene without multisampling.
             assert page.evaluate("window.hemgSoftwareRendering") is True
             assert page.evaluate("viewer.renderer.getContext().getContextAttributes().antialias") is False
+            # ... at half the resolution, without Meshcat's real-time plot (a frame each
+            # redraw), at a frame rate paced by the simulation's: hand values of the law.
+            assert page.evaluate("viewer.renderer.getPixelRatio()") == 0.5
+            assert page.evaluate(
+                "getComputedStyle(document.getElementById('stats-plot')).display") == "none"
+            paced = page.evaluate("[[8, 0.5], [4, 0.9], [2, 0.1], [2, 1.0], [14, 1.2], [15, 1.0],"
+                                  " [8, 0.98], [8, 0.97]].map(([f, r]) => hemgPace.nextFps(f, r))")
+            assert paced == [4, 2, 2, 3, 15, 15, 8, 8]
             box = page.evaluate("JSON.stringify(document.getElementById('hemg-panel')"
                                 ".getBoundingClientRect())")  # fmt: skip
             assert '"x":8' in box
@@ -88,6 +98,10 @@ def test_takes_start_end_discard_keep_in_the_real_page(chromium, tmp_path):
                 page.press("ArrowRight")
                 time.sleep(0.15)
             time.sleep(0.5)
+            # The server's real-time factor reaches the page, which paces on it.
+            with urllib.request.urlopen(command.url + "state") as reply:
+                assert 0.0 < json.load(reply)["rate"] < 10.0
+            assert 2 <= page.evaluate("hemgPace.fps()") <= 15
             end_take(page)
             code, out = command.finish()
     finally:
