@@ -28,6 +28,9 @@ class AssistConfig:
     # Disagreement scale delta (m): the weight is multiplied by exp(-(d / delta)^2), d the
     # distance between the operator's command and the policy's point.
     disagreement_scale: float = checked(0.02, positive=True)
+    # Delay-aware trust T_t (s; 0: off): modes confidence and emg keep a weight of at least
+    # weight * min(1, T / T_t), T the link's one-way delay (docs/shared_control.md).
+    trust_delay: float = checked(0.0)
     # Co-contraction band of the EMG chain's activation (dimensionless): below ``low`` the
     # operator lets the model lead, above ``high`` the model gives way entirely.
     activation_low: float = checked(0.2, fraction=True)

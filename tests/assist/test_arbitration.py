@@ -30,6 +30,37 @@ def test_target_weight_by_hand():
         assert got == pytest.approx(expected * factor, rel=1e-12, abs=1e-15)
 
 
+def test_delay_trust_floor_by_hand():
+    tense = dict(confidence=0.5, disagreement=0.02, activation=0.9, **LAW)  # emg's law: 0
+    for delay, expected in ((0.0, 0.0), (0.1, 0.16), (0.25, 0.4), (0.5, 0.8), (2.0, 0.8)):
+        got = target_weight("emg", weight=0.8, delay=delay, trust_delay=0.5, **tense)
+        assert got == pytest.approx(expected, rel=1e-12, abs=1e-15)
+    # Above the floor the law stands; off (T_t = 0) or in the other modes there is none.
+    law = 0.8 * 0.5 * np.exp(-1.0)  # 0.147
+    got = target_weight("confidence", weight=0.8, delay=0.05, trust_delay=0.5, **tense)
+    assert got == pytest.approx(law, rel=1e-12)
+    assert target_weight("emg", weight=0.8, delay=0.5, trust_delay=0.0, **tense) == 0.0
+    assert target_weight("fixed", weight=0.8, delay=0.5, trust_delay=0.1, **tense) == 0.8
+    assert target_weight("none", weight=0.8, delay=0.5, trust_delay=0.1, **tense) == 0.0
+
+
+def test_delay_trust_through_the_system():
+    # A tense operator (activation above the band) over a 0.25 s link: the weight settles on
+    # W * 0.25 / 0.5 = 0.3 (the first-order filter, tau 0.1 s, for 2 s: e^-20 left).
+    config = AssistConfig(mode="emg", weight=0.6, trust_delay=0.5)
+    arbitration = Harness(config, delay=0.25)
+    arbitration.set(activation=1.0)
+    arbitration.step(2000)
+    assert arbitration.out("weight")[0] == pytest.approx(0.3, abs=1e-8)
+    command, policy = np.array([0.1, 0.2, 0.3]), np.array([0.4, -0.5, 0.6])
+    np.testing.assert_allclose(arbitration.out("p_WE_reference"), 0.7 * command + 0.3 * policy,
+                               atol=1e-8)  # fmt: skip
+    untrusting = Harness(dc.replace(config, trust_delay=0.0), delay=0.25)
+    untrusting.set(activation=1.0)
+    untrusting.step(2000)
+    assert untrusting.out("weight")[0] == 0.0
+
+
 def test_newest_command_age_by_hand():
     assert newest_command_age(2.0, 0.25, 0.0, 0.0) == 0.25  # no gap: the delay
     # Sent in [1.0, 1.5) is lost: at t = 1.45 with 0.25 delay, sent 1.2 is lost, the newest
