@@ -10,15 +10,15 @@ from hemg_drake.assist.config import ASSIST_MODES, AssistConfig
 
 def target_weight(
     mode, *, weight, confidence, disagreement, scale, activation, low, high, delay=0.0,
-    trust_delay=0.0,
+    trust_delay=0.0, trust_weight=1.0,
 ):  # fmt: skip
     """The arbitration law's target weight w* in [0, 1] (docs/shared_control.md).
 
     - ``none``: 0; ``fixed``: W;
     - ``confidence``: W kappa exp(-(d / delta)^2);
     - ``emg``: W kappa exp(-(d / delta)^2) (1 - c), c = clip((a - a_lo) / (a_hi - a_lo), 0, 1);
-    - ``confidence`` and ``emg`` with ``trust_delay`` T_t > 0: at least W min(1, T / T_t),
-      T the one-way delay: under delay neither the disagreement nor the tension say the
+    - ``confidence`` and ``emg`` with ``trust_delay`` T_t > 0: at least W_t min(1, T / T_t),
+      T the one-way delay, W_t ``trust_weight``: under delay neither the disagreement nor the tension say the
       operator is right (the command is late and a person working a late loop tenses).
 
     Parameters
@@ -32,6 +32,7 @@ def target_weight(
     low, high : floats, a_lo < a_hi, the co-contraction band
     delay : float, T (s), the link's one-way delay
     trust_delay : float, T_t (s); 0: no floor
+    trust_weight : float, W_t in [0, 1], the floor's largest value
     """
     if mode == "none":
         return 0.0
@@ -41,7 +42,7 @@ def target_weight(
     if mode == "emg":
         w *= 1.0 - float(np.clip((activation - low) / (high - low), 0.0, 1.0))
     if trust_delay > 0.0:
-        w = max(w, float(weight) * min(1.0, float(delay) / float(trust_delay)))
+        w = max(w, float(trust_weight) * min(1.0, float(delay) / float(trust_delay)))
     return float(w)
 
 
@@ -216,6 +217,7 @@ def Arbitration_(T):
                     high=config.activation_high,
                     delay=self._link_values(context)[0],
                     trust_delay=config.trust_delay,
+                    trust_weight=config.trust_weight,
                 )
             state[0] += self._rate * (target - state[0])
             state[1:4] = command

@@ -29,8 +29,10 @@ class AssistConfig:
     # distance between the operator's command and the policy's point.
     disagreement_scale: float = checked(0.02, positive=True)
     # Delay-aware trust T_t (s; 0: off): modes confidence and emg keep a weight of at least
-    # weight * min(1, T / T_t), T the link's one-way delay (docs/shared_control.md).
+    # W_t min(1, T / T_t), T the link's one-way delay, W_t = trust_weight
+    # (docs/shared_control.md).
     trust_delay: float = checked(0.0)
+    trust_weight: float = checked(1.0, fraction=True)
     # Co-contraction band of the EMG chain's activation (dimensionless): below ``low`` the
     # operator lets the model lead, above ``high`` the model gives way entirely.
     activation_low: float = checked(0.2, fraction=True)

@@ -33,8 +33,12 @@ def test_target_weight_by_hand():
 def test_delay_trust_floor_by_hand():
     tense = dict(confidence=0.5, disagreement=0.02, activation=0.9, **LAW)  # emg's law: 0
     for delay, expected in ((0.0, 0.0), (0.1, 0.16), (0.25, 0.4), (0.5, 0.8), (2.0, 0.8)):
-        got = target_weight("emg", weight=0.8, delay=delay, trust_delay=0.5, **tense)
+        got = target_weight("emg", weight=0.5, delay=delay, trust_delay=0.5, trust_weight=0.8,
+                            **tense)  # fmt: skip
         assert got == pytest.approx(expected, rel=1e-12, abs=1e-15)
+    # The floor's cap W_t defaults to 1 (the model may lead alone), whatever W is.
+    got = target_weight("emg", weight=0.5, delay=0.75, trust_delay=0.5, **tense)
+    assert got == 1.0
     # Above the floor the law stands; off (T_t = 0) or in the other modes there is none.
     law = 0.8 * 0.5 * np.exp(-1.0)  # 0.147
     got = target_weight("confidence", weight=0.8, delay=0.05, trust_delay=0.5, **tense)
@@ -46,8 +50,8 @@ def test_delay_trust_floor_by_hand():
 
 def test_delay_trust_through_the_system():
     # A tense operator (activation above the band) over a 0.25 s link: the weight settles on
-    # W * 0.25 / 0.5 = 0.3 (the first-order filter, tau 0.1 s, for 2 s: e^-20 left).
-    config = AssistConfig(mode="emg", weight=0.6, trust_delay=0.5)
+    # W_t * 0.25 / 0.5 = 0.3 (the first-order filter, tau 0.1 s, for 2 s: e^-20 left).
+    config = AssistConfig(mode="emg", weight=0.5, trust_delay=0.5, trust_weight=0.6)
     arbitration = Harness(config, delay=0.25)
     arbitration.set(activation=1.0)
     arbitration.step(2000)
