@@ -32,7 +32,10 @@ fixes, quiet machine: 0.38x real time, key to target 215 ms median (p90 337, max
 Before and after in turn at load average 15-17 (four other agents): 0.07x both; CPU per
 simulated second, command / Chromium, 1.89 / 6.11 s before, 1.77 / 5.47 s after; key to
 target (the local echo) 6 ms median (p90 52, max 78) after. The real-time factor needs the
-lead's quiet machine.
+lead's quiet machine. With the page pacing itself on a software renderer (3 December 2026,
+idle machine, three runs each in turn): real-time factor 0.45-0.52x before, 0.69-0.89x
+after; Chromium 2.1-2.7 CPU s per simulated second before, 0.63-0.90 after; the page then
+renders about 3 frames a second (docs/teleop_browser.md).
 
     .venv/bin/python benchmarks/bench_teleop_page.py [--task cotter_pin] [--taps 20]
 """
