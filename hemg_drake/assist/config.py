@@ -23,7 +23,8 @@ class AssistConfig:
     # The fitted model (``model.npz`` written by ``hemg-drake learn``), read when mode is
     # not none. A relative path is taken from the working directory.
     model: str = ""
-    # Weight of mode "fixed", and the largest weight of modes "confidence" and "emg".
+    # Weight of mode "fixed", and the largest weight of modes "confidence" and "emg" (the
+    # delay-aware floor, trust_weight, may exceed it).
     weight: float = checked(0.5, fraction=True)
     # Disagreement scale delta (m): the weight is multiplied by exp(-(d / delta)^2), d the
     # distance between the operator's command and the policy's point.

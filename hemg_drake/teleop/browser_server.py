@@ -117,14 +117,15 @@ OVERLAY = r"""
   const SOFTWARE_PIXEL_RATIO = 0.5, FPS_MIN = 2, FPS_MAX = 15, BEHIND = 0.97, KEPT_UP = 0.99;
   const nextFps = (fps, rate) =>
     rate < BEHIND ? Math.max(FPS_MIN, fps / 2) : rate >= KEPT_UP ? Math.min(FPS_MAX, fps + 1) : fps;
-  let fps = 8, adapted = 0, urgent = false, lastRender = -1e9;
+  let fps = 8, adapted = 0, paced = 0, urgent = false, lastRender = -1e9;
   function pace(rate) {
     const now = performance.now();
     if (!software || typeof rate !== "number" || now - adapted < 1000) return;
     fps = nextFps(fps, rate);
-    adapted = now;
+    adapted = now; paced++;
   }
-  window.hemgPace = {nextFps, fps: () => software ? fps : null};  // for tests and benchmarks
+  // For tests and benchmarks: the law, the frame rate now, how many times it was paced.
+  window.hemgPace = {nextFps, fps: () => software ? fps : null, paced: () => paced};
   if (software) {
     // Meshcat's real-time plot redraws on each of its messages (4 a second of simulated
     // time), each a frame: the page's "slow" line says it instead.
@@ -180,18 +181,20 @@ OVERLAY = r"""
     held[e.code] = {axis, since: now, last: now};
     nudge(axis, axis.tap * (e.shiftKey ? config.fine : 1), true);
   }, true);
-  window.addEventListener("keyup", (e) => { delete held[e.code]; }, true);
-  window.addEventListener("blur", () => { for (const k in held) delete held[k]; });
+  // A released key first gets its motion up to the release (in software the last render
+  // may be up to 1 / fps ago).
+  const release = (code) => { if (held[code]) moveKey(held[code], performance.now()); delete held[code]; };
+  window.addEventListener("keyup", (e) => release(e.code), true);
+  window.addEventListener("blur", () => { for (const k in held) release(k); });
   let shift = false;
   window.addEventListener("keydown", (e) => { shift = e.shiftKey; }, true);
   window.addEventListener("keyup", (e) => { shift = e.shiftKey; }, true);
-  function moveHeld(now) {
-    for (const h of Object.values(held)) {
-      const from = Math.max(h.last, h.since + 1000 * config.hold_delay);
-      if (now > from) nudge(h.axis, h.axis.speed * (shift ? config.fine : 1) * (now - from) / 1000);
-      h.last = now;
-    }
+  function moveKey(h, now) {
+    const from = Math.max(h.last, h.since + 1000 * config.hold_delay);
+    if (now > from) nudge(h.axis, h.axis.speed * (shift ? config.fine : 1) * (now - from) / 1000);
+    h.last = now;
   }
+  function moveHeld(now) { for (const h of Object.values(held)) moveKey(h, now); }
   function tick() {
     requestAnimationFrame(tick);
     // In software the render moves them (below), so the sliders change in its frames.
@@ -246,7 +249,7 @@ OVERLAY = r"""
       pace(s.rate);
     } catch (e) { text("hemg-state", "the teleop command is not running"); }
     if (Object.keys(pending).length && performance.now() - lastFlush > FLUSH_MS) {
-      if (window.viewer && viewer.renderer) viewer.set_dirty(); else flush();
+      if (software && window.viewer && viewer.renderer) viewer.set_dirty(); else flush();
     }
     setTimeout(poll, POLL_MS);
   }
