@@ -18,8 +18,9 @@ def target_weight(
     - ``confidence``: W kappa exp(-(d / delta)^2);
     - ``emg``: W kappa exp(-(d / delta)^2) (1 - c), c = clip((a - a_lo) / (a_hi - a_lo), 0, 1);
     - ``confidence`` and ``emg`` with ``trust_delay`` T_t > 0: at least W_t min(1, T / T_t),
-      T the one-way delay, W_t ``trust_weight``: under delay neither the disagreement nor the tension say the
-      operator is right (the command is late and a person working a late loop tenses).
+      T the one-way delay, W_t ``trust_weight``: under delay neither the disagreement nor
+      the tension say the operator is right (the command is late and a person working a
+      late loop tenses).
 
     Parameters
     ----------

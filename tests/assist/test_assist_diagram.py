@@ -113,6 +113,16 @@ def test_the_scenario_refuses_guidance_without_the_passivity_controller(model_pa
         scenario("assist.mode=emg")
 
 
+def test_malformed_trust_settings_name_the_key():
+    for override, said in (("assist.trust_weight=1.5", "must lie in [0, 1], got 1.5"),
+                           ("assist.trust_delay=-0.1", "must not be negative, got -0.1"),
+                           ("assist.trust_delay=abc", "must be a number, got 'abc'")):  # fmt: skip
+        with pytest.raises(ValueError) as error:
+            scenario(override)
+        key = override.split("=")[0]
+        assert str(error.value) == f"--set {override}: key '{key}' {said}"
+
+
 def test_a_missing_model_file_names_the_key(tmp_path):
     broken = scenario("assist.mode=emg", f"assist.model={tmp_path / 'none.npz'}")
     with pytest.raises(ValueError, match="assist.model"):
