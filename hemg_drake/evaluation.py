@@ -421,6 +421,34 @@ def _drawing_metrics(demos, log):
     }
 
 
+def template_errors(demo, template):
+    """A drawing take's ink against the strokes it was asked to draw (the page's template).
+
+    Parameters
+    ----------
+    demo : Demonstration (time, p_WE, f_WE)
+    template : list of (k, 3) polylines (m, W): the strokes to draw.
+
+    Returns
+    -------
+    (strokes drawn, [shape error (m) of the ink matched to each template stroke, None where
+    none was]): seen from above, matched by position (:func:`match_strokes`), each error
+    ``shape`` of :func:`~hemg_drake.tasks.metrics.stroke_errors`, whichever way the stroke
+    was drawn (the placement left out: the template only shows where to draw).
+    """
+    drawn = [s[:, :2] for s in strokes(demo.time, demo.p_WE, demo.f_WE)]
+    same = [[np.asarray(t, dtype=float)[:, :2]] for t in template]
+
+    def shape(ink, group):
+        return min(metrics.stroke_errors(ink, group)["shape"],
+                   metrics.stroke_errors(ink[::-1], group)["shape"])  # fmt: skip
+
+    order = match_strokes(drawn, same)
+    return len(drawn), [
+        None if i is None else shape(drawn[i], group) for i, group in zip(order, same, strict=True)
+    ]
+
+
 def format_metrics(results):
     """A plain-text table of metrics per run (run name -> metrics dict): out of sample first
     (against fresh demonstrations, where the record has them), in sample beside it."""

@@ -25,6 +25,7 @@ from hemg_drake.teleop.browser_inputs import (
     save_inputs,
 )
 from hemg_drake.teleop.browser_page import TeleopPage, operator_view
+from hemg_drake.teleop_takes import template_score, template_strokes
 
 # The page is refreshed, and the simulator advanced, in steps of this (s): 32 Hz.
 PAGE_PERIOD = 1 / 32
@@ -49,6 +50,7 @@ class Take:
     master: BrowserMaster
     page_updates: int
     wall_seconds: float
+    score: str | None = None  # the drawing's ink against the template (template_score)
 
 
 def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=None,
@@ -225,14 +227,15 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
         if reason is not None and (live or t >= duration):
             break
     wall = time.perf_counter() - began
+    demo = demonstration_from_logs(
+        built.logger.FindLog(context), built.emg_logger.FindLog(context), seed
+    )
+    score = template_score(scenario, demo)
     if page is not None:
         page.update(t, np.zeros(3), np.zeros(3), scenario.emg.k_min, False)
         if controls is not None:
             controls.mark_keep()
-        page.state("ended", t)
-    demo = demonstration_from_logs(
-        built.logger.FindLog(context), built.emg_logger.FindLog(context), seed
-    )
+        page.state("ended", t, hint=None if score is None else f"{score}; K keeps it, D discards it")
     if recorder is not None:
         if page is not None:
             meshcat.Delete(TeleopPage.PATH)  # the page's marks are no part of the replay
@@ -241,7 +244,7 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
     log = InputsLog(time=times, wall_time=wall_times, rows=rows, end_time=t,
                     end_reason=reason if live else source.end_reason, seed=seed,
                     scenario=scenario.to_yaml())  # fmt: skip
-    return Take(demo, log, built, master, page.updates if page else 0, wall)
+    return Take(demo, log, built, master, page.updates if page else 0, wall, score)
 
 
 def _assist_ports(diagram, master):
@@ -266,22 +269,6 @@ def _assist_values(ports, context):
         belief=float(np.max(h)), confidence=float(values["confidence"][0]),
         on=bool(values["on"][0] >= 0.5), link_lost=bool(values["link_lost"][0] >= 0.5),
     )  # fmt: skip
-
-
-def template_strokes(plan):
-    """The plan's pen-down strokes: a list of (k, 3) polylines (its waypoints; the plan runs
-    straight between them)."""
-    strokes, current = [], None
-    for i, down in enumerate(plan.pen_down):
-        if down:
-            current = [plan.points[i]] if current is None else current
-            current.append(plan.points[i + 1])
-        elif current is not None:
-            strokes.append(np.array(current))
-            current = None
-    if current is not None:
-        strokes.append(np.array(current))
-    return strokes
 
 
 def _takes_hint(folder):
@@ -452,6 +439,8 @@ def _take(scenario, folder, out_dir, duration, replay_inputs, replays, progress,
         f"take {c}: {log.end_time:.2f} s ({log.end_reason}), "
         f"{len(log.time)} input samples, in {take.wall_seconds:.1f} s of wall time"
     )
+    if take.score is not None:
+        progress(f"take {c}: {take.score}")
     span = input_span(take.master, log.time, log.rows, log.end_time)
     if replay_inputs is None:
         if log.end_reason == "page closed":

@@ -88,6 +88,37 @@ def trim_demonstration(demo, t_start, t_end, *, emg_period):
     return dc.replace(demo, **changes)
 
 
+def template_strokes(plan):
+    """The plan's pen-down strokes: a list of (k, 3) polylines (its waypoints; the plan runs
+    straight between them)."""
+    strokes, current = [], None
+    for i, down in enumerate(plan.pen_down):
+        if down:
+            current = [plan.points[i]] if current is None else current
+            current.append(plan.points[i + 1])
+        elif current is not None:
+            strokes.append(np.array(current))
+            current = None
+    if current is not None:
+        strokes.append(np.array(current))
+    return strokes
+
+
+def template_score(scenario, demo):
+    """A drawing take's ink against the template the page shows, in a line (the person
+    decides on it whether to keep the take); None for another task."""
+    from hemg_drake.evaluation import template_errors
+
+    if scenario.task != "drawing":
+        return None
+    template = template_strokes(scenario.task_plan())
+    drawn, errors = template_errors(demo, template)
+    if drawn == 0:
+        return "no ink"
+    shapes = " / ".join("-" if e is None else f"{1e3 * e:.1f}" for e in errors)
+    return f"{drawn} ink strokes for the template's {len(template)}, {shapes} mm off in shape"
+
+
 def describe_trim(c, span, end_time):
     """One line for the terminal: what the trim of take ``c`` removed."""
     t_start, t_end = span

@@ -1,5 +1,7 @@
 """The reproduction's record: Table II measured three ways, and success checked on the physics."""
 
+import dataclasses as dc
+
 import numpy as np
 import pytest
 
@@ -231,3 +233,43 @@ def test_stroke_runs_merge_only_breaks_shorter_than_50_ms():
         f[a:b, 2] = 1.0
     runs, breaks = evaluation.stroke_runs(t, f)
     assert runs == [(0, 46)] and breaks == [2]
+
+
+# --- a take's ink against the page's template (template_errors) ----------------------------
+
+
+def _demo_of(t, p, f):
+    return dc.replace(_drawing_demo(1, (0.0, 0.0)), time=t, p_WE=p, f_WE=f)
+
+
+def test_a_take_is_scored_against_the_template_by_shape_hand_values():
+    shapes = [np.column_stack([s, np.zeros(len(s))]) for s in _shapes()]
+    a = 0.002  # the template's line tilted: its ends a above and a below the drawn line
+    tilted = shapes[0][[0, -1]] + [[0.0, a, 0.0], [0.0, -a, 0.0]]
+    # Both resampled to 50 points evenly along x: the gaps a (1 - 2u), u = i / 49, whose mean
+    # square is (n + 1) / (3 (n - 1)) a^2 for n = 50 points.
+    expected = a * np.sqrt(51 / 147)
+    drawn, errors = evaluation.template_errors(_demo_of(*_drawing(order=(2, 0, 1))),
+                                               [shapes[1], tilted, shapes[2]])  # fmt: skip
+    assert drawn == 3
+    # The arc and the zig-zag drawn as sampled (150 points, cutting the template's vertices
+    # by up to 0.3 mm at the zig-zag's corners): next to nothing.
+    assert errors[0] < 1e-4 and errors[2] < 3e-4
+    assert errors[1] == pytest.approx(expected, rel=1e-9)
+    # Where the template stands does not count (shape only), nor which way a stroke was drawn.
+    t, p, f = _drawing(shift=((0.004, -0.003), (0, 0), (0, 0)))
+    p_back = p.copy()
+    down = f[:, 2] > 0
+    first = np.flatnonzero(down)[:150]
+    p_back[first] = p[first][::-1]
+    drawn, errors = evaluation.template_errors(_demo_of(t, p_back, f), [tilted])
+    assert drawn == 3 and errors == [pytest.approx(expected, rel=1e-9)]
+
+
+def test_a_template_stroke_left_undrawn_has_no_error():
+    t, p, f = _drawing()
+    f[250:500, 2] = 0.0  # the second stroke (the arc) drawn in the air
+    template = [np.column_stack([s, np.zeros(len(s))]) for s in _shapes()]
+    drawn, errors = evaluation.template_errors(_demo_of(t, p, f), template)
+    assert drawn == 2 and errors[1] is None
+    assert errors[0] < 1e-9 and errors[2] < 3e-4

@@ -256,3 +256,45 @@ def test_an_enter_pressed_while_the_scene_is_built_starts_the_first_take():
     controls.mark_start()
     with pytest.raises(TimeoutError):
         controls.wait_start()
+
+
+def test_a_drawing_take_is_scored_against_the_template_the_page_shows():
+    from hemg_drake.learning.demos import Demonstration
+    from hemg_drake.scenario import load_scenario, shipped_scenario
+    from hemg_drake.teleop_takes import template_score, template_strokes
+
+    scenario = load_scenario(shipped_scenario("drawing"))
+    template = template_strokes(scenario.task_plan())
+    assert len(template) == 3
+    # The ink: each template stroke at 1 mm spacing along its waypoints, 2 N on the pen,
+    # strokes 0 and 2 as shown, stroke 1 (the zig-zag) moved 3 mm to the side (placement,
+    # not shape) and its middle waypoint 4 mm off; 0.3 s in the air between strokes.
+    points, force = [], []
+    for k, stroke in enumerate(template):
+        corners = np.array(stroke, dtype=float)
+        if k == 1:
+            corners = corners + [0.0, 0.003, 0.0]
+            corners[len(corners) // 2, 0] += 0.004
+        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(corners, axis=0), axis=1))])
+        along = np.linspace(0.0, s[-1], max(20, int(s[-1] / 1e-3)))
+        ink = np.column_stack([np.interp(along, s, c) for c in corners.T])
+        air = np.repeat(ink[:1] + [0.0, 0.0, 0.01], 30, axis=0)
+        points += [air, ink]
+        force += [np.zeros((30, 3)), np.tile([0.0, 0.0, 2.0], (len(ink), 1))]
+    p, f = np.vstack(points), np.vstack(force)
+    n = len(p)
+    t = np.arange(n) * 0.01
+    demo = Demonstration(
+        seed=1, time=t, p_WE=p, v_WE=np.gradient(p, t, axis=0), p_MS=p, p_WE_desired=p,
+        envelope=np.zeros(n), activation=np.zeros(n), gain=np.full(n, 100.0), f_WE=f,
+        emg_time=np.arange(2 * n) * 0.005, emg=np.zeros((2 * n, 8)),
+        muscle_activation=np.zeros(2 * n),
+    )  # fmt: skip
+    line = template_score(scenario, demo)
+    drawn, shapes = line.split(" ink strokes for the template's 3, ")
+    errors = [float(e) for e in shapes.removesuffix(" mm off in shape").split(" / ")]
+    assert drawn == "3"
+    # As drawn: next to nothing (the 1 mm sampling cuts the corners); the zig-zag's moved
+    # waypoint shows in its shape only.
+    assert errors[0] <= 0.2 and errors[2] <= 0.2 and 0.5 < errors[1] < 4.0, line
+    assert template_score(load_scenario(shipped_scenario("cotter_pin")), demo) is None

@@ -35,7 +35,10 @@ def wait_for(page, text, timeout=120.0):
 
 
 def end_take(page, verdict="KeyK"):
-    """End the take (Escape), wait for the page to say so, then keep (K) or discard (D) it."""
+    """End the take (Escape), wait for the page to say so, then keep (K) or discard (D) it;
+    returns the hint the page showed with "ended" (a drawing's score against the template)."""
     page.press("Escape")
     wait_for(page, "ended")
+    hint = page.evaluate("document.getElementById('hemg-hint').textContent") or ""
     page.press(verdict)
+    return hint
