@@ -25,7 +25,8 @@ keys at irregular moments, then a key held for a few seconds, Escape, K. Printed
 - the held key's speed in wall-clock time (the slider's change over the wall time it was
   held), against ``HOLD_MM_S``.
 
-``--screenshot PNG`` also writes a picture of the page mid-take (docs/img/teleop_page.png).
+``--screenshot PNG`` also writes a picture of the page mid-take (the README's picture:
+``tests/tooling/page_picture.py``).
 
 Measured (cotter pin, seed 24; docs/teleop_browser.md has the table): before the page's
 fixes, quiet machine: 0.38x real time, key to target 215 ms median (p90 337, max 372).
@@ -67,7 +68,7 @@ from hemg_drake.teleop.browser_inputs import (
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 from tooling.headless_page import HeadlessPage  # noqa: E402  (test tooling, not runtime)
-from tooling.teleop_page import controls_ready, wait_for  # noqa: E402
+from tooling.teleop_page import Command, controls_ready, wait_for  # noqa: E402
 
 # Injected into the page: the wall time from each arrow keydown to the first animation
 # frame in which the stylus target's position differs.
@@ -149,17 +150,12 @@ def target_steps(log):
 
 def run(task, taps, hold, screenshot, seed):
     rng = np.random.default_rng(seed)
-    loader = subprocess.Popen([sys.executable, "-c", "while True: pass"])
     out_dir = Path(tempfile.mkdtemp(prefix="bench-teleop-page-")) / "run"
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    command = subprocess.Popen(
-        [sys.executable, "-m", "hemg_drake.cli", "teleop", task, "--out", str(out_dir),
-         "--port", "0", "--no-replay"],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
-    )  # fmt: skip
+    command = Command(task, "--out", str(out_dir), "--port", "0", "--no-replay")
+    process = command.process
+    loader = subprocess.Popen([sys.executable, "-c", "while True: pass"])
     try:
-        url = command.stdout.readline().split()[2]
-        with HeadlessPage(url, size=(1280, 800)) as page:
+        with HeadlessPage(command.url, size=(1280, 800)) as page:
             wait_for(page, "waiting", timeout=300.0)
             controls_ready(page)
             page.evaluate(WATCHER.replace("ROBOT_MM", str(ROBOT_MM)))
@@ -173,7 +169,7 @@ def run(task, taps, hold, screenshot, seed):
             frames_from, pace_from = page.evaluate("[hemgFrames, hemgPaced.length]")
             wall_from = time.monotonic()
             kinds_from = chromium_processes(page.process.pid)
-            cpu_from = (cpu_seconds(command.pid), sum(kinds_from.values()))
+            cpu_from = (cpu_seconds(process.pid), sum(kinds_from.values()))
             load = [os.getloadavg()[0]]
             time.sleep(1.0)
             for k in range(taps):
@@ -201,16 +197,16 @@ def run(task, taps, hold, screenshot, seed):
             frames = page.evaluate("hemgFrames") - frames_from
             frame_rate = frames / (time.monotonic() - wall_from)
             pace = [x for x in page.evaluate("hemgPaced")[pace_from:] if x is not None]
-            cpu = (cpu_seconds(command.pid) - cpu_from[0], sum(kinds.values()) - cpu_from[1])
+            cpu = (cpu_seconds(process.pid) - cpu_from[0], sum(kinds.values()) - cpu_from[1])
             kinds.subtract(kinds_from)
             kinds = +kinds  # a helper that ended during the take: not counted
             load.append(os.getloadavg()[0])
             page.press("KeyK")
-            out, _ = command.communicate(timeout=600)
+            out = command.finish(timeout=600)[1]
     except BaseException:
-        if command.poll() is None:
-            command.terminate()
-        print(command.communicate(timeout=60)[0], file=sys.stderr)
+        if process.poll() is None:
+            process.terminate()
+        print(process.communicate(timeout=60)[0], file=sys.stderr)
         raise
     finally:
         loader.kill()

@@ -62,12 +62,13 @@ def strokes(time, p_WE, f_WE):
     return [p_WE[a:b].copy() for a, b in stroke_runs(time, f_WE)[0]]
 
 
-def match_strokes(drawn, demonstrated):
+def match_strokes(drawn, demonstrated, *, either_way=False):
     """Which drawn stroke is which demonstrated stroke: matched by position, not by order.
 
     The cost of pairing drawn stroke i with demonstrated stroke k is their RMS distance
     (:func:`~hemg_drake.tasks.metrics.stroke_errors`: both resampled by arc length, seen in
-    the columns given, e.g. x, y from above); the pairing of least total cost is an
+    the columns given, e.g. x, y from above; ``either_way``: the smaller of it and the
+    reversed stroke's); the pairing of least total cost is an
     assignment (``scipy.optimize.linear_sum_assignment``, Hungarian method). Unpaired
     strokes (more drawn than demonstrated, or fewer) stay unmatched.
 
@@ -84,8 +85,9 @@ def match_strokes(drawn, demonstrated):
 
     if not drawn or not demonstrated:
         return [None] * len(demonstrated)
-    cost = np.array([[metrics.stroke_errors(s, same)["rms"] for same in demonstrated]
-                     for s in drawn])  # fmt: skip
+    ways = (1, -1) if either_way else (1,)
+    cost = np.array([[min(metrics.stroke_errors(s[::way], same)["rms"] for way in ways)
+                      for same in demonstrated] for s in drawn])  # fmt: skip
     rows, cols = linear_sum_assignment(cost)
     matched = [None] * len(demonstrated)
     for i, k in zip(rows, cols, strict=True):
@@ -433,18 +435,19 @@ def template_errors(demo, template):
     -------
     (strokes drawn, [shape error (m) of the ink matched to each template stroke, None where
     none was]): seen from above, matched by position (:func:`match_strokes`), each error
-    ``shape`` of :func:`~hemg_drake.tasks.metrics.stroke_errors`, whichever way the stroke
-    was drawn (the placement left out: the template only shows where to draw).
+    ``shape`` of :func:`~hemg_drake.tasks.metrics.stroke_errors`; matched and scored
+    whichever way each stroke was drawn (the placement left out: the template only shows
+    where to draw). Ink that never moved (a dot) counts as drawn but has no shape to match.
     """
-    drawn = [s[:, :2] for s in strokes(demo.time, demo.p_WE, demo.f_WE)]
+    inked = [s[:, :2] for s in strokes(demo.time, demo.p_WE, demo.f_WE)]
+    drawn = [s for s in inked if np.ptp(s, axis=0).any()]
     same = [[np.asarray(t, dtype=float)[:, :2]] for t in template]
 
     def shape(ink, group):
-        return min(metrics.stroke_errors(ink, group)["shape"],
-                   metrics.stroke_errors(ink[::-1], group)["shape"])  # fmt: skip
+        return min(metrics.stroke_errors(ink[::way], group)["shape"] for way in (1, -1))
 
-    order = match_strokes(drawn, same)
-    return len(drawn), [
+    order = match_strokes(drawn, same, either_way=True)
+    return len(inked), [
         None if i is None else shape(drawn[i], group) for i, group in zip(order, same, strict=True)
     ]
 

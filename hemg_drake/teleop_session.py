@@ -169,7 +169,9 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
     if live and controls is not None:
         controls.mark_start()
         page.state("waiting")
-        if not controls.wait_start():
+        # A page opened for an earlier take (or while the scene was built) and closed since
+        # counts as closed: the person left, the command does not wait for Enter forever.
+        if not controls.wait_start(opened=server is not None and server.opened()):
             raise TakeNotKept("page closed")
         page.state("recording", 0.0)
         # Pace from now: the wait is no part of the take (Simulator's realtime base).
@@ -230,12 +232,18 @@ def run_take(scenario, *, seed, source="meshcat", visualization=None, duration=N
     demo = demonstration_from_logs(
         built.logger.FindLog(context), built.emg_logger.FindLog(context), seed
     )
-    score = template_score(scenario, demo)
+    score = None
+    if built.scene is not None:  # with the scene the page shows the template
+        try:
+            score = template_score(scenario, demo)
+        except ValueError as error:  # a score never costs the take
+            score = f"not scored ({error})"
     if page is not None:
         page.update(t, np.zeros(3), np.zeros(3), scenario.emg.k_min, False)
         if controls is not None:
             controls.mark_keep()
-        page.state("ended", t, hint=None if score is None else f"{score}; K keeps it, D discards it")
+        page.state("ended", t,
+                   hint=None if score is None else f"{score}; K keeps it, D discards it")
     if recorder is not None:
         if page is not None:
             meshcat.Delete(TeleopPage.PATH)  # the page's marks are no part of the replay

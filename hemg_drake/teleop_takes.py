@@ -116,7 +116,8 @@ def template_score(scenario, demo):
     if drawn == 0:
         return "no ink"
     shapes = " / ".join("-" if e is None else f"{1e3 * e:.1f}" for e in errors)
-    return f"{drawn} ink strokes for the template's {len(template)}, {shapes} mm off in shape"
+    return (f"{drawn} ink stroke{'s' if drawn > 1 else ''} for the template's "
+            f"{len(template)}, {shapes} mm off in shape")  # fmt: skip
 
 
 def describe_trim(c, span, end_time):

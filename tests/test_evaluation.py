@@ -1,7 +1,5 @@
 """The reproduction's record: Table II measured three ways, and success checked on the physics."""
 
-import dataclasses as dc
-
 import numpy as np
 import pytest
 
@@ -147,8 +145,7 @@ def _drawing(order=(0, 1, 2), shift=((0, 0), (0, 0), (0, 0)), lift=None):
     return np.arange(len(p_WE)) * DT, p_WE, f_WE
 
 
-def _drawing_demo(seed, jitter):
-    t, p, f = _drawing(shift=[np.array(jitter) * (k + 1) for k in range(3)])
+def _demo_of(t, p, f, seed=1):
     n, zeros = len(t), np.zeros((len(t), 3))
     return Demonstration(
         seed=seed, time=t, p_WE=p, v_WE=np.gradient(p, t, axis=0), p_MS=zeros, p_WE_desired=p,
@@ -156,6 +153,10 @@ def _drawing_demo(seed, jitter):
         emg_time=np.arange(2 * n) * 0.005, emg=np.zeros((2 * n, 8)),
         muscle_activation=np.zeros(2 * n),
     )  # fmt: skip
+
+
+def _drawing_demo(seed, jitter):
+    return _demo_of(*_drawing(shift=[np.array(jitter) * (k + 1) for k in range(3)]), seed=seed)
 
 
 def _drawn(**kwargs):
@@ -238,9 +239,6 @@ def test_stroke_runs_merge_only_breaks_shorter_than_50_ms():
 # --- a take's ink against the page's template (template_errors) ----------------------------
 
 
-def _demo_of(t, p, f):
-    return dc.replace(_drawing_demo(1, (0.0, 0.0)), time=t, p_WE=p, f_WE=f)
-
 
 def test_a_take_is_scored_against_the_template_by_shape_hand_values():
     shapes = [np.column_stack([s, np.zeros(len(s))]) for s in _shapes()]
@@ -264,6 +262,35 @@ def test_a_take_is_scored_against_the_template_by_shape_hand_values():
     p_back[first] = p[first][::-1]
     drawn, errors = evaluation.template_errors(_demo_of(t, p_back, f), [tilted])
     assert drawn == 3 and errors == [pytest.approx(expected, rel=1e-9)]
+
+
+def _inked(xy_strokes):
+    """A take inking ``xy_strokes`` (m) in turn, 2 N on the pen, 0.3 s in the air between."""
+    points, force = [], []
+    for xy in xy_strokes:
+        stroke = np.column_stack([xy, np.zeros(len(xy))])
+        points += [np.repeat(stroke[:1] + [0.0, 0.0, 0.01], 30, axis=0), stroke]
+        force += [np.zeros((30, 3)), np.tile([0.0, 0.0, 2.0], (len(xy), 1))]
+    p = np.vstack(points)
+    return _demo_of(np.arange(len(p)) * DT, p, np.vstack(force))
+
+
+def test_a_stroke_drawn_backwards_is_matched_to_its_template_stroke():
+    # The line drawn from its far end, and a stray 2 cm touch 8 mm from its near end: the
+    # line is matched whichever way it went (by its forward distance alone the stray won it).
+    line, arc, zigzag = (_along(s, 150) for s in _shapes())
+    stray = _along(line[0] + np.array([[0.0, 0.008], [0.02, 0.008]]), 20)
+    template = [np.column_stack([s, np.zeros(len(s))]) for s in _shapes()]
+    drawn, errors = evaluation.template_errors(_inked([line[::-1], stray, arc, zigzag]), template)
+    assert drawn == 4
+    assert errors[0] < 1e-9 and errors[1] < 1e-4 and errors[2] < 3e-4
+
+
+def test_ink_that_never_moved_counts_but_is_not_matched():
+    dot = np.tile([0.0, -0.09], (20, 1))  # the pen pressed and lifted where it came down
+    template = [np.column_stack([s, np.zeros(len(s))]) for s in _shapes()]
+    drawn, errors = evaluation.template_errors(_inked([dot]), template)
+    assert drawn == 1 and errors == [None, None, None]
 
 
 def test_a_template_stroke_left_undrawn_has_no_error():

@@ -367,6 +367,7 @@ class TeleopPageServer:
         )  # fmt: skip
         self._html = page_html(drake_page(meshcat), meshcat.port(), config).encode("utf-8")
         self._lock = threading.Lock()
+        self._opened = threading.Event()  # a browser has loaded the page (it may be closed now)
         self._state = dict(state="starting", headline="getting the scene ready", hint="", K=0.0, K_min=0.0,
                            K_max=1.0, activation=0.0, force=0.0, force_max=60.0, slow="", rate=None)  # fmt: skip
         server = self
@@ -374,6 +375,7 @@ class TeleopPageServer:
         class Handler(http.server.BaseHTTPRequestHandler):
             def do_GET(self):
                 if self.path.split("?")[0] in ("/", "/index.html"):
+                    server._opened.set()
                     body, kind = server._html, "text/html; charset=utf-8"
                 elif self.path.split("?")[0] == "/state":
                     with server._lock:
@@ -414,6 +416,11 @@ class TeleopPageServer:
 
     def url(self):
         return f"http://localhost:{self.port()}/"
+
+    def opened(self):
+        """Whether a browser has loaded the page since the server started (a take waiting
+        for Enter then counts a closed page as the person gone)."""
+        return self._opened.is_set()
 
     def update(self, **values):
         """Set some of the page's read-outs: state ("waiting", "recording", "ended",

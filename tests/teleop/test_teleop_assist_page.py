@@ -5,19 +5,14 @@ pin comes out with fewer key presses with the assist on than off (counts printed
 
 import subprocess
 import sys
-import time
-from pathlib import Path
 
-import numpy as np
 import pytest
 
 from hemg_drake.tasks.plans import pin_length
 from hemg_drake.teleop.browser_inputs import COLUMNS, load_inputs
 from tooling.headless_page import HeadlessPage
 from tooling.page_driver import PageDriver, pull_pin
-from tooling.teleop_page import controls_ready, end_take, wait_for
-
-from test_teleop_page import ROOT, Command
+from tooling.teleop_page import ROOT, Command, controls_ready, end_take, wait_for
 
 pytestmark = [pytest.mark.browser, pytest.mark.person, pytest.mark.timeout(3600)]
 

@@ -3,12 +3,8 @@ printed URL opened in headless Chromium, real key events (DevTools ``Input.dispa
 and what the page shows read back from it."""
 
 import json
-import os
-import subprocess
-import sys
 import time
 import urllib.request
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,33 +23,9 @@ from hemg_drake.teleop.browser_inputs import (
 )
 from tooling.headless_page import HeadlessPage  # tests/tooling: test tooling, not runtime
 from tooling.page_driver import PageDriver
-from tooling.teleop_page import controls_ready, end_take, state, wait_for
+from tooling.teleop_page import Command, controls_ready, end_take, state, wait_for
 
 pytestmark = pytest.mark.browser
-ROOT = Path(__file__).resolve().parents[2]
-
-
-class Command:
-    """``hemg-drake teleop`` running, its output read line by line."""
-
-    def __init__(self, *args):
-        env = dict(os.environ, PYTHONPATH=str(ROOT))
-        self.process = subprocess.Popen(
-            [sys.executable, "-m", "hemg_drake.cli", "teleop", *args], stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT, text=True, env=env,
-        )  # fmt: skip
-        self.first = self.process.stdout.readline()
-        assert self.first.startswith("Teleop page: http://localhost:"), self.first
-        self.url = self.first.split()[2]
-
-    def finish(self, timeout=300):
-        out, _ = self.process.communicate(timeout=timeout)
-        return self.process.returncode, out
-
-    def stop(self):
-        if self.process.poll() is None:
-            self.process.terminate()
-            self.process.communicate(timeout=30)
 
 
 def test_takes_start_end_discard_keep_in_the_real_page(chromium, tmp_path):

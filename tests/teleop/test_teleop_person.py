@@ -6,17 +6,13 @@ Long (the page runs below real time): marked ``person``, run by ``make test-pers
 import json
 import subprocess
 import sys
-import time
 
-import numpy as np
 import pytest
 
 from hemg_drake.tasks.plans import pin_length
 from tooling.headless_page import HeadlessPage
 from tooling.page_driver import PageDriver, draw_strokes, pull_pin
-from tooling.teleop_page import controls_ready, end_take, wait_for
-
-from test_teleop_page import ROOT, Command
+from tooling.teleop_page import ROOT, Command, controls_ready, end_take, wait_for
 
 pytestmark = [pytest.mark.browser, pytest.mark.person, pytest.mark.timeout(3600)]
 

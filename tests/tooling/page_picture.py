@@ -9,8 +9,6 @@ rendered at full resolution, as a browser with a GPU shows it.
 """
 
 import argparse
-import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -22,7 +20,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from hemg_drake.fileio import write_bytes_atomic  # noqa: E402
 from tooling.headless_page import HeadlessPage  # noqa: E402
 from tooling.page_driver import PageDriver, draw_strokes  # noqa: E402
-from tooling.teleop_page import controls_ready, wait_for  # noqa: E402
+from tooling.teleop_page import Command, controls_ready, wait_for  # noqa: E402
 
 
 def main():
@@ -30,15 +28,9 @@ def main():
     parser.add_argument("png", help="where to write the picture")
     args = parser.parse_args()
     out_dir = Path(tempfile.mkdtemp(prefix="hemg-page-picture-")) / "run"
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    command = subprocess.Popen(
-        [sys.executable, "-m", "hemg_drake.cli", "teleop", "drawing", "--out", str(out_dir),
-         "--port", "0", "--no-replay"],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
-    )  # fmt: skip
+    command = Command("drawing", "--out", str(out_dir), "--port", "0", "--no-replay")
     try:
-        url = command.stdout.readline().split()[2]
-        with HeadlessPage(url, size=(1280, 800)) as page:
+        with HeadlessPage(command.url, size=(1280, 800)) as page:
             wait_for(page, "waiting", timeout=300.0)
             controls_ready(page)
             page.press("Enter")
@@ -53,11 +45,9 @@ def main():
             write_bytes_atomic(args.png, page.screenshot())
             print(page.evaluate("document.getElementById('hemg-hint').textContent"))
             page.press("KeyD")  # nothing is kept
-            command.wait(timeout=300)
+        command.finish(timeout=120)  # the page closed before the next take: the command ends
     finally:
-        if command.poll() is None:
-            command.terminate()
-            command.wait(timeout=30)
+        command.stop()
 
 
 if __name__ == "__main__":

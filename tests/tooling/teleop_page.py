@@ -1,10 +1,42 @@
 """Reading the teleop page (``hemg-drake teleop``'s served page) as a person does: its state
-line, and waiting for its controls or for a state. Shared by the page's tests and
-benchmarks/bench_teleop_page.py."""
+line, and waiting for its controls or for a state; the command itself, run in a process of its
+own. Shared by the page's tests, benchmarks/bench_teleop_page.py and page_picture.py."""
 
+import os
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 from hemg_drake.teleop.browser_inputs import KEYS
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+class Command:
+    """``hemg-drake teleop`` running in a process of its own, its output read line by line:
+    ``url`` the page it printed first."""
+
+    def __init__(self, *args):
+        env = dict(os.environ, PYTHONPATH=str(ROOT))
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "hemg_drake.cli", "teleop", *args], stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT, text=True, env=env,
+        )  # fmt: skip
+        self.first = self.process.stdout.readline()
+        if not self.first.startswith("Teleop page: http://localhost:"):
+            self.process.kill()  # no page: the command said why (its output, raised below)
+            raise RuntimeError(self.first + self.process.communicate(timeout=30)[0])
+        self.url = self.first.split()[2]
+
+    def finish(self, timeout=300):
+        out, _ = self.process.communicate(timeout=timeout)
+        return self.process.returncode, out
+
+    def stop(self):
+        if self.process.poll() is None:
+            self.process.terminate()
+            self.process.communicate(timeout=30)
 
 
 def state(page):
