@@ -198,9 +198,10 @@ def takes_command(args):
         for path in remove_take(args.run, args.remove, progress=_print):
             _print(f"wrote {path}")
         return
-    for c, operator, seconds, samples, own in list_takes(args.run):
+    for c, operator, seconds, samples, own, score in list_takes(args.run):
         files = ", ".join(own) if own else "-"
-        _print(f"{c:3d}  {operator:<10s} {seconds:7.2f} s  {samples:6d} samples  {files}")
+        _print(f"{c:3d}  {operator:<10s} {seconds:7.2f} s  {samples:6d} samples  {files}"
+               + ("" if score is None else f"  ({score})"))  # fmt: skip
 
 
 def emg_figure_command(args):

@@ -130,21 +130,32 @@ def describe_trim(c, span, end_time):
 
 
 # -- hemg-drake takes -----------------------------------------------------------------------
-def list_takes(run):
+def list_takes(run, *, scores=True):
     """One row per demonstration in ``run``'s dataset: (number, operator, seconds, samples,
-    files of its own), checked against the manifest."""
+    files of its own, score): checked against the manifest; the score a drawing's ink against
+    the template at the take's placement (:func:`template_score`), None for another task
+    (or without ``scores``)."""
     from hemg_drake.learning.demos import load_dataset
+    from hemg_drake.placements import demonstration_scenario
     from hemg_drake.run_folder import RunFolder
+    from hemg_drake.scenario import parse_scenario
 
     folder = RunFolder(run)
     folder.check("demonstrate", folder.dataset, run_hint="hemg-drake teleop or demonstrate")
     demos, metadata = load_dataset(folder.dataset)
     operators = metadata.get("operators", ["simulated"] * len(demos))
     listed = folder.manifest()["demonstrate"]["files"]
+    scenario = None
+    if scores and metadata.get("task") == "drawing" and "scenario" in metadata:
+        scenario = parse_scenario(metadata["scenario"], source=f"{run}/dataset.npz")
     rows = []
     for c, demo in enumerate(demos, start=1):
         own = [n for n in (f"inputs_{c}.npz", f"replay_{c}.html") if n in listed]
-        rows.append((c, operators[c - 1], float(demo.time[-1] - demo.time[0]), len(demo), own))
+        score = None
+        if scenario is not None:
+            score = template_score(demonstration_scenario(scenario, demo.seed), demo)
+        rows.append((c, operators[c - 1], float(demo.time[-1] - demo.time[0]), len(demo), own,
+                     score))  # fmt: skip
     return rows
 
 
@@ -157,7 +168,7 @@ def remove_take(run, number, *, progress=print):
     from hemg_drake.scenario import parse_scenario
     from hemg_drake.viz.figures import plot_demonstrations, plot_emg_envelopes, save_figure
 
-    rows = list_takes(run)  # checks the dataset first: a bad folder changes nothing
+    rows = list_takes(run, scores=False)  # checks the dataset first: a bad folder changes nothing
     if not 1 <= number <= len(rows):
         raise ValueError(
             f"--remove {number}: {run} holds takes 1..{len(rows)}; give one of them"

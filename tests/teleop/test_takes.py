@@ -341,6 +341,28 @@ def test_a_drawing_take_is_scored_against_the_template_the_page_shows():
     assert template_score(load_scenario(shipped_scenario("cotter_pin")), take) is None
 
 
+def test_takes_lists_each_drawing_take_with_its_score(tmp_path, capsys):
+    from hemg_drake.learning.demos import save_dataset
+    from hemg_drake.scenario import load_scenario, shipped_scenario
+    from hemg_drake.teleop_takes import template_strokes
+
+    scenario = load_scenario(shipped_scenario("drawing"))
+    template = template_strokes(scenario.task_plan())
+    out = tmp_path / "run"
+    with RunFolder.output(out).transaction("demonstrate", keep_own=True) as folder:
+        record = dict(scenario=scenario.to_yaml(), task="drawing", log_period=0.01,
+                      operators=["browser", "browser"])  # fmt: skip
+        save_dataset(folder.dataset, [_take_along(template), _take_along(template, (1, 0.004))],
+                     record)  # fmt: skip
+        folder.finish("demonstrate", [folder.dataset], command="teleop")
+    capsys.readouterr()
+    assert main(["takes", str(out)]) == 0
+    listed = capsys.readouterr().out.splitlines()
+    scores = [_shapes_of(line.split("  (")[1].rstrip(")")) for line in listed]
+    assert [drawn for drawn, _ in scores] == ["3 ink strokes", "3 ink strokes"], listed
+    assert max(scores[0][1]) <= 0.2 and scores[1][1][1] > 0.5, listed  # the moved waypoint
+
+
 def test_a_replayed_drawing_take_carries_its_score():
     """The score is made where the take ends (run_take), before the page asks K or D."""
     from hemg_drake.scenario import load_scenario, shipped_scenario
