@@ -140,7 +140,7 @@ class PageDriver:
         return True
 
 
-def hold_towards(driver, goal, *, near, axes="xz", slack=1e-3, timeout=120.0):
+def hold_towards(driver, goal, *, near, axes="xz", slack=1e-3, fine_slant=None, timeout=120.0):
     """Hold the keys that move the target towards ``goal`` (m, W) along the straight line
     from where it is, as a person draws a slanted line with the arrows, watching the cross
     (the page echoes the keys at once): the key of the axis with the longer way is held
@@ -148,27 +148,32 @@ def hold_towards(driver, goal, *, near, axes="xz", slack=1e-3, timeout=120.0):
     axis' key is held while the cross lags the line by more than ``slack`` (m) along that
     axis, and let go once it is back on it. Each press of that key moves one tap, then
     nothing for the page's hold delay (0.25 s), so near 45 degrees the cross can lag the
-    line by a few millimetres before it catches up. Then the target settles; taps
-    (:meth:`PageDriver.step_towards`) do the rest."""
+    line by a few millimetres before it catches up. With ``fine_slant``, a line more slanted
+    than that (its shorter way over its longer) is held with Shift, a quarter of the speed,
+    as a person slows down for a slant: the cross then leaves the line by a quarter as much
+    (at full speed the zig-zag's legs came out as staircases 3-8 mm off their lines). Then
+    the target settles; taps (:meth:`PageDriver.step_towards`) do the rest."""
     start = driver.position(TARGET)
     units = {a: driver.directions[a] / np.linalg.norm(driver.directions[a]) for a in axes}
     way = {a: float(np.dot(goal - start, u)) for a, u in units.items()}  # m, signed
     major = max(axes, key=lambda a: abs(way[a]))
     if abs(way[major]) <= near:
         return
+    minor = max((abs(way[a]) for a in axes if a != major), default=0.0)
+    fine = fine_slant is not None and minor > fine_slant * abs(way[major])
     held = {}  # axis -> the key held
     deadline = time.monotonic() + timeout
 
     def hold(axis, key):
         if held.get(axis) != key:
             release(axis)
-            driver.page.key("keyDown", key)
+            driver.page.key("keyDown", key, shift=fine)
             driver.presses[key] += 1
             held[axis] = key
 
     def release(axis):
         if axis in held:
-            driver.page.key("keyUp", held.pop(axis))
+            driver.page.key("keyUp", held.pop(axis), shift=fine)
 
     try:
         while True:
@@ -191,7 +196,7 @@ def hold_towards(driver, goal, *, near, axes="xz", slack=1e-3, timeout=120.0):
             time.sleep(0.02)
     finally:
         for key in held.values():
-            driver.page.key("keyUp", key)
+            driver.page.key("keyUp", key, shift=fine)
     driver.settled_target()
 
 
@@ -264,8 +269,8 @@ def draw_strokes(driver, *, depth=2.5e-3, contact=0.5, tolerance=1.5e-3, dt=0.04
 
     for stroke in driver.template():
         for k, point in enumerate(stroke):
-            if hold is not None:  # the long way held, the last millimetres tapped
-                hold_towards(driver, point, near=hold)
+            if hold is not None:  # the long way held (slants slowly), the last mm tapped
+                hold_towards(driver, point, near=hold, fine_slant=0.1 if k > 0 else None)
             while driver.step_towards(point, tolerance=tolerance, fine_below=2 * tolerance):
                 driver.wait_take_time(dt)
                 check()
