@@ -106,13 +106,17 @@ def template_strokes(plan):
 
 def template_score(scenario, demo):
     """A drawing take's ink against the template the page shows, in a line (the person
-    decides on it whether to keep the take); None for another task."""
+    decides on it whether to keep the take); None for another task. A take that cannot be
+    scored says why ("not scored (...)"): a score never costs a take, nor a listing."""
     from hemg_drake.evaluation import template_errors
 
     if scenario.task != "drawing":
         return None
     template = template_strokes(scenario.task_plan())
-    drawn, errors = template_errors(demo, template)
+    try:
+        drawn, errors = template_errors(demo, template)
+    except ValueError as error:
+        return f"not scored ({error})"
     if drawn == 0:
         return "no ink"
     shapes = " / ".join("-" if e is None else f"{1e3 * e:.1f}" for e in errors)

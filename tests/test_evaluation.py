@@ -239,7 +239,6 @@ def test_stroke_runs_merge_only_breaks_shorter_than_50_ms():
 # --- a take's ink against the page's template (template_errors) ----------------------------
 
 
-
 def test_a_take_is_scored_against_the_template_by_shape_hand_values():
     shapes = [np.column_stack([s, np.zeros(len(s))]) for s in _shapes()]
     a = 0.002  # the template's line tilted: its ends a above and a below the drawn line

@@ -338,6 +338,11 @@ def test_a_drawing_take_is_scored_against_the_template_the_page_shows():
     assert moved[0] <= 0.2 and moved[2] <= 0.2
     take = _take_along(template)
     assert template_score(scenario, dc.replace(take, f_WE=0 * take.f_WE)) == "no ink"
+    # A trace that cannot be scored says why, and costs nothing else.
+    stalled = take.time.copy()
+    stalled[5] = stalled[4]
+    assert template_score(scenario, dc.replace(take, time=stalled)) == (
+        "not scored (times must be strictly increasing)")
     assert template_score(load_scenario(shipped_scenario("cotter_pin")), take) is None
 
 
